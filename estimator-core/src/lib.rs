@@ -1,0 +1,26 @@
+//! Step-input estimators for fast weighing, in fixed-size, allocation-free `no_std` Rust.
+//!
+//! A load cell rings and creeps for a second or more after a mass lands. The estimators
+//! here read the mass from that transient instead of waiting for it to settle. This crate
+//! is the one implementation of every estimator: the firmware and the host simulator call
+//! the very same code, in `f32` on the Cortex-M4F and in `f32` or `f64` on the host.
+//!
+//! What it must never do: allocate, panic on data, use `unsafe`, or report a number that is
+//! not finite as a valid reading. Bad input becomes a [`Reading`] whose [`State`] says why.
+//!
+//! The core method is [`StepEstimator`], the data-driven estimator of Markovsky (2015) as
+//! analysed by Quintana-Carapia (2020), solved recursively in square-root information form.
+#![no_std]
+#![deny(unsafe_code)]
+#![warn(missing_docs)]
+#![allow(clippy::needless_range_loop)] // index loops mirror the matrix algebra
+
+mod adc;
+mod reading;
+mod real;
+mod step;
+
+pub use adc::{AdcError, AdcSource};
+pub use reading::{ConfigError, Estimator, InvalidReason, Reading, State};
+pub use real::Real;
+pub use step::{StepConfig, StepEstimator, MAX_DECIMATION};

@@ -1,0 +1,105 @@
+//! What every estimator answers with, and the ways a configuration or a sample is refused.
+
+/// Why a reading cannot be trusted. A reading with one of these never carries an estimate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum InvalidReason {
+    /// A sample was NaN or infinite.
+    NonFiniteInput,
+    /// A sample lay outside the configured valid range (for example a saturated ADC).
+    OutOfRange,
+    /// The step level is not identifiable from the data: the constant column is (numerically)
+    /// in the span of the difference columns, so the estimate would be noise amplified.
+    IllConditioned,
+    /// The recursive update produced a non-finite number (overflow or a corrupted state).
+    NonFiniteUpdate,
+    /// A sample was reported missing by the caller; the Hankel structure is broken.
+    MissingSample,
+}
+
+/// The state a reading is in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum State {
+    /// Not enough samples yet for the least-squares problem to be determined.
+    WarmingUp,
+    /// The estimate is the least-squares solution of the data so far.
+    Estimating,
+    /// Something went wrong; the estimator stays here until `reset()`.
+    Invalid(InvalidReason),
+}
+
+/// One answer per raw sample pushed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Reading<T> {
+    /// The estimated input (step level) in the caller's unit; `Some` only while estimating.
+    pub estimate: Option<T>,
+    /// Raw samples pushed since the last reset (saturating).
+    pub samples: u32,
+    /// Whether `estimate` can be used, and if not, why.
+    pub state: State,
+    /// The a-priori residual of the latest regression row, in the estimate's unit; `Some`
+    /// only when the previous update was already determined.
+    pub residual: Option<T>,
+}
+
+impl<T: Copy> Reading<T> {
+    /// The estimate if the reading is valid.
+    pub fn value(&self) -> Option<T> {
+        self.estimate
+    }
+
+    /// True when the estimator has latched an error.
+    pub fn is_invalid(&self) -> bool {
+        matches!(self.state, State::Invalid(_))
+    }
+}
+
+/// A configuration the estimator refuses, with the offending field.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ConfigError {
+    /// The order is 0 or above the estimator's capacity.
+    Order { requested: usize, capacity: usize },
+    /// The static gain is zero, NaN or infinite.
+    Gain,
+    /// The forgetting factor is not in (0, 1].
+    Forgetting,
+    /// The decimation factor is 0 or above [`crate::MAX_DECIMATION`].
+    Decimation,
+    /// The valid range is empty or contains NaN.
+    Range,
+    /// A model parameter (other estimators) is outside its domain.
+    Model,
+}
+
+impl core::fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            ConfigError::Order {
+                requested,
+                capacity,
+            } => write!(f, "order {requested} is not in 1..={capacity}"),
+            ConfigError::Gain => f.write_str("static gain must be finite and non-zero"),
+            ConfigError::Forgetting => f.write_str("forgetting factor must be in (0, 1]"),
+            ConfigError::Decimation => write!(
+                f,
+                "decimation must be in 1..={}",
+                crate::MAX_DECIMATION
+            ),
+            ConfigError::Range => f.write_str("valid range must be non-empty and not NaN"),
+            ConfigError::Model => f.write_str("model parameter outside its domain"),
+        }
+    }
+}
+
+/// What every estimator in this crate offers: push one raw sample, get one reading.
+pub trait Estimator<T> {
+    /// Feed the next raw sample (in the caller's raw unit, offset already removed).
+    fn push(&mut self, sample: T) -> Reading<T>;
+    /// Tell the estimator a sample was lost; it answers with an invalid reading.
+    fn push_missing(&mut self) -> Reading<T>;
+    /// Forget everything and start over for a new load.
+    fn reset(&mut self);
+}

@@ -1,0 +1,2 @@
+//! Weighing firmware (placeholder; filled by issue 4).
+#![no_std]

@@ -1,0 +1,1 @@
+//! Cross-crate and on-target tests of the weighing firmware and its estimators.
