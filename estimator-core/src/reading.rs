@@ -25,7 +25,9 @@ pub enum State {
     WarmingUp,
     /// The estimate is the least-squares solution of the data so far.
     Estimating,
-    /// Something went wrong; the estimator stays here until `reset()`.
+    /// The reading cannot be trusted. Faults of the data stream or of the state (all reasons
+    /// but [`InvalidReason::IllConditioned`]) latch until `reset()`; ill-conditioning is a
+    /// property of the data so far and clears when more data make the step identifiable.
     Invalid(InvalidReason),
 }
 
@@ -61,7 +63,12 @@ impl<T: Copy> Reading<T> {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ConfigError {
     /// The order is 0 or above the estimator's capacity.
-    Order { requested: usize, capacity: usize },
+    Order {
+        /// The order asked for.
+        requested: usize,
+        /// The largest order this estimator type holds.
+        capacity: usize,
+    },
     /// The static gain is zero, NaN or infinite.
     Gain,
     /// The forgetting factor is not in (0, 1].
@@ -83,11 +90,9 @@ impl core::fmt::Display for ConfigError {
             } => write!(f, "order {requested} is not in 1..={capacity}"),
             ConfigError::Gain => f.write_str("static gain must be finite and non-zero"),
             ConfigError::Forgetting => f.write_str("forgetting factor must be in (0, 1]"),
-            ConfigError::Decimation => write!(
-                f,
-                "decimation must be in 1..={}",
-                crate::MAX_DECIMATION
-            ),
+            ConfigError::Decimation => {
+                write!(f, "decimation must be in 1..={}", crate::MAX_DECIMATION)
+            }
             ConfigError::Range => f.write_str("valid range must be non-empty and not NaN"),
             ConfigError::Model => f.write_str("model parameter outside its domain"),
         }

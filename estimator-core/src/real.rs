@@ -22,19 +22,28 @@ pub trait Real:
     + SubAssign
     + MulAssign
 {
+    /// Additive identity.
     const ZERO: Self;
+    /// Multiplicative identity.
     const ONE: Self;
     /// Machine epsilon of the type.
     const EPSILON: Self;
     /// Name used in reports ("f32" or "f64").
     const NAME: &'static str;
 
+    /// Nearest value of this type.
     fn from_f64(value: f64) -> Self;
+    /// Exact widening to `f64`.
     fn to_f64(self) -> f64;
+    /// Nearest value of this type (exact for |value| ≤ 2^24 in `f32`).
     fn from_i32(value: i32) -> Self;
+    /// Nearest value of this type.
     fn from_u32(value: u32) -> Self;
+    /// Absolute value.
     fn abs(self) -> Self;
+    /// Neither NaN nor infinite.
     fn is_finite(self) -> bool;
+    /// Square root (libm; not on the estimator's hot path).
     fn sqrt(self) -> Self;
 }
 

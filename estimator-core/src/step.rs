@@ -65,16 +65,19 @@ impl<T: Real> StepConfig<T> {
         }
     }
 
+    /// Set the forgetting factor λ.
     pub fn with_forgetting(mut self, forgetting: T) -> Self {
         self.forgetting = forgetting;
         self
     }
 
+    /// Set the block length D of the decimator.
     pub fn with_decimation(mut self, decimation: u16) -> Self {
         self.decimation = decimation;
         self
     }
 
+    /// Set the range of valid raw samples.
     pub fn with_valid_range(mut self, min: T, max: T) -> Self {
         self.valid_min = min;
         self.valid_max = max;
@@ -138,6 +141,8 @@ pub struct StepEstimator<T: Real, const N: usize> {
     block_sum: T,
     block_len: u16,
     samples: u32,
+    /// A fault that broke the data stream or the state; latched until `reset()`.
+    fault: Option<InvalidReason>,
     state: State,
     estimate: Option<T>,
     residual: Option<T>,
@@ -165,12 +170,14 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
             block_sum: T::ZERO,
             block_len: 0,
             samples: 0,
+            fault: None,
             state: State::WarmingUp,
             estimate: None,
             residual: None,
         })
     }
 
+    /// The configuration in use.
     pub fn config(&self) -> &StepConfig<T> {
         &self.config
     }
@@ -178,6 +185,18 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
     /// The capacity `N`: the largest order this instance accepts.
     pub const fn capacity() -> usize {
         N
+    }
+
+    /// How well the step level is identified: the squared sine of the angle between the
+    /// constant column and the span of the difference columns, in (0, 1]. It is the factor
+    /// by which noise on the data is amplified into the estimate (as 1/√·); the estimator
+    /// flags [`InvalidReason::IllConditioned`] when it falls to the rounding level of `T`.
+    pub fn identifiability(&self) -> T {
+        if self.effective_rows > T::ZERO {
+            self.weight_u / self.effective_rows
+        } else {
+            T::ZERO
+        }
     }
 
     /// Samples needed (at the raw rate) before the first estimate: `(2n+1)·D`.
@@ -201,11 +220,18 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         }
     }
 
+    /// Mark the current reading invalid; the next determined update may clear it.
     fn invalidate(&mut self, reason: InvalidReason) -> Reading<T> {
         self.state = State::Invalid(reason);
         self.estimate = None;
         self.residual = None;
         self.reading()
+    }
+
+    /// Invalidate and stay invalid until `reset()`: the data stream or the state is broken.
+    fn latch(&mut self, reason: InvalidReason) -> Reading<T> {
+        self.fault = Some(reason);
+        self.invalidate(reason)
     }
 
     /// One decimated sample `x` (in the estimate's unit) into the regression.
@@ -284,7 +310,7 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         self.rows = self.rows.saturating_add(1);
 
         if !(self.rhs_u.is_finite() && self.weight_u.is_finite() && row_weight.is_finite()) {
-            self.invalidate(InvalidReason::NonFiniteUpdate);
+            self.latch(InvalidReason::NonFiniteUpdate);
             return;
         }
         if (self.rows as usize) < n + 1 {
@@ -292,6 +318,9 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         }
         // weight_u / effective_rows is the squared sine of the angle between the constant
         // column and the span of the difference columns; near zero, u is not identifiable.
+        // Not latched: right after warm-up a fast-sampled Hankel system can be too
+        // ill-conditioned for the precision, and more rows cure that (the factorisation is
+        // backward stable, so the early rounding does not persist).
         let threshold = T::from_f64(100.0) * T::EPSILON * self.effective_rows;
         if !(self.weight_u > threshold) {
             self.invalidate(InvalidReason::IllConditioned);
@@ -306,14 +335,14 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
 impl<T: Real, const N: usize> Estimator<T> for StepEstimator<T, N> {
     fn push(&mut self, sample: T) -> Reading<T> {
         self.samples = self.samples.saturating_add(1);
-        if let State::Invalid(_) = self.state {
+        if self.fault.is_some() {
             return self.reading();
         }
         if !sample.is_finite() {
-            return self.invalidate(InvalidReason::NonFiniteInput);
+            return self.latch(InvalidReason::NonFiniteInput);
         }
         if !(sample >= self.config.valid_min && sample <= self.config.valid_max) {
-            return self.invalidate(InvalidReason::OutOfRange);
+            return self.latch(InvalidReason::OutOfRange);
         }
         let x = sample * self.inv_gain;
         if self.config.decimation == 1 {
@@ -333,10 +362,10 @@ impl<T: Real, const N: usize> Estimator<T> for StepEstimator<T, N> {
 
     fn push_missing(&mut self) -> Reading<T> {
         self.samples = self.samples.saturating_add(1);
-        if let State::Invalid(_) = self.state {
+        if self.fault.is_some() {
             return self.reading();
         }
-        self.invalidate(InvalidReason::MissingSample)
+        self.latch(InvalidReason::MissingSample)
     }
 
     fn reset(&mut self) {
