@@ -13,7 +13,10 @@
 #![no_std]
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
-#![allow(clippy::needless_range_loop)] // index loops mirror the matrix algebra
+#![allow(clippy::needless_range_loop)]
+// index loops mirror the matrix algebra
+// `!(a < b)` is how a comparison that must also fail on NaN is written.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 mod adc;
 mod reading;

@@ -112,7 +112,7 @@ fn overflowing_data_is_caught_as_a_non_finite_update() {
         // Finite samples whose squares overflow f32.
         let s = if k % 2 == 0 { 3e38 } else { -3e38 };
         let r = est.push(s);
-        assert!(r.estimate.map_or(true, f32::is_finite));
+        assert!(r.estimate.is_none_or(f32::is_finite));
         state = r.state;
     }
     assert_eq!(state, State::Invalid(InvalidReason::NonFiniteUpdate));
@@ -203,10 +203,10 @@ proptest! {
             prop_assert_eq!(r64.samples as usize, k + 1);
             prop_assert_eq!(r64.estimate.is_some(), r64.state == State::Estimating);
             prop_assert_eq!(r32.estimate.is_some(), r32.state == State::Estimating);
-            prop_assert!(r64.estimate.map_or(true, f64::is_finite));
-            prop_assert!(r32.estimate.map_or(true, f32::is_finite));
-            prop_assert!(r64.residual.map_or(true, f64::is_finite));
-            prop_assert!(r32.residual.map_or(true, f32::is_finite));
+            prop_assert!(r64.estimate.is_none_or(f64::is_finite));
+            prop_assert!(r32.estimate.is_none_or(f32::is_finite));
+            prop_assert!(r64.residual.is_none_or(f64::is_finite));
+            prop_assert!(r32.residual.is_none_or(f32::is_finite));
             if poison_at.is_some_and(|p| k >= p) {
                 prop_assert_eq!(r64.state, State::Invalid(InvalidReason::NonFiniteInput));
             }
