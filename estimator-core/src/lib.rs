@@ -19,11 +19,17 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 mod adc;
+mod covariance;
 mod reading;
 mod real;
+pub mod scale;
 mod step;
 
 pub use adc::{AdcError, AdcSource};
+pub use covariance::CovarianceStepEstimator;
 pub use reading::{ConfigError, Estimator, InvalidReason, Reading, State};
 pub use real::Real;
+pub use scale::{
+    CountsScale, RawSample, Scale, ScaleConfig, ScaleFault, ScaleReading, ScaleState, TareError,
+};
 pub use step::{StepConfig, StepEstimator, MAX_DECIMATION};
