@@ -1,1 +1,4 @@
 //! Cross-crate and on-target tests of the weighing firmware and its estimators.
+
+pub mod core_check;
+pub mod qemu;
