@@ -1,0 +1,245 @@
+//! The baselines a scale maker uses today, behind the same reading interface, so every
+//! comparison of speed against accuracy has them as the reference.
+//!
+//! Both cut the raw stream into blocks of `block` samples and keep the last `K` block means.
+//! The reading is stable when the spread (max − min) of those `K` means is within
+//! `stable_band` (in the estimate's unit). Then:
+//! - [`BaselineMode::SettledAverage`]: wait until stable, then average every sample from
+//!   that moment on (the classic "wait, then average" scale);
+//! - [`BaselineMode::MovingAverage`]: report the mean of the last `K` blocks (a boxcar
+//!   low-pass of length `K·block`) while it is stable.
+
+use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
+use crate::real::Real;
+
+/// Which baseline.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum BaselineMode {
+    /// Wait until stable, then average everything from then on.
+    SettledAverage,
+    /// Boxcar mean of the last `K` blocks, reported while stable.
+    MovingAverage,
+}
+
+/// Configuration of a [`Baseline`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BaselineConfig<T> {
+    /// Which baseline.
+    pub mode: BaselineMode,
+    /// Static gain: raw units per unit of the estimate.
+    pub gain: T,
+    /// Raw samples per block.
+    pub block: u16,
+    /// Largest spread of the last `K` block means (estimate's unit) that counts as stable.
+    pub stable_band: T,
+}
+
+/// A stability-detecting baseline estimator keeping `K` block means.
+#[derive(Clone, Debug)]
+pub struct Baseline<T: Real, const K: usize> {
+    config: BaselineConfig<T>,
+    inv_gain: T,
+    blocks: [T; K],
+    blocks_filled: usize,
+    next_block: usize,
+    block_sum: T,
+    block_len: u16,
+    settled_sum: T,
+    settled_count: u32,
+    samples: u32,
+    fault: Option<InvalidReason>,
+    state: State,
+    estimate: Option<T>,
+}
+
+impl<T: Real, const K: usize> Baseline<T, K> {
+    /// A new baseline, or why the configuration is impossible.
+    pub fn new(config: BaselineConfig<T>) -> Result<Self, ConfigError> {
+        if !config.gain.is_finite() || config.gain == T::ZERO {
+            return Err(ConfigError::Gain);
+        }
+        if config.block == 0 || K < 2 {
+            return Err(ConfigError::Decimation);
+        }
+        if !(config.stable_band > T::ZERO) || !config.stable_band.is_finite() {
+            return Err(ConfigError::Model);
+        }
+        Ok(Self {
+            config,
+            inv_gain: T::ONE / config.gain,
+            blocks: [T::ZERO; K],
+            blocks_filled: 0,
+            next_block: 0,
+            block_sum: T::ZERO,
+            block_len: 0,
+            settled_sum: T::ZERO,
+            settled_count: 0,
+            samples: 0,
+            fault: None,
+            state: State::WarmingUp,
+            estimate: None,
+        })
+    }
+
+    fn reading(&self) -> Reading<T> {
+        Reading {
+            estimate: self.estimate,
+            samples: self.samples,
+            state: self.state,
+            residual: None,
+        }
+    }
+
+    fn latch(&mut self, reason: InvalidReason) -> Reading<T> {
+        self.fault = Some(reason);
+        self.state = State::Invalid(reason);
+        self.estimate = None;
+        self.reading()
+    }
+
+    /// Spread and mean of the stored block means.
+    fn spread_and_mean(&self) -> (T, T) {
+        let mut min = self.blocks[0];
+        let mut max = self.blocks[0];
+        let mut sum = T::ZERO;
+        for &b in &self.blocks {
+            if b < min {
+                min = b;
+            }
+            if b > max {
+                max = b;
+            }
+            sum += b;
+        }
+        (max - min, sum / T::from_u32(K as u32))
+    }
+}
+
+impl<T: Real, const K: usize> Estimator<T> for Baseline<T, K> {
+    fn push(&mut self, sample: T) -> Reading<T> {
+        self.samples = self.samples.saturating_add(1);
+        if self.fault.is_some() {
+            return self.reading();
+        }
+        if !sample.is_finite() {
+            return self.latch(InvalidReason::NonFiniteInput);
+        }
+        let x = sample * self.inv_gain;
+        if self.settled_count > 0 && self.config.mode == BaselineMode::SettledAverage {
+            self.settled_sum += x;
+            self.settled_count += 1;
+            self.estimate = Some(self.settled_sum / T::from_u32(self.settled_count));
+            return self.reading();
+        }
+        self.block_sum += x;
+        self.block_len += 1;
+        if self.block_len < self.config.block {
+            return self.reading();
+        }
+        self.blocks[self.next_block] = self.block_sum / T::from_u32(self.config.block as u32);
+        self.next_block = (self.next_block + 1) % K;
+        self.blocks_filled = (self.blocks_filled + 1).min(K);
+        self.block_sum = T::ZERO;
+        self.block_len = 0;
+        if self.blocks_filled < K {
+            return self.reading();
+        }
+        let (spread, mean) = self.spread_and_mean();
+        if spread <= self.config.stable_band {
+            self.state = State::Estimating;
+            self.estimate = Some(mean);
+            if self.config.mode == BaselineMode::SettledAverage {
+                // Everything in the stable window counts towards the average.
+                let count = K as u32 * self.config.block as u32;
+                self.settled_sum = mean * T::from_u32(count);
+                self.settled_count = count;
+            }
+        } else {
+            self.state = State::WarmingUp;
+            self.estimate = None;
+        }
+        self.reading()
+    }
+
+    fn push_missing(&mut self) -> Reading<T> {
+        self.samples = self.samples.saturating_add(1);
+        if self.fault.is_some() {
+            return self.reading();
+        }
+        self.latch(InvalidReason::MissingSample)
+    }
+
+    fn reset(&mut self) {
+        if let Ok(fresh) = Self::new(self.config) {
+            *self = fresh;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ringing(k: usize) -> f64 {
+        // 25 Hz at 4 kHz, decaying with a 0.2 s time constant, around 100 units (gain 2).
+        let t = k as f64 / 4000.0;
+        2.0 * (100.0 + 10.0 * (-t / 0.2).exp() * (2.0 * core::f64::consts::PI * 25.0 * t).cos())
+    }
+
+    fn first_stable(mode: BaselineMode) -> (usize, f64) {
+        let config = BaselineConfig {
+            mode,
+            gain: 2.0,
+            block: 40,
+            stable_band: 0.1,
+        };
+        let mut baseline = Baseline::<f64, 10>::new(config).unwrap();
+        for k in 0..20_000 {
+            if let Some(e) = baseline.push(ringing(k)).estimate {
+                return (k, e);
+            }
+        }
+        panic!("never stable");
+    }
+
+    #[test]
+    fn waits_until_the_ringing_is_inside_the_band() {
+        for mode in [BaselineMode::SettledAverage, BaselineMode::MovingAverage] {
+            let (k, estimate) = first_stable(mode);
+            // Envelope 10·e^(−t/0.2) ≤ 0.05 (half the band) needs t ≥ 0.2·ln(200) ≈ 1.06 s;
+            // the 100 ms boxcar averages the ringing down sooner, but not before 0.5 s.
+            assert!((2000..4400).contains(&k), "{mode:?}: first stable at {k}");
+            assert!((estimate - 100.0).abs() < 0.1, "{mode:?}: {estimate}");
+        }
+    }
+
+    #[test]
+    fn bad_input_latches_and_impossible_config_is_refused() {
+        let config = BaselineConfig {
+            mode: BaselineMode::MovingAverage,
+            gain: 1.0,
+            block: 4,
+            stable_band: 1.0,
+        };
+        let mut baseline = Baseline::<f32, 4>::new(config).unwrap();
+        assert_eq!(
+            baseline.push(f32::NAN).state,
+            State::Invalid(InvalidReason::NonFiniteInput)
+        );
+        assert!(baseline.push(1.0).is_invalid());
+        baseline.reset();
+        assert!(!baseline.push(1.0).is_invalid());
+        let bad = BaselineConfig { block: 0, ..config };
+        assert_eq!(
+            Baseline::<f32, 4>::new(bad).err(),
+            Some(ConfigError::Decimation)
+        );
+        let bad = BaselineConfig {
+            gain: 0.0,
+            ..config
+        };
+        assert_eq!(Baseline::<f32, 4>::new(bad).err(), Some(ConfigError::Gain));
+    }
+}
