@@ -19,6 +19,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 mod adc;
+pub mod calibration;
 mod covariance;
 mod reading;
 mod real;
@@ -26,6 +27,7 @@ pub mod scale;
 mod step;
 
 pub use adc::{AdcError, AdcSource};
+pub use calibration::{Calibration, CalibrationError, CalibrationSource};
 pub use covariance::CovarianceStepEstimator;
 pub use reading::{ConfigError, Estimator, InvalidReason, Reading, State};
 pub use real::Real;
