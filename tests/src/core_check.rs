@@ -68,7 +68,7 @@ pub fn generate_response() -> Vec<f32> {
     let damped = omega * libm::sqrt(1.0 - zeta * zeta);
     let step_raw = f64::from(GAIN_PER_G) * MASS_G;
     let noise_rms = step_raw / libm::pow(10.0, SNR_DB / 20.0);
-    let mut noise = SplitMix64(0x5eed_0f_10ad_ce11);
+    let mut noise = SplitMix64(0x005e_ed0f_10ad_ce11);
     (0..RESPONSE_SAMPLES)
         .map(|k| {
             let t = k as f64 / SAMPLE_RATE_HZ;
