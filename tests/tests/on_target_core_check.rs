@@ -1,9 +1,12 @@
 //! The `f32` estimator on the Cortex-M4F (QEMU mps2-an386) against the host `f32` run,
 //! reading by reading, on the stored step response.
 //!
-//! Needs the bare-metal ELF: `cargo xtask test` builds `on-target`'s `core_check` and passes
-//! its path in `ON_TARGET_CORE_CHECK_ELF`. Without that variable the test says so and skips
-//! (a plain host `cargo test` cannot cross-build). With it, QEMU must be installed.
+//! Needs the bare-metal ELFs: `cargo xtask test` builds the `on-target` package and passes
+//! the directory of its ELFs in `ON_TARGET_ELF_DIR`. Without that variable the tests say so
+//! and skip (a plain host `cargo test` cannot cross-build). With it, QEMU must be installed.
+//!
+//! Also checked here: a panic and a HardFault on the target end QEMU with a failing status,
+//! which is what makes every on-target check able to fail.
 //!
 //! The claim is bit-for-bit equality (0 ulp) of every estimate and residual, and equal states.
 //! Why that is expected, not hoped for: the update uses only `+ − × ÷` and comparisons, which
@@ -18,18 +21,61 @@ use std::time::Duration;
 use tests::core_check::{self, cases::CASES};
 use tests::qemu;
 
-/// The variable `cargo xtask test` sets to the `core_check` ELF.
-const ELF_VAR: &str = "ON_TARGET_CORE_CHECK_ELF";
+/// The variable `cargo xtask test` sets to the directory of the `on-target` ELFs.
+const ELF_DIR_VAR: &str = "ON_TARGET_ELF_DIR";
+
+/// The ELF of one `on-target` binary, or `None` (with a message) when not provided.
+fn on_target_elf(bin: &str) -> Option<PathBuf> {
+    let Some(dir) = std::env::var_os(ELF_DIR_VAR).map(PathBuf::from) else {
+        println!(
+            "SKIPPED: {ELF_DIR_VAR} is not set; `cargo xtask test` builds the on-target ELFs and sets it"
+        );
+        return None;
+    };
+    let elf = dir.join(bin);
+    assert!(
+        elf.is_file(),
+        "{ELF_DIR_VAR}: no {bin} in {}",
+        dir.display()
+    );
+    Some(elf)
+}
+
+#[test]
+fn a_panic_on_the_target_fails_the_qemu_run() {
+    let Some(elf) = on_target_elf("panic_exit") else {
+        return;
+    };
+    let run = qemu::run(&elf, &[], Duration::from_secs(30)).expect("start qemu-system-arm");
+    assert!(!run.timed_out(), "panic_exit hung instead of exiting");
+    assert!(!run.success(), "a panicking guest ended QEMU with success");
+    assert!(
+        run.stdout_text().contains("PANIC: "),
+        "{}",
+        run.stdout_text()
+    );
+}
+
+#[test]
+fn a_hard_fault_on_the_target_fails_the_qemu_run() {
+    let Some(elf) = on_target_elf("fault_exit") else {
+        return;
+    };
+    let run = qemu::run(&elf, &[], Duration::from_secs(30)).expect("start qemu-system-arm");
+    assert!(!run.timed_out(), "fault_exit hung instead of exiting");
+    assert!(!run.success(), "a faulting guest ended QEMU with success");
+    assert!(
+        run.stdout_text().contains("HARDFAULT"),
+        "{}",
+        run.stdout_text()
+    );
+}
 
 #[test]
 fn target_f32_matches_host_f32_bit_for_bit() {
-    let Some(elf) = std::env::var_os(ELF_VAR).map(PathBuf::from) else {
-        println!(
-            "SKIPPED: {ELF_VAR} is not set; `cargo xtask test` builds the on-target ELF and sets it"
-        );
+    let Some(elf) = on_target_elf("core_check") else {
         return;
     };
-    assert!(elf.is_file(), "{ELF_VAR}={} is not a file", elf.display());
 
     let stored = std::fs::read(core_check::response_path()).expect("read the stored response");
     let host = core_check::host_records(&core_check::decode_response(&stored));

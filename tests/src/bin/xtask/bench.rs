@@ -98,7 +98,7 @@ fn parse_target_figures(text: &str) -> Result<TargetFigures> {
 
 /// Run `bench_core` under `-icount shift=0` and print its figures.
 fn on_target() -> Result<()> {
-    let elf = build_on_target("bench_core")?;
+    let elf = build_on_target("bench_core")?.join("bench_core");
     let run = qemu::run(&elf, &qemu::ICOUNT_ARGS, Duration::from_secs(120))
         .context("start qemu-system-arm")?;
     if !run.success() {

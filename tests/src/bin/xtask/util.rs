@@ -8,8 +8,8 @@ use anyhow::{bail, Context, Result};
 /// The bare-metal target of the Cortex-M4F.
 pub const THUMB_TARGET: &str = "thumbv7em-none-eabihf";
 
-/// The variable through which the host test finds the `core_check` ELF.
-pub const CORE_CHECK_ELF_VAR: &str = "ON_TARGET_CORE_CHECK_ELF";
+/// The variable through which the host tests find the `on-target` ELFs (a directory).
+pub const ON_TARGET_ELF_DIR_VAR: &str = "ON_TARGET_ELF_DIR";
 
 /// The workspace root (the `tests` package sits one level below it).
 pub fn workspace_root() -> PathBuf {
@@ -53,9 +53,9 @@ pub fn run_checked(command: &mut Command) -> Result<()> {
     Ok(())
 }
 
-/// Build one binary of the bare-metal `on-target` package (release: fat LTO, as shipped)
-/// and return the path of its ELF.
-pub fn build_on_target(bin: &str) -> Result<PathBuf> {
+/// Build every binary of the bare-metal `on-target` package (release: fat LTO, as shipped)
+/// and return the directory of the ELFs, checking that `expected_bin` is there.
+pub fn build_on_target(expected_bin: &str) -> Result<PathBuf> {
     run_checked(cargo().args([
         "build",
         "--release",
@@ -63,12 +63,14 @@ pub fn build_on_target(bin: &str) -> Result<PathBuf> {
         "on-target",
         "--target",
         THUMB_TARGET,
-        "--bin",
-        bin,
+        "--bins",
     ]))?;
-    let elf = target_dir().join(THUMB_TARGET).join("release").join(bin);
-    if !elf.is_file() {
-        bail!("built {bin} but found no ELF at {}", elf.display());
+    let dir = target_dir().join(THUMB_TARGET).join("release");
+    if !dir.join(expected_bin).is_file() {
+        bail!(
+            "built on-target but found no {expected_bin} in {}",
+            dir.display()
+        );
     }
-    Ok(elf)
+    Ok(dir)
 }
