@@ -1,6 +1,6 @@
-// The estimator configurations the on-target check runs, shared by the bare-metal
-// `core_check` binary and the host test that compares against it (included there with
-// `#[path]`), so the two sides cannot drift apart.
+//! The estimator configurations the on-target check runs, shared by the bare-metal
+//! `core_check` binary and the host test that compares against it (included there with
+//! `#[path]`), so the two sides cannot drift apart.
 
 /// The stored step response: `f32` little-endian raw samples (zero offset removed),
 /// written by `tests::core_check::generate_response_bytes` (see that module).

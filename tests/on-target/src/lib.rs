@@ -15,7 +15,6 @@ use cortex_m::peripheral::SYST;
 use cortex_m_rt::{exception, ExceptionFrame};
 use cortex_m_semihosting::debug;
 
-#[path = "cases.rs"]
 pub mod cases;
 
 /// Write a string to the host's stdout through semihosting, in one host call.
@@ -124,6 +123,7 @@ impl Ticks {
     /// The current counter value (counts down).
     #[inline(always)]
     pub fn now(&self) -> u32 {
+        // Reading through `SYST` (owned by `self`) keeps the counter's configuration ours.
         let _ = &self.syst;
         SYST::get_current()
     }
