@@ -4,7 +4,9 @@
 //!
 //! Each figure times only full regression updates (D = 1, λ = 1): per load the estimator is
 //! reset, the first samples of the stored step response are pushed untimed (warm-up), the
-//! rest are timed; loads repeat until [`MIN_TIME`] of timed pushing has accumulated.
+//! rest are timed; loads repeat until [`ROUND_TIME`] of timed pushing has accumulated. The
+//! figure is the best of [`ROUNDS`] rounds: the machine is shared (2 cores, parallel builds),
+//! and interference only ever makes a round slower.
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -14,8 +16,10 @@ use tests::core_check::{self, cases::GAIN_PER_G};
 
 /// Samples pushed untimed after each reset (covers warm-up up to n = 12: 2n + 1 = 25).
 const UNTIMED_SAMPLES: usize = 200;
-/// Timed pushing per (type, order) figure.
-const MIN_TIME: Duration = Duration::from_millis(300);
+/// Timed pushing per round.
+const ROUND_TIME: Duration = Duration::from_millis(60);
+/// Rounds per (type, order) figure; the fastest counts.
+const ROUNDS: usize = 5;
 
 fn updates_per_second<T: Real, const N: usize>(response: &[f32]) -> f64 {
     let samples: Vec<T> = response
@@ -27,9 +31,17 @@ fn updates_per_second<T: Real, const N: usize>(response: &[f32]) -> f64 {
         Ok(estimator) => estimator,
         Err(error) => panic!("order {N} refused: {error}"),
     };
+    let mut best = 0.0f64;
+    for _ in 0..ROUNDS {
+        best = best.max(one_round(&mut estimator, &samples));
+    }
+    best
+}
+
+fn one_round<T: Real, const N: usize>(estimator: &mut StepEstimator<T, N>, samples: &[T]) -> f64 {
     let mut timed = Duration::ZERO;
     let mut updates = 0u64;
-    while timed < MIN_TIME {
+    while timed < ROUND_TIME {
         estimator.reset();
         for &sample in &samples[..UNTIMED_SAMPLES] {
             black_box(estimator.push(sample));
@@ -62,10 +74,10 @@ fn main() {
     let stored = std::fs::read(core_check::response_path()).expect("read the stored response");
     let response = core_check::decode_response(&stored);
     println!(
-        "host ({} {}): StepEstimator<T, n> at order n, D = 1, λ = 1, {} ms timed per figure",
+        "host ({} {}): StepEstimator<T, n> at order n, D = 1, λ = 1, best of {ROUNDS} rounds of {} ms",
         std::env::consts::ARCH,
         std::env::consts::OS,
-        MIN_TIME.as_millis()
+        ROUND_TIME.as_millis()
     );
     println!("   n  f32 Mupdates/s  f64 Mupdates/s  f32/f64  size_of f32 B  size_of f64 B  (host sizes; usize is 8 B here)");
     row::<2>(&response);
