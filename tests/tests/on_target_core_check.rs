@@ -12,7 +12,8 @@
 //! Why that is expected, not hoped for: the update uses only `+ − × ÷` and comparisons, which
 //! IEEE 754 rounds identically on x86-64 SSE and on the M4F's FPv4-SP; rustc does not contract
 //! `a·b + c` into a fused multiply-add (no fast-math), so both sides round the same operations
-//! in the same order; no libm function is on the update path; and cortex-m-rt leaves the FPU
+//! in the same order (the M4F build does use `vmla.f32`/`vmls.f32`, but those round the
+//! product before accumulating, unlike `vfma`: the same two roundings as `vmul` + `vadd`); no libm function is on the update path; and cortex-m-rt leaves the FPU
 //! in its reset mode (round to nearest, no flush-to-zero, no default NaN).
 
 use std::path::PathBuf;
