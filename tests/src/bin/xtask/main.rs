@@ -130,8 +130,8 @@ impl Steps {
                 println!("  failure in {}: {error:#}", outcome.name);
             }
         }
-        // A plain closing line that CI log readers understand.
-        println!("xtask: {passed} passed, {} failed", failed.len());
+        // Steps, not tests: the tests are counted by cargo test's own "test result:" lines.
+        println!("xtask steps: {passed} ok, {} failed", failed.len());
         if failed.is_empty() {
             Ok(())
         } else {
