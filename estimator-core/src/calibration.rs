@@ -135,6 +135,56 @@ impl Calibration {
     }
 }
 
+/// The analogue chain of the hardware board: load cell → INA114 → ADC. Its nominal
+/// calibration is the fallback when no valid record is stored.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FrontEnd {
+    /// Bridge excitation in volts.
+    pub excitation_v: f32,
+    /// Rated output of the cell at capacity, in mV per volt of excitation.
+    pub rated_output_mv_per_v: f32,
+    /// Rated capacity of the cell in grams.
+    pub capacity_g: f32,
+    /// The INA114's gain resistor R_G in ohms (gain = 1 + 50 kΩ / R_G).
+    pub gain_resistor_ohm: f32,
+    /// Voltage on the INA114's REF pin: the output with a balanced bridge.
+    pub reference_pin_v: f32,
+    /// ADC reference (full scale) in volts.
+    pub adc_reference_v: f32,
+    /// ADC resolution in bits.
+    pub adc_bits: u8,
+}
+
+impl FrontEnd {
+    /// The INA114's gain, 1 + 50 kΩ / R_G (data sheet).
+    pub fn ina114_gain(&self) -> f32 {
+        1.0 + 50_000.0 / self.gain_resistor_ohm
+    }
+
+    /// ADC counts per volt at the ADC pin.
+    pub fn counts_per_volt(&self) -> f32 {
+        (1u32 << self.adc_bits) as f32 / self.adc_reference_v
+    }
+
+    /// The nominal gain and zero of the chain.
+    pub fn nominal_calibration(&self) -> Calibration {
+        let volts_per_gram =
+            self.excitation_v * self.rated_output_mv_per_v * 1e-3 / self.capacity_g;
+        Calibration {
+            counts_per_gram: volts_per_gram * self.ina114_gain() * self.counts_per_volt(),
+            zero_counts: self.reference_pin_v * self.counts_per_volt(),
+        }
+    }
+
+    /// ADC counts at the cell's capacity: must stay below full scale, or a full load
+    /// saturates the converter (and reads invalid).
+    pub fn counts_at_capacity(&self) -> f32 {
+        let nominal = self.nominal_calibration();
+        nominal.zero_counts + nominal.counts_per_gram * self.capacity_g
+    }
+}
+
 /// The stored record if it is good, else `defaults` and the reason (never garbage).
 /// `stored` is `None` when the store has nothing at all.
 pub fn load_or_default(
@@ -247,6 +297,28 @@ mod tests {
                 Err(CalibrationError::OutOfDomain)
             );
         }
+    }
+
+    #[test]
+    fn front_end_gain_and_counts_follow_the_data_sheet_formulas() {
+        let front_end = FrontEnd {
+            excitation_v: 3.3,
+            rated_output_mv_per_v: 2.0,
+            capacity_g: 600.0,
+            gain_resistor_ohm: 130.0,
+            reference_pin_v: 0.5,
+            adc_reference_v: 3.3,
+            adc_bits: 12,
+        };
+        let gain = front_end.ina114_gain();
+        assert!((gain - 385.615).abs() < 1e-2, "{gain}");
+        let nominal = front_end.nominal_calibration();
+        // 6.6 mV at 600 g → 11 µV/g → ×385.6 → 4.242 mV/g → ×(4096/3.3) counts/V.
+        let expected = 11e-6 * 385.615 * 4096.0 / 3.3;
+        assert!((nominal.counts_per_gram as f64 - expected).abs() < 1e-3 * expected);
+        assert!((nominal.zero_counts - 620.6).abs() < 0.1);
+        assert!(front_end.counts_at_capacity() < 4095.0);
+        assert!(nominal.is_valid());
     }
 
     #[test]

@@ -27,7 +27,7 @@ pub mod scale;
 mod step;
 
 pub use adc::{AdcError, AdcSource};
-pub use calibration::{Calibration, CalibrationError, CalibrationSource};
+pub use calibration::{Calibration, CalibrationError, CalibrationSource, FrontEnd};
 pub use covariance::CovarianceStepEstimator;
 pub use reading::{ConfigError, Estimator, InvalidReason, Reading, State};
 pub use real::Real;

@@ -1,4 +1,5 @@
 //! Cross-crate and on-target tests of the weighing firmware and its estimators.
 
 pub mod core_check;
+pub mod e2e;
 pub mod qemu;

@@ -1,20 +1,353 @@
-//! PLACEHOLDER, owned by the firmware engineer (issue 4), who replaces this file with the
-//! real QEMU demo, end-to-end test and firmware benchmarks. Until then every entry point
-//! fails loudly, so `cargo xtask test` cannot pass without the firmware.
+//! The firmware's xtask entry points: `demo` (the QEMU firmware on the demo scene, live
+//! readout and summary), `e2e_test` (the same run judged by `tests::e2e`) and `bench`
+//! (instruction counts under `-icount shift=0`, image sizes of both boards).
+//!
+//! The firmware logs defmt frames over semihosting to QEMU's stdout; they are decoded here
+//! with `defmt-decoder` against the ELF's table, so nothing extra needs installing.
 
-use anyhow::{bail, Result};
+use std::io::{Read, Write as _};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::mpsc;
+use std::thread;
+use std::time::{Duration, Instant};
 
-/// `cargo xtask demo`: run the QEMU firmware on the demo scene and print the live readout.
+use anyhow::{anyhow, bail, Context, Result};
+use tests::e2e::{self, RunLog, Scene};
+use tests::qemu::{MACHINE_ARGS, QEMU};
+
+use crate::util::{cargo, run_checked, target_dir, THUMB_TARGET};
+
+/// The QEMU image's binary name.
+const QEMU_BIN: &str = "firmware-qemu";
+/// The STM32F411 image's binary name.
+const STM32_BIN: &str = "firmware-stm32f411";
+/// Flash of the STM32F411CE (the whole chip; the last 128 KiB sector holds calibration).
+const STM32F411_FLASH_BYTES: u64 = 512 * 1024;
+/// RAM of the STM32F411CE.
+const STM32F411_RAM_BYTES: u64 = 128 * 1024;
+
+/// Virtual time counts instructions (1 ns each); `sleep=off` skips idle time instead of
+/// waiting for it, so the 4 s scene runs deterministically and as fast as the host allows.
+const ICOUNT_FAST: [&str; 2] = ["-icount", "shift=0,sleep=off"];
+/// Instruction-counted but idle time passes in real time: the demo's readout is live.
+const ICOUNT_REAL_TIME: [&str; 2] = ["-icount", "shift=0"];
+/// A run of the 4 s scene that takes longer than this hangs.
+const RUN_TIMEOUT: Duration = Duration::from_secs(120);
+
+/// `cargo xtask demo`: build the QEMU firmware, run the demo scene with a live readout,
+/// then print the summary (time to 0.1 % per step, largest error once within it, drops).
 pub fn demo() -> Result<()> {
-    bail!("firmware not built yet (tests/src/bin/xtask/firmware.rs is a placeholder)")
+    let elf = build(Board::Qemu, false)?;
+    println!("==> running {} on QEMU mps2-an386 (scene: empty 0.3 s, 138.32 g, removed at 2.0 s, 250 g at 2.5 s, end 4.0 s, 50 dB)", elf.display());
+    let run = run_firmware(&elf, &ICOUNT_REAL_TIME, true)?;
+    let report = e2e::check(&Scene::demo(), &run);
+    println!("\n==> summary");
+    print!("{}", report.summary());
+    if report.passed() {
+        println!("all acceptance criteria met");
+    } else {
+        println!("acceptance criteria NOT met:");
+        for failure in &report.failures {
+            println!("  - {failure}");
+        }
+    }
+    Ok(())
 }
 
-/// The end-to-end QEMU test of the firmware, run by `cargo xtask test`.
+/// The end-to-end test: the demo scene in QEMU, judged by `tests::e2e::check`.
 pub fn e2e_test() -> Result<()> {
-    bail!("firmware not built yet (tests/src/bin/xtask/firmware.rs is a placeholder)")
+    let elf = build(Board::Qemu, false)?;
+    let run = run_firmware(&elf, &ICOUNT_FAST, false)?;
+    let report = e2e::check(&Scene::demo(), &run);
+    print!("{}", report.summary());
+    if !report.passed() {
+        bail!(
+            "the firmware's readout fails the acceptance criteria:\n  - {}",
+            report.failures.join("\n  - ")
+        );
+    }
+    println!("firmware end-to-end: all criteria met");
+    Ok(())
 }
 
-/// The firmware's figures for `cargo xtask bench`.
+/// `cargo xtask bench`, firmware part: instructions in the hand-off and in the estimator
+/// per sample (QEMU, `-icount shift=0`), and flash/RAM of both images.
 pub fn bench() -> Result<()> {
-    bail!("firmware not built yet (tests/src/bin/xtask/firmware.rs is a placeholder)")
+    let qemu_elf = build(Board::Qemu, false)?;
+    let qemu_size = image_size(&qemu_elf)?;
+    let stm32_elf = build(Board::Stm32f411, false)?;
+    let stm32_size = image_size(&stm32_elf)?;
+    let bench_elf = build(Board::Qemu, true)?;
+    let run = run_firmware(&bench_elf, &ICOUNT_FAST, false)?;
+    if !run.exited_successfully {
+        bail!(
+            "the bench firmware did not finish:\n{}",
+            run.lines.join("\n")
+        );
+    }
+    let calibration = find_fields(&run, "bench calibration")?;
+    let instructions = field(&calibration, "instructions")? as f64;
+    let calibration_ticks =
+        field(&calibration, "long")? as f64 - field(&calibration, "short")? as f64;
+    if calibration_ticks <= 0.0 {
+        bail!("SysTick did not advance over the calibration loop (is -icount on?)");
+    }
+    let instructions_per_tick = instructions / calibration_ticks;
+    let handoff = find_fields(&run, "bench handoff")?;
+    let estimator = find_fields(&run, "bench estimator")?;
+    let per_event = |fields: &[(String, u64)]| -> Result<f64> {
+        let events = field(fields, "events")?;
+        if events == 0 {
+            bail!("no events measured");
+        }
+        Ok(field(fields, "ticks")? as f64 / events as f64 * instructions_per_tick)
+    };
+    let config = run
+        .lines
+        .iter()
+        .find(|line| line.starts_with("config "))
+        .cloned()
+        .unwrap_or_default();
+    println!("firmware on QEMU mps2-an386, -icount shift=0 ({config}):");
+    println!("  SysTick: {instructions_per_tick:.2} instructions per tick (calibrated on a loop of {instructions:.0} instructions)");
+    println!(
+        "  sample hand-off:   {:>7.1} instructions per sample (goal <= 200; {} samples)",
+        per_event(&handoff)?,
+        field(&handoff, "events")?
+    );
+    println!(
+        "  estimator + scale: {:>7.1} instructions per 4 kHz sample, amortised (goal <= 1,000; {} samples)",
+        per_event(&estimator)?,
+        field(&estimator, "events")?
+    );
+    println!("image sizes (release, as `cargo size` counts them):");
+    println!(
+        "  {QEMU_BIN:<20} flash {:>7} B  RAM {:>6} B (static; the stack takes the rest)",
+        qemu_size.flash, qemu_size.ram
+    );
+    println!(
+        "  {STM32_BIN:<20} flash {:>7} B  RAM {:>6} B; STM32F411CE flash free: {:.1} % of {} KiB, RAM free {:.1} % of {} KiB",
+        stm32_size.flash,
+        stm32_size.ram,
+        100.0 * (1.0 - stm32_size.flash as f64 / STM32F411_FLASH_BYTES as f64),
+        STM32F411_FLASH_BYTES / 1024,
+        100.0 * (1.0 - stm32_size.ram as f64 / STM32F411_RAM_BYTES as f64),
+        STM32F411_RAM_BYTES / 1024,
+    );
+    Ok(())
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Board {
+    Qemu,
+    Stm32f411,
+}
+
+/// Build one firmware image in release and return its ELF.
+fn build(board: Board, bench: bool) -> Result<PathBuf> {
+    let mut command = cargo();
+    command.args([
+        "build",
+        "--release",
+        "-p",
+        "firmware",
+        "--target",
+        THUMB_TARGET,
+    ]);
+    let bin = match board {
+        Board::Qemu => {
+            if bench {
+                command.args(["--features", "bench"]);
+            }
+            QEMU_BIN
+        }
+        Board::Stm32f411 => {
+            command.args(["--no-default-features", "--features", "stm32f411"]);
+            STM32_BIN
+        }
+    };
+    command.args(["--bin", bin]);
+    run_checked(&mut command)?;
+    let elf = target_dir().join(THUMB_TARGET).join("release").join(bin);
+    if !elf.is_file() {
+        bail!("built {bin} but found no ELF at {}", elf.display());
+    }
+    Ok(elf)
+}
+
+/// Run the QEMU image, decode its defmt log as it arrives (printing it when `live`), and
+/// return the decoded lines with how QEMU ended.
+fn run_firmware(elf: &Path, icount: &[&str], live: bool) -> Result<RunLog> {
+    let elf_bytes = std::fs::read(elf).with_context(|| format!("reading {}", elf.display()))?;
+    let table = defmt_decoder::Table::parse(&elf_bytes)
+        .context("reading the defmt table")?
+        .ok_or_else(|| anyhow!("{} has no defmt data", elf.display()))?;
+    let mut decoder = table.new_stream_decoder();
+
+    let mut child = Command::new(QEMU)
+        .args(MACHINE_ARGS)
+        .args(["-nographic", "-monitor", "none", "-serial", "none"])
+        .args(["-semihosting-config", "enable=on,target=native"])
+        .args(icount)
+        .arg("-kernel")
+        .arg(elf)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .with_context(|| format!("cannot start {QEMU} (cargo xtask install)"))?;
+    let mut stdout = child
+        .stdout
+        .take()
+        .ok_or_else(|| anyhow!("no stdout pipe"))?;
+    let mut stderr = child
+        .stderr
+        .take()
+        .ok_or_else(|| anyhow!("no stderr pipe"))?;
+    let (chunks, received) = mpsc::channel::<Vec<u8>>();
+    let reader = thread::spawn(move || {
+        let mut buffer = [0u8; 4096];
+        while let Ok(count) = stdout.read(&mut buffer) {
+            if count == 0 || chunks.send(buffer[..count].to_vec()).is_err() {
+                break;
+            }
+        }
+    });
+    let stderr_reader = thread::spawn(move || {
+        let mut text = String::new();
+        let _ = stderr.read_to_string(&mut text);
+        text
+    });
+
+    let started = Instant::now();
+    let mut lines = Vec::new();
+    let mut timed_out = false;
+    loop {
+        match received.recv_timeout(Duration::from_millis(50)) {
+            Ok(chunk) => {
+                decoder.received(&chunk);
+                loop {
+                    match decoder.decode() {
+                        Ok(frame) => {
+                            let prefix = match frame.level() {
+                                Some(defmt_parser::Level::Error) => "ERROR ",
+                                _ => "",
+                            };
+                            let line = format!("{prefix}{}", frame.display_message());
+                            if live {
+                                println!("{}", pretty(&line));
+                                let _ = std::io::stdout().flush();
+                            }
+                            lines.push(line);
+                        }
+                        Err(defmt_decoder::DecodeError::UnexpectedEof) => break,
+                        Err(defmt_decoder::DecodeError::Malformed) => {
+                            lines.push("ERROR malformed defmt frame".into());
+                            if !table.encoding().can_recover() {
+                                break;
+                            }
+                        }
+                    }
+                }
+            }
+            Err(mpsc::RecvTimeoutError::Disconnected) => break,
+            Err(mpsc::RecvTimeoutError::Timeout) => {}
+        }
+        if started.elapsed() > RUN_TIMEOUT {
+            timed_out = true;
+            let _ = child.kill();
+            break;
+        }
+    }
+    let status = child.wait().context("waiting for QEMU")?;
+    let _ = reader.join();
+    let qemu_stderr = stderr_reader.join().unwrap_or_default();
+    if timed_out {
+        lines.push(format!(
+            "ERROR QEMU killed after the {} s timeout",
+            RUN_TIMEOUT.as_secs()
+        ));
+    }
+    if !status.success() && !qemu_stderr.trim().is_empty() {
+        lines.push(format!("ERROR QEMU: {}", qemu_stderr.trim()));
+    }
+    Ok(RunLog {
+        lines,
+        exited_successfully: status.success() && !timed_out,
+    })
+}
+
+/// A readout line as a person reads it; other lines unchanged.
+fn pretty(line: &str) -> String {
+    match e2e::ReadoutLine::parse(line) {
+        Some(readout) => {
+            let mass = readout
+                .mass_g
+                .map_or("     ---   ".to_string(), |mass| format!("{mass:>9.2} g"));
+            format!(
+                "t={:>5.2} s  {mass}  {:<12}  {:>6} samples since change  dropped {}",
+                readout.time_s(),
+                readout.state,
+                readout.since_change,
+                readout.dropped
+            )
+        }
+        None => line.to_string(),
+    }
+}
+
+/// The `key=value` fields of the first line starting with `prefix`.
+fn find_fields(run: &RunLog, prefix: &str) -> Result<Vec<(String, u64)>> {
+    let line = run
+        .lines
+        .iter()
+        .find(|line| line.starts_with(prefix))
+        .ok_or_else(|| anyhow!("the firmware printed no `{prefix}` line"))?;
+    Ok(line
+        .split_whitespace()
+        .filter_map(|field| {
+            let (key, value) = field.split_once('=')?;
+            Some((key.to_string(), value.parse().ok()?))
+        })
+        .collect())
+}
+
+fn field(fields: &[(String, u64)], key: &str) -> Result<u64> {
+    fields
+        .iter()
+        .find(|(name, _)| name == key)
+        .map(|&(_, value)| value)
+        .ok_or_else(|| anyhow!("no `{key}` field"))
+}
+
+/// Flash and static RAM of an image, counted like `cargo size` (`size -A`): flash is what
+/// the loader writes (vector table, code, read-only data, initialised data), RAM is
+/// `.data` + `.bss` + `.uninit`.
+struct ImageSize {
+    flash: u64,
+    ram: u64,
+}
+
+fn image_size(elf: &Path) -> Result<ImageSize> {
+    use object::{Object, ObjectSection};
+    let bytes = std::fs::read(elf).with_context(|| format!("reading {}", elf.display()))?;
+    let file = object::File::parse(&*bytes).context("parsing the ELF")?;
+    let mut size = ImageSize { flash: 0, ram: 0 };
+    for section in file.sections() {
+        let name = section.name().unwrap_or("");
+        match name {
+            ".vector_table" | ".text" | ".rodata" | ".gnu.sgstubs" => size.flash += section.size(),
+            ".data" => {
+                size.flash += section.size();
+                size.ram += section.size();
+            }
+            ".bss" | ".uninit" => size.ram += section.size(),
+            _ => {}
+        }
+    }
+    if size.flash == 0 {
+        bail!("{} has no code sections", elf.display());
+    }
+    Ok(size)
 }

@@ -1,0 +1,204 @@
+//! The weighing firmware on QEMU `mps2-an386`: a 4 kHz CMSDK timer interrupt takes samples
+//! from the simulated load cell, the estimator task runs the weighing core, and a readout
+//! task logs 20 lines a second over semihosting (defmt). After the 4 s demo scene it exits
+//! QEMU with status 0; a panic or fault exits with status 1.
+#![no_std]
+#![no_main]
+
+use defmt_semihosting as _;
+
+#[rtic::app(device = firmware::mps2_an386, peripherals = false)]
+mod app {
+    use estimator_core::{AdcSource, RawSample, Scale};
+    use firmware::mps2_an386::{CmsdkTimer, Interrupt, SYSTEM_CLOCK_HZ};
+    use firmware::pipeline::{
+        self, Pipeline, Readout, SampleMessage, SampleQueue, QUEUE_CAPACITY, SAMPLE_RATE_HZ,
+    };
+    use firmware::qemu::{self, scripted, RamCalibrationStore, SimulatedConverter};
+    use heapless::spsc::{Consumer, Producer};
+
+    use firmware::bench;
+
+    type LoadCell = scripted::ScriptedCell;
+
+    /// The demo scene lasts 4.0 s.
+    const SCENE_SAMPLES: u32 = 4 * SAMPLE_RATE_HZ;
+
+    #[shared]
+    struct Shared {
+        latest: Option<Readout>,
+        /// Instruction counting (only filled with the `bench` feature).
+        handoff_ticks: bench::Totals,
+        estimator_ticks: bench::Totals,
+    }
+
+    #[local]
+    struct Local {
+        timer: CmsdkTimer,
+        converter: SimulatedConverter<LoadCell>,
+        producer: Producer<'static, SampleMessage>,
+        consumer: Consumer<'static, SampleMessage>,
+        pipeline: Pipeline,
+        sequence: u32,
+    }
+
+    #[init(local = [queue: SampleQueue = SampleQueue::new()])]
+    fn init(cx: init::Context) -> (Shared, Local) {
+        #[cfg(feature = "bench")]
+        {
+            let mut core = cx.core;
+            bench::start(&mut core.SYST);
+            let iterations = 100_000;
+            let (short, long) = bench::calibrate(iterations);
+            defmt::println!(
+                "bench calibration instructions={=u32} short={=u32} long={=u32}",
+                2 * iterations,
+                short,
+                long
+            );
+        }
+        #[cfg(not(feature = "bench"))]
+        let _ = cx.core;
+
+        // The factory calibration of the simulated chain, stored as a record and read back
+        // through the same CRC-checked decoder as the hardware's flash.
+        let factory = estimator_core::Calibration {
+            counts_per_gram: scripted::COUNTS_PER_GRAM,
+            zero_counts: scripted::ZERO_COUNTS,
+        };
+        let store = RamCalibrationStore::with_record(factory.encode());
+        let (calibration, source) = store.load(factory);
+        defmt::println!(
+            "calibration counts_per_gram={=f32} zero_counts={=f32} source={}",
+            calibration.counts_per_gram,
+            calibration.zero_counts,
+            source
+        );
+
+        let config = pipeline::scale_config();
+        let scale = match Scale::new(config, calibration.counts_scale()) {
+            Ok(scale) => scale,
+            Err(error) => {
+                defmt::error!("scale configuration refused: {}", error);
+                qemu::exit(false)
+            }
+        };
+        defmt::println!(
+            "config order={=usize} decimation={=u16} sample_rate_hz={=u32}",
+            config.order,
+            config.decimation,
+            SAMPLE_RATE_HZ
+        );
+
+        let (producer, consumer) = cx.local.queue.split();
+        let converter = SimulatedConverter::new(scripted::ScriptedCell::demo_scene());
+        // Safety: the only CmsdkTimer for timer 0; it moves into the hand-off task.
+        let mut timer = unsafe { CmsdkTimer::timer0() };
+        timer.start_periodic(SYSTEM_CLOCK_HZ / SAMPLE_RATE_HZ);
+
+        (
+            Shared {
+                latest: None,
+                handoff_ticks: bench::Totals::default(),
+                estimator_ticks: bench::Totals::default(),
+            },
+            Local {
+                timer,
+                converter,
+                producer,
+                consumer,
+                pipeline: Pipeline::new(scale),
+                sequence: 0,
+            },
+        )
+    }
+
+    /// The sample hand-off: no math, no logging. A full queue leaves a gap in the sequence
+    /// numbers, which the estimator task counts as dropped samples.
+    #[task(binds = Timer0, priority = 3, local = [timer, converter, producer, sequence],
+           shared = [handoff_ticks])]
+    fn sample_handoff(cx: sample_handoff::Context) {
+        #[cfg(feature = "bench")]
+        let started = bench::now();
+
+        cx.local.timer.clear_interrupt();
+        let converter = cx.local.converter;
+        let sample = match converter.read() {
+            Ok(code) if converter.is_saturated(code) => RawSample::Saturated,
+            Ok(code) => RawSample::Counts(code as i32),
+            Err(_) => RawSample::Lost,
+        };
+        let sequence = *cx.local.sequence;
+        let _ = cx
+            .local
+            .producer
+            .enqueue(SampleMessage { sequence, sample });
+        *cx.local.sequence = sequence.wrapping_add(1);
+        rtic::pend(Interrupt::Uart0Rx);
+
+        #[cfg(feature = "bench")]
+        {
+            let ticks = bench::since(started);
+            let mut shared = cx.shared;
+            shared.handoff_ticks.lock(|totals| totals.add(ticks));
+        }
+
+        // The simulated analogue hardware produces the next conversion (not the hand-off).
+        converter.convert();
+    }
+
+    /// The estimator task: drains the queue (bounded by its capacity) into the weighing core.
+    #[task(binds = Uart0Rx, priority = 2, local = [consumer, pipeline],
+           shared = [latest, estimator_ticks])]
+    fn estimate(mut cx: estimate::Context) {
+        for _ in 0..QUEUE_CAPACITY {
+            let Some(message) = cx.local.consumer.dequeue() else {
+                break;
+            };
+            #[cfg(feature = "bench")]
+            let started = bench::now();
+            let readout = cx.local.pipeline.accept(message);
+            #[cfg(feature = "bench")]
+            {
+                let ticks = bench::since(started);
+                cx.shared.estimator_ticks.lock(|totals| totals.add(ticks));
+            }
+            if let Some(readout) = readout {
+                cx.shared.latest.lock(|latest| *latest = Some(readout));
+                rtic::pend(Interrupt::Uart1Rx);
+            }
+        }
+    }
+
+    /// The readout task: 20 lines a second, then the end-of-scene summary and exit.
+    #[task(binds = Uart1Rx, priority = 1, shared = [latest, handoff_ticks, estimator_ticks])]
+    fn readout(mut cx: readout::Context) {
+        let Some(readout) = cx.shared.latest.lock(|latest| latest.take()) else {
+            return;
+        };
+        pipeline::log_readout(&readout);
+        if readout.sample >= SCENE_SAMPLES {
+            #[cfg(feature = "bench")]
+            {
+                let handoff = cx.shared.handoff_ticks.lock(|totals| *totals);
+                let estimator = cx.shared.estimator_ticks.lock(|totals| *totals);
+                defmt::println!(
+                    "bench handoff ticks={=u64} events={=u32}",
+                    handoff.ticks,
+                    handoff.events
+                );
+                defmt::println!(
+                    "bench estimator ticks={=u64} events={=u32}",
+                    estimator.ticks,
+                    estimator.events
+                );
+            }
+            defmt::println!(
+                "end samples={=u32} dropped={=u32}",
+                readout.sample,
+                readout.dropped
+            );
+            qemu::exit(true)
+        }
+    }
+}

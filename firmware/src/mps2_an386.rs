@@ -1,0 +1,185 @@
+//! A minimal hand-written device module for QEMU's `mps2-an386` (ARM MPS2 with the AN386
+//! Cortex-M4F image), in the shape RTIC expects: an `Interrupt` enum, `NVIC_PRIO_BITS`,
+//! and the interrupt vector table. Only what the firmware uses is here: the CMSDK timer.
+//!
+//! Interrupt numbers and addresses follow QEMU's `hw/arm/mps2.c` (and ARM's AN385/AN386
+//! application notes): CMSDK APB timer 0 at `0x4000_0000` on IRQ 8, timer 1 at
+//! `0x4000_1000` on IRQ 9; the system clock is 25 MHz.
+#![allow(unsafe_code)]
+
+/// The system (and APB timer) clock of the board in QEMU.
+pub const SYSTEM_CLOCK_HZ: u32 = 25_000_000;
+
+/// Priority bits RTIC may use. QEMU's NVIC implements at least 3, like the FPGA board.
+pub const NVIC_PRIO_BITS: u8 = 3;
+
+/// External interrupts 0..=23 of the AN386 image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u16)]
+#[allow(missing_docs)]
+pub enum Interrupt {
+    Uart0Rx = 0,
+    Uart0Tx = 1,
+    Uart1Rx = 2,
+    Uart1Tx = 3,
+    Uart2Rx = 4,
+    Uart2Tx = 5,
+    Gpio0Combined = 6,
+    Gpio1Combined = 7,
+    Timer0 = 8,
+    Timer1 = 9,
+    DualTimer = 10,
+    Spi01 = 11,
+    Uart012Overflow = 12,
+    Ethernet = 13,
+    AudioI2S = 14,
+    TouchScreen = 15,
+    Gpio2Combined = 16,
+    Gpio3Combined = 17,
+    Uart3Rx = 18,
+    Uart3Tx = 19,
+    Uart4Rx = 20,
+    Uart4Tx = 21,
+    Spi2 = 22,
+    Spi34 = 23,
+}
+
+/// RTIC looks the enum up under this name too.
+pub use Interrupt as interrupt;
+
+// Safety: every variant is a distinct external interrupt number the AN386 NVIC implements.
+unsafe impl cortex_m::interrupt::InterruptNumber for Interrupt {
+    #[inline]
+    fn number(self) -> u16 {
+        self as u16
+    }
+}
+
+extern "C" {
+    fn Uart0Rx();
+    fn Uart0Tx();
+    fn Uart1Rx();
+    fn Uart1Tx();
+    fn Uart2Rx();
+    fn Uart2Tx();
+    fn Gpio0Combined();
+    fn Gpio1Combined();
+    fn Timer0();
+    fn Timer1();
+    fn DualTimer();
+    fn Spi01();
+    fn Uart012Overflow();
+    fn Ethernet();
+    fn AudioI2S();
+    fn TouchScreen();
+    fn Gpio2Combined();
+    fn Gpio3Combined();
+    fn Uart3Rx();
+    fn Uart3Tx();
+    fn Uart4Rx();
+    fn Uart4Tx();
+    fn Spi2();
+    fn Spi34();
+}
+
+/// One entry of the vector table.
+#[doc(hidden)]
+#[derive(Clone, Copy)]
+pub struct Vector {
+    _handler: unsafe extern "C" fn(),
+}
+
+/// The external interrupt vectors, placed after cortex-m-rt's exception vectors. Handlers
+/// the firmware does not define fall back to `DefaultHandler` through `device.x`.
+#[doc(hidden)]
+#[link_section = ".vector_table.interrupts"]
+#[no_mangle]
+#[used]
+pub static __INTERRUPTS: [Vector; 24] = [
+    Vector { _handler: Uart0Rx },
+    Vector { _handler: Uart0Tx },
+    Vector { _handler: Uart1Rx },
+    Vector { _handler: Uart1Tx },
+    Vector { _handler: Uart2Rx },
+    Vector { _handler: Uart2Tx },
+    Vector {
+        _handler: Gpio0Combined,
+    },
+    Vector {
+        _handler: Gpio1Combined,
+    },
+    Vector { _handler: Timer0 },
+    Vector { _handler: Timer1 },
+    Vector {
+        _handler: DualTimer,
+    },
+    Vector { _handler: Spi01 },
+    Vector {
+        _handler: Uart012Overflow,
+    },
+    Vector { _handler: Ethernet },
+    Vector { _handler: AudioI2S },
+    Vector {
+        _handler: TouchScreen,
+    },
+    Vector {
+        _handler: Gpio2Combined,
+    },
+    Vector {
+        _handler: Gpio3Combined,
+    },
+    Vector { _handler: Uart3Rx },
+    Vector { _handler: Uart3Tx },
+    Vector { _handler: Uart4Rx },
+    Vector { _handler: Uart4Tx },
+    Vector { _handler: Spi2 },
+    Vector { _handler: Spi34 },
+];
+
+/// Base address of CMSDK APB timer 0.
+pub const TIMER0_BASE: usize = 0x4000_0000;
+
+/// A CMSDK APB timer: a 32-bit down-counter that reloads and raises its interrupt at zero.
+pub struct CmsdkTimer {
+    base: usize,
+}
+
+impl CmsdkTimer {
+    const CTRL: usize = 0x00;
+    const RELOAD: usize = 0x08;
+    const INTCLEAR: usize = 0x0C;
+    const CTRL_ENABLE: u32 = 1 << 0;
+    const CTRL_INTERRUPT_ENABLE: u32 = 1 << 3;
+
+    /// Take timer 0. Only one owner may exist: RTIC's `init` creates it once and moves it
+    /// into the hand-off task.
+    ///
+    /// # Safety
+    /// The caller must create at most one `CmsdkTimer` per timer.
+    pub unsafe fn timer0() -> Self {
+        Self { base: TIMER0_BASE }
+    }
+
+    fn write(&mut self, offset: usize, value: u32) {
+        // Safety: `base + offset` is a register of the CMSDK timer this value owns; the
+        // block is device memory, so the access is volatile and aligned.
+        unsafe { core::ptr::write_volatile((self.base + offset) as *mut u32, value) }
+    }
+
+    /// Interrupt every `period_ticks` timer clocks, periodically.
+    pub fn start_periodic(&mut self, period_ticks: u32) {
+        self.write(Self::CTRL, 0);
+        self.write(Self::RELOAD, period_ticks.saturating_sub(1));
+        // VALUE is loaded from RELOAD when the counter is written; writing it directly
+        // makes the first period exact too.
+        self.write(0x04, period_ticks.saturating_sub(1));
+        self.write(Self::INTCLEAR, 1);
+        self.write(Self::CTRL, Self::CTRL_ENABLE | Self::CTRL_INTERRUPT_ENABLE);
+    }
+
+    /// Acknowledge the interrupt.
+    #[inline(always)]
+    pub fn clear_interrupt(&mut self) {
+        self.write(Self::INTCLEAR, 1);
+    }
+}
