@@ -19,16 +19,22 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 mod adc;
+mod baseline;
 pub mod calibration;
 mod covariance;
+mod factor;
+mod input;
+mod ramp;
 mod reading;
 mod real;
 pub mod scale;
 mod step;
 
 pub use adc::{AdcError, AdcSource};
+pub use baseline::{Baseline, BaselineConfig, BaselineMode};
 pub use calibration::{Calibration, CalibrationError, CalibrationSource, FrontEnd};
 pub use covariance::CovarianceStepEstimator;
+pub use ramp::{RampConfig, RampEstimator};
 pub use reading::{ConfigError, Estimator, InvalidReason, Reading, State};
 pub use real::Real;
 pub use scale::{

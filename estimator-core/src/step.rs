@@ -13,21 +13,14 @@
 //!
 //! ## The recursive form
 //! The thesis uses the textbook covariance RLS (eq. 3.24), initialised by inverting the
-//! first `(n+1)×(n+1)` block. In `f32` that form loses positive definiteness on the
-//! ill-conditioned Hankel data of a fast-sampled sensor. We instead keep the *information*
-//! square root `R = D^{1/2}·U` (unit upper-triangular `U`, diagonal `D`) and fold each new
-//! row in with Gentleman's square-root-free Givens rotations (Gentleman 1973, Miller's
-//! AS 274). Why this form:
-//! - it is a QR factorisation of the weighted regression matrix, so it is backward stable
-//!   and needs no prior: starting from `D = 0` the first `n+1` rows give the exact
-//!   least-squares solution, and every later estimate equals the batch solution;
-//! - no square roots (the M4F's `VSQRT` is out of reach of safe `no_std` code, and a
-//!   software square root would cost more than the whole update);
-//! - the step level is the *last* unknown, so with a unit triangular factor it is read off
-//!   directly (`θ_u`), without a back substitution;
-//! - forgetting scales only the `n+1` diagonal weights;
-//! - the row left over after the rotations is the a-priori residual, for free.
+//! first `(n+1)×(n+1)` block; in `f32` that form drifts on the ill-conditioned Hankel data
+//! of a fast-sampled sensor (see `CovarianceStepEstimator` and the long-run test). We solve
+//! the same problem in square-root information form with square-root-free Givens rotations
+//! (the shared engine in `factor.rs`): exact initialisation, backward stable, no square
+//! roots, and the step level — the last unknown — read off the factor directly.
 
+use crate::factor::Factor;
+use crate::input::{check_sample, Decimator, DifferenceWindow};
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
 use crate::real::Real;
 
@@ -116,30 +109,15 @@ impl<T: Real> StepConfig<T> {
 pub struct StepEstimator<T: Real, const N: usize> {
     config: StepConfig<T>,
     inv_gain: T,
-    inv_decimation: T,
-    /// Strict upper triangle of the unit triangular factor among the difference columns.
-    coupling: [[T; N]; N],
-    /// Column of the unit triangular factor that couples each difference column to `u`.
-    coupling_u: [T; N],
-    /// Diagonal weights `D` of the difference columns.
-    weight: [T; N],
-    /// Diagonal weight of the constant column: the squared norm of its part orthogonal to
-    /// the difference columns.
-    weight_u: T,
-    /// Transformed right-hand side; its last entry is the estimate of `u`.
-    rhs: [T; N],
-    rhs_u: T,
-    /// The last `n` differences, oldest first: the regressor of the next row.
-    deltas: [T; N],
-    previous: T,
-    /// Decimated samples seen (saturating), which tells when the regressor is full.
-    decimated_samples: u32,
+    decimator: Decimator<T>,
+    differences: DifferenceWindow<T, N, 1>,
+    /// Leading columns: the differences; one trailing column: the constant, whose unknown is
+    /// the step level.
+    factor: Factor<T, N, 1>,
     /// Regression rows folded in (saturating).
     rows: u32,
     /// Exponentially weighted row count, the scale for the conditioning test.
     effective_rows: T,
-    block_sum: T,
-    block_len: u16,
     samples: u32,
     /// A fault that broke the data stream or the state; latched until `reset()`.
     fault: Option<InvalidReason>,
@@ -155,20 +133,11 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         Ok(Self {
             config,
             inv_gain: T::ONE / config.gain,
-            inv_decimation: T::ONE / T::from_u32(config.decimation as u32),
-            coupling: [[T::ZERO; N]; N],
-            coupling_u: [T::ZERO; N],
-            weight: [T::ZERO; N],
-            weight_u: T::ZERO,
-            rhs: [T::ZERO; N],
-            rhs_u: T::ZERO,
-            deltas: [T::ZERO; N],
-            previous: T::ZERO,
-            decimated_samples: 0,
+            decimator: Decimator::new(config.decimation),
+            differences: DifferenceWindow::new(),
+            factor: Factor::new(),
             rows: 0,
             effective_rows: T::ZERO,
-            block_sum: T::ZERO,
-            block_len: 0,
             samples: 0,
             fault: None,
             state: State::WarmingUp,
@@ -193,7 +162,7 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
     /// flags [`InvalidReason::IllConditioned`] when it falls to the rounding level of `T`.
     pub fn identifiability(&self) -> T {
         if self.effective_rows > T::ZERO {
-            self.weight_u / self.effective_rows
+            self.factor.tail_weight()[0] / self.effective_rows
         } else {
             T::ZERO
         }
@@ -237,98 +206,43 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
     /// One decimated sample `x` (in the estimate's unit) into the regression.
     fn update(&mut self, x: T) {
         let n = self.config.order;
-        let k = self.decimated_samples;
-        self.decimated_samples = k.saturating_add(1);
-        if k == 0 {
-            self.previous = x;
+        if !self.differences.push(x, n) {
             return;
         }
-        // Shift the new difference Δx(k−1) into the regressor.
-        let delta = x - self.previous;
-        self.previous = x;
-        self.deltas.copy_within(1..n, 0);
-        self.deltas[n - 1] = delta;
-        if (k as usize) < n {
-            return;
-        }
-
         let lambda = self.config.forgetting;
         if lambda < T::ONE {
-            for d in self.weight[..n].iter_mut() {
-                *d *= lambda;
-            }
-            self.weight_u *= lambda;
+            self.factor.forget(n, lambda);
         }
         self.effective_rows = self.effective_rows * lambda + T::ONE;
-
-        // Fold the row [Δ…, 1 | x] into (D, U, rhs) with square-root-free Givens rotations.
-        let mut row = self.deltas;
-        let mut row_u = T::ONE;
-        let mut target = x;
-        let mut row_weight = T::ONE;
-        for i in 0..n {
-            let xi = row[i];
-            if xi == T::ZERO {
-                continue;
-            }
-            let di = self.weight[i];
-            let wx = row_weight * xi;
-            let new_d = di + wx * xi;
-            let cbar = di / new_d;
-            let sbar = wx / new_d;
-            row_weight *= cbar;
-            self.weight[i] = new_d;
-            let coupling = &mut self.coupling[i];
-            for j in (i + 1)..n {
-                let xj = row[j];
-                row[j] = xj - xi * coupling[j];
-                coupling[j] = cbar * coupling[j] + sbar * xj;
-            }
-            let xu = row_u;
-            row_u = xu - xi * self.coupling_u[i];
-            self.coupling_u[i] = cbar * self.coupling_u[i] + sbar * xu;
-            let t = target;
-            target = t - xi * self.rhs[i];
-            self.rhs[i] = cbar * self.rhs[i] + sbar * t;
-            if row_weight == T::ZERO {
-                // Column i had no weight yet: the whole row now defines it.
-                break;
-            }
-        }
         let had_estimate = self.estimate.is_some();
-        if row_u != T::ZERO && row_weight != T::ZERO {
-            let wx = row_weight * row_u;
-            let new_d = self.weight_u + wx * row_u;
-            let cbar = self.weight_u / new_d;
-            let sbar = wx / new_d;
-            row_weight *= cbar;
-            self.weight_u = new_d;
-            let t = target;
-            target = t - row_u * self.rhs_u;
-            self.rhs_u = cbar * self.rhs_u + sbar * t;
-        }
+        let folded = self.factor.fold(n, self.differences.window(), [T::ONE], x);
         self.rows = self.rows.saturating_add(1);
-
-        if !(self.rhs_u.is_finite() && self.weight_u.is_finite() && row_weight.is_finite()) {
+        let [step] = self.factor.tail_solution();
+        let [weight] = self.factor.tail_weight();
+        if !(step.is_finite() && weight.is_finite() && folded.row_weight.is_finite()) {
             self.latch(InvalidReason::NonFiniteUpdate);
             return;
         }
         if (self.rows as usize) < n + 1 {
             return;
         }
-        // weight_u / effective_rows is the squared sine of the angle between the constant
+        // weight / effective_rows is the squared sine of the angle between the constant
         // column and the span of the difference columns; near zero, u is not identifiable.
         // Not latched: right after warm-up a fast-sampled Hankel system can be too
         // ill-conditioned for the precision, and more rows cure that (the factorisation is
         // backward stable, so the early rounding does not persist).
         let threshold = T::from_f64(100.0) * T::EPSILON * self.effective_rows;
-        if !(self.weight_u > threshold) {
+        if !(weight > threshold) {
             self.invalidate(InvalidReason::IllConditioned);
             return;
         }
-        self.residual = if had_estimate { Some(target) } else { None };
+        self.residual = if had_estimate {
+            Some(folded.residual)
+        } else {
+            None
+        };
         self.state = State::Estimating;
-        self.estimate = Some(self.rhs_u);
+        self.estimate = Some(step);
     }
 }
 
@@ -338,24 +252,12 @@ impl<T: Real, const N: usize> Estimator<T> for StepEstimator<T, N> {
         if self.fault.is_some() {
             return self.reading();
         }
-        if !sample.is_finite() {
-            return self.latch(InvalidReason::NonFiniteInput);
-        }
-        if !(sample >= self.config.valid_min && sample <= self.config.valid_max) {
-            return self.latch(InvalidReason::OutOfRange);
-        }
-        let x = sample * self.inv_gain;
-        if self.config.decimation == 1 {
+        let sample = match check_sample(sample, self.config.valid_min, self.config.valid_max) {
+            Ok(sample) => sample,
+            Err(reason) => return self.latch(reason),
+        };
+        if let Some(x) = self.decimator.push(sample * self.inv_gain) {
             self.update(x);
-        } else {
-            self.block_sum += x;
-            self.block_len += 1;
-            if self.block_len == self.config.decimation {
-                let mean = self.block_sum * self.inv_decimation;
-                self.block_sum = T::ZERO;
-                self.block_len = 0;
-                self.update(mean);
-            }
         }
         self.reading()
     }

@@ -1,0 +1,158 @@
+//! The recursive least-squares engine shared by the data-driven estimators.
+//!
+//! It keeps the square-root information factor `R = D^{1/2}·U` of a weighted regression
+//! (unit upper-triangular `U`, diagonal `D`) and the transformed right-hand side, and folds
+//! each new row in with Gentleman's square-root-free Givens rotations (Gentleman 1973;
+//! Miller, AS 274). The columns are split into `N` *leading* columns (the Hankel columns,
+//! of which the first `n ≤ N` are active) and `E` *trailing* columns (the input model: `[1]`
+//! for a step, `[t, 1]` for a ramp). The trailing unknowns are the ones read out, and they
+//! come last, so reading them needs a back substitution over `E` entries only.
+//!
+//! Why this form: it is a QR factorisation, backward stable in `f32`; starting from `D = 0`
+//! it needs no prior and gives the exact least-squares solution as soon as the rows
+//! determine it; there are no square roots; forgetting scales only the diagonal `D`; and the
+//! row left after the rotations is the a-priori residual.
+
+use crate::real::Real;
+
+/// The factor of a regression with `N` leading and `E` trailing columns.
+#[derive(Clone, Debug)]
+pub(crate) struct Factor<T: Real, const N: usize, const E: usize> {
+    /// Strict upper triangle of `U` among the leading columns.
+    lead_coupling: [[T; N]; N],
+    /// Block of `U` coupling each leading column to the trailing ones.
+    cross_coupling: [[T; E]; N],
+    /// Strict upper triangle of `U` among the trailing columns.
+    tail_coupling: [[T; E]; E],
+    lead_weight: [T; N],
+    /// `D` of the trailing columns: the squared norm of the part of each trailing column
+    /// orthogonal to all columns before it.
+    tail_weight: [T; E],
+    lead_rhs: [T; N],
+    tail_rhs: [T; E],
+}
+
+/// What folding one row leaves behind.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Folded<T> {
+    /// The a-priori residual of the row (meaningful once the problem was determined).
+    pub residual: T,
+    /// The product of the rotations' cosines: zero while the row only fills the factor.
+    pub row_weight: T,
+}
+
+impl<T: Real, const N: usize, const E: usize> Factor<T, N, E> {
+    pub(crate) fn new() -> Self {
+        Self {
+            lead_coupling: [[T::ZERO; N]; N],
+            cross_coupling: [[T::ZERO; E]; N],
+            tail_coupling: [[T::ZERO; E]; E],
+            lead_weight: [T::ZERO; N],
+            tail_weight: [T::ZERO; E],
+            lead_rhs: [T::ZERO; N],
+            tail_rhs: [T::ZERO; E],
+        }
+    }
+
+    /// Exponential forgetting: every earlier row's weight is multiplied by λ.
+    pub(crate) fn forget(&mut self, active: usize, lambda: T) {
+        for d in self.lead_weight[..active].iter_mut() {
+            *d *= lambda;
+        }
+        for d in self.tail_weight.iter_mut() {
+            *d *= lambda;
+        }
+    }
+
+    /// Fold the row `[lead[..active], tail] θ = target` into the factor.
+    pub(crate) fn fold(
+        &mut self,
+        active: usize,
+        mut lead: [T; N],
+        mut tail: [T; E],
+        mut target: T,
+    ) -> Folded<T> {
+        let mut row_weight = T::ONE;
+        for i in 0..active {
+            let xi = lead[i];
+            if xi == T::ZERO {
+                continue;
+            }
+            let (cbar, sbar) = rotation(&mut self.lead_weight[i], &mut row_weight, xi);
+            let coupling = &mut self.lead_coupling[i];
+            for j in (i + 1)..active {
+                apply(&mut lead[j], &mut coupling[j], xi, cbar, sbar);
+            }
+            let cross = &mut self.cross_coupling[i];
+            for e in 0..E {
+                apply(&mut tail[e], &mut cross[e], xi, cbar, sbar);
+            }
+            apply(&mut target, &mut self.lead_rhs[i], xi, cbar, sbar);
+            if row_weight == T::ZERO {
+                // Column i had no weight yet: the whole row now defines it.
+                return Folded {
+                    residual: target,
+                    row_weight,
+                };
+            }
+        }
+        for e in 0..E {
+            let xe = tail[e];
+            if xe == T::ZERO {
+                continue;
+            }
+            let (cbar, sbar) = rotation(&mut self.tail_weight[e], &mut row_weight, xe);
+            let coupling = &mut self.tail_coupling[e];
+            for f in (e + 1)..E {
+                apply(&mut tail[f], &mut coupling[f], xe, cbar, sbar);
+            }
+            apply(&mut target, &mut self.tail_rhs[e], xe, cbar, sbar);
+            if row_weight == T::ZERO {
+                break;
+            }
+        }
+        Folded {
+            residual: target,
+            row_weight,
+        }
+    }
+
+    /// The least-squares values of the trailing unknowns (back substitution over `E`).
+    pub(crate) fn tail_solution(&self) -> [T; E] {
+        let mut theta = [T::ZERO; E];
+        for e in (0..E).rev() {
+            let mut value = self.tail_rhs[e];
+            for f in (e + 1)..E {
+                value -= self.tail_coupling[e][f] * theta[f];
+            }
+            theta[e] = value;
+        }
+        theta
+    }
+
+    /// `D` of the trailing columns.
+    pub(crate) fn tail_weight(&self) -> [T; E] {
+        self.tail_weight
+    }
+}
+
+/// Gentleman's rotation for a column with weight `d` meeting a row entry `x` of weight `w`:
+/// updates both weights and returns the (c̄, s̄) that transform the rest of the row.
+#[inline(always)]
+fn rotation<T: Real>(d: &mut T, w: &mut T, x: T) -> (T, T) {
+    let wx = *w * x;
+    let new_d = *d + wx * x;
+    let cbar = *d / new_d;
+    let sbar = wx / new_d;
+    *w *= cbar;
+    *d = new_d;
+    (cbar, sbar)
+}
+
+/// Eliminate `x` from one further entry of the row and update the factor entry.
+#[inline(always)]
+fn apply<T: Real>(row_entry: &mut T, factor_entry: &mut T, x: T, cbar: T, sbar: T) {
+    let old = *row_entry;
+    *row_entry = old - x * *factor_entry;
+    *factor_entry = cbar * *factor_entry + sbar * old;
+}

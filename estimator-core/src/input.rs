@@ -1,0 +1,101 @@
+//! The input stage every data-driven estimator shares: sample checks, block averaging and
+//! the window of differences that forms the Hankel regressor.
+
+use crate::reading::InvalidReason;
+use crate::real::Real;
+
+/// Refuse a sample that is not finite or lies outside `[min, max]`.
+#[inline]
+pub(crate) fn check_sample<T: Real>(sample: T, min: T, max: T) -> Result<T, InvalidReason> {
+    if !sample.is_finite() {
+        return Err(InvalidReason::NonFiniteInput);
+    }
+    if !(sample >= min && sample <= max) {
+        return Err(InvalidReason::OutOfRange);
+    }
+    Ok(sample)
+}
+
+/// Averages non-overlapping blocks of `D` samples. Non-overlapping blocks keep white noise
+/// white at the lower rate, which the least-squares statistics of the method assume.
+#[derive(Clone, Debug)]
+pub(crate) struct Decimator<T> {
+    length: u16,
+    inv_length: T,
+    sum: T,
+    filled: u16,
+}
+
+impl<T: Real> Decimator<T> {
+    pub(crate) fn new(length: u16) -> Self {
+        Self {
+            length,
+            inv_length: T::ONE / T::from_u32(length.max(1) as u32),
+            sum: T::ZERO,
+            filled: 0,
+        }
+    }
+
+    /// The block mean when this sample completes a block.
+    #[inline]
+    pub(crate) fn push(&mut self, x: T) -> Option<T> {
+        if self.length <= 1 {
+            return Some(x);
+        }
+        self.sum += x;
+        self.filled += 1;
+        if self.filled < self.length {
+            return None;
+        }
+        let mean = self.sum * self.inv_length;
+        self.sum = T::ZERO;
+        self.filled = 0;
+        Some(mean)
+    }
+}
+
+/// The last `n` differences of order `ORDER` (1: Δx, 2: Δ²x) of a sequence, oldest first.
+#[derive(Clone, Debug)]
+pub(crate) struct DifferenceWindow<T, const N: usize, const ORDER: usize> {
+    /// The last `ORDER` values of the sequence and of its lower differences.
+    history: [T; ORDER],
+    /// Values pushed so far (saturating).
+    seen: u32,
+    window: [T; N],
+}
+
+impl<T: Real, const N: usize, const ORDER: usize> DifferenceWindow<T, N, ORDER> {
+    pub(crate) fn new() -> Self {
+        Self {
+            history: [T::ZERO; ORDER],
+            seen: 0,
+            window: [T::ZERO; N],
+        }
+    }
+
+    /// Push the next value; true once the first `n` differences fill the window.
+    #[inline]
+    pub(crate) fn push(&mut self, x: T, n: usize) -> bool {
+        // history[j] holds the previous j-th difference; walk up the orders.
+        let mut difference = x;
+        for j in 0..ORDER {
+            let previous = self.history[j];
+            self.history[j] = difference;
+            difference -= previous;
+        }
+        let seen = self.seen;
+        self.seen = seen.saturating_add(1);
+        if (seen as usize) < ORDER {
+            return false;
+        }
+        self.window.copy_within(1..n, 0);
+        self.window[n - 1] = difference;
+        seen as usize >= ORDER + n - 1
+    }
+
+    /// The window (its first `n` entries are the active regressor).
+    #[inline]
+    pub(crate) fn window(&self) -> [T; N] {
+        self.window
+    }
+}

@@ -1,0 +1,180 @@
+//! Affine (ramp) input estimation for conveyor weighing (Quintana-Carapia 2020, ch. 6).
+//!
+//! A mass sliding onto a conveyor scale at constant speed is an input `u(t) = a·t + b`. The
+//! thesis tracks `û(k)` with the exponentially weighted step estimator and fits a line to
+//! it afterwards (eq. 6.3–6.6); but a ramp makes the constant column collinear with the
+//! first differences (they tend to the constant `G·a`), and the tracked estimate lags.
+//! We instead put the input model into the regression itself: second differences remove
+//! both the constant and the slope from the response, so for an order-`n` sensor
+//!
+//! ```text
+//! y(k)/G = c₀ + c₁·t_k + Σ ℓ_i · Δ²y(k−n+i−2)/G,      c₁ = a,  c₀ = b − a·τ
+//! ```
+//!
+//! with τ the sensor's steady-state ramp lag. The slope is estimated without bias on an
+//! LTI sensor; the intercept needs τ, calibrated with a reference mass (`lag_s`). The same
+//! recursive engine as the step estimator solves it, with `[t, 1]` as trailing columns.
+
+use crate::factor::Factor;
+use crate::input::{check_sample, Decimator, DifferenceWindow};
+use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
+use crate::real::Real;
+use crate::step::StepConfig;
+
+/// Configuration of a [`RampEstimator`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RampConfig<T> {
+    /// Order, gain, forgetting, decimation and valid range, as for the step estimator.
+    pub regression: StepConfig<T>,
+    /// Time between raw samples, in seconds: the slope is per second.
+    pub sample_period_s: T,
+    /// The sensor's steady-state ramp lag τ (calibrated): `b = c₀ + a·τ`.
+    pub lag_s: T,
+}
+
+/// The data-driven affine-input estimator, capacity order `N`.
+#[derive(Clone, Debug)]
+pub struct RampEstimator<T: Real, const N: usize> {
+    config: RampConfig<T>,
+    inv_gain: T,
+    decimated_period_s: T,
+    decimator: Decimator<T>,
+    differences: DifferenceWindow<T, N, 2>,
+    /// Leading: second differences; trailing: `[t, 1]`.
+    factor: Factor<T, N, 2>,
+    decimated_samples: u32,
+    rows: u32,
+    effective_rows: T,
+    samples: u32,
+    fault: Option<InvalidReason>,
+    line: Option<(T, T)>,
+    state: State,
+}
+
+impl<T: Real, const N: usize> RampEstimator<T, N> {
+    /// A new ramp estimator, or why the configuration is impossible.
+    pub fn new(config: RampConfig<T>) -> Result<Self, ConfigError> {
+        config.regression.validate(N)?;
+        if !(config.sample_period_s > T::ZERO)
+            || !config.sample_period_s.is_finite()
+            || !config.lag_s.is_finite()
+        {
+            return Err(ConfigError::Model);
+        }
+        let decimation = config.regression.decimation;
+        Ok(Self {
+            config,
+            inv_gain: T::ONE / config.regression.gain,
+            decimated_period_s: config.sample_period_s * T::from_u32(decimation as u32),
+            decimator: Decimator::new(decimation),
+            differences: DifferenceWindow::new(),
+            factor: Factor::new(),
+            decimated_samples: 0,
+            rows: 0,
+            effective_rows: T::ZERO,
+            samples: 0,
+            fault: None,
+            line: None,
+            state: State::WarmingUp,
+        })
+    }
+
+    /// The input line: slope `a` (estimate's unit per second) and intercept `b` (at the
+    /// first raw sample after reset), once determined.
+    pub fn line(&self) -> Option<(T, T)> {
+        self.line
+    }
+
+    fn reading(&self) -> Reading<T> {
+        let t = T::from_u32(self.samples.saturating_sub(1)) * self.config.sample_period_s;
+        Reading {
+            estimate: self.line.map(|(a, b)| a * t + b),
+            samples: self.samples,
+            state: self.state,
+            residual: None,
+        }
+    }
+
+    fn invalidate(&mut self, reason: InvalidReason) -> Reading<T> {
+        self.state = State::Invalid(reason);
+        self.line = None;
+        self.reading()
+    }
+
+    fn latch(&mut self, reason: InvalidReason) -> Reading<T> {
+        self.fault = Some(reason);
+        self.invalidate(reason)
+    }
+
+    fn update(&mut self, x: T) {
+        let n = self.config.regression.order;
+        // The block mean sits at the middle of its block.
+        let block_centre = T::from_f64(0.5 * (self.config.regression.decimation as f64 - 1.0))
+            * self.config.sample_period_s;
+        let t = T::from_u32(self.decimated_samples) * self.decimated_period_s + block_centre;
+        self.decimated_samples = self.decimated_samples.saturating_add(1);
+        if !self.differences.push(x, n) {
+            return;
+        }
+        let lambda = self.config.regression.forgetting;
+        if lambda < T::ONE {
+            self.factor.forget(n, lambda);
+        }
+        self.effective_rows = self.effective_rows * lambda + T::ONE;
+        let folded = self
+            .factor
+            .fold(n, self.differences.window(), [t, T::ONE], x);
+        self.rows = self.rows.saturating_add(1);
+        let [slope, c0] = self.factor.tail_solution();
+        if !(slope.is_finite() && c0.is_finite() && folded.row_weight.is_finite()) {
+            self.latch(InvalidReason::NonFiniteUpdate);
+            return;
+        }
+        if (self.rows as usize) < n + 2 {
+            return;
+        }
+        let threshold = T::from_f64(100.0) * T::EPSILON * self.effective_rows;
+        let [w_t, w_1] = self.factor.tail_weight();
+        // The time column's weight grows like rows·t², so compare it on that scale.
+        let t_scale = t * t;
+        if !(w_1 > threshold && w_t > threshold * t_scale) {
+            self.invalidate(InvalidReason::IllConditioned);
+            return;
+        }
+        self.line = Some((slope, c0 + slope * self.config.lag_s));
+        self.state = State::Estimating;
+    }
+}
+
+impl<T: Real, const N: usize> Estimator<T> for RampEstimator<T, N> {
+    fn push(&mut self, sample: T) -> Reading<T> {
+        self.samples = self.samples.saturating_add(1);
+        if self.fault.is_some() {
+            return self.reading();
+        }
+        let cfg = &self.config.regression;
+        let sample = match check_sample(sample, cfg.valid_min, cfg.valid_max) {
+            Ok(sample) => sample,
+            Err(reason) => return self.latch(reason),
+        };
+        if let Some(x) = self.decimator.push(sample * self.inv_gain) {
+            self.update(x);
+        }
+        self.reading()
+    }
+
+    fn push_missing(&mut self) -> Reading<T> {
+        self.samples = self.samples.saturating_add(1);
+        if self.fault.is_some() {
+            return self.reading();
+        }
+        self.latch(InvalidReason::MissingSample)
+    }
+
+    fn reset(&mut self) {
+        if let Ok(fresh) = Self::new(self.config) {
+            *self = fresh;
+        }
+    }
+}
