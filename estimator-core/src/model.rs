@@ -1,0 +1,425 @@
+//! Model-based step estimation: least squares on the augmented state `[x₀; u]` of a known
+//! sensor model (thesis §3.1, eq. 3.4).
+//!
+//! With the discrete model `x(k+1) = A x(k) + B u`, `y(k) = C x(k)` and a step `u` that is
+//! constant since before the estimator was (re)started, every sample is linear in the
+//! unknown state at the restart `x₀` and in `u`:
+//!
+//! ```text
+//! y(k) = C·A^k·x₀ + s(k)·u,       s(k) = C·Σ_{j<k} A^j·B  (step response from rest)
+//! ```
+//!
+//! The regressor `[C·A^k, s(k)]` is propagated one sample at a time (`C·A^{k+1} = (C·A^k)·A`,
+//! `s(k+1) = s(k) + C·A^k·B`), and each row is folded into the same square-root-free Givens
+//! engine as the data-driven estimators, with `u` as the trailing unknown. With white noise
+//! this is the maximum-likelihood estimate of `u` for an unknown initial state: no
+//! errors-in-variables bias, and its variance is the Cramér–Rao bound of that problem.
+//! The price: the model must be right. The mechanical resonance moves with the load
+//! (ω² = k/(m_platform + M)); [`ModelBank`] runs several candidate models and keeps the one
+//! the data fit best.
+
+use crate::factor::Factor;
+use crate::input::{check_sample, Decimator};
+use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
+use crate::real::Real;
+use crate::step::MAX_DECIMATION;
+
+/// A discrete-time single-output sensor model with `S` states, in the estimate's unit:
+/// `s(∞) = C·(I − A)⁻¹·B` is the static gain (raw units per unit of `u`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SensorModel<T, const S: usize> {
+    /// State transition over one raw sample.
+    pub a: [[T; S]; S],
+    /// Input vector.
+    pub b: [T; S],
+    /// Output row.
+    pub c: [T; S],
+}
+
+impl<T: Real, const S: usize> SensorModel<T, S> {
+    fn is_finite(&self) -> bool {
+        self.a.iter().flatten().all(|v| v.is_finite())
+            && self.b.iter().all(|v| v.is_finite())
+            && self.c.iter().all(|v| v.is_finite())
+    }
+}
+
+/// The model over one block of `D` raw samples, for regressors of block means:
+/// `transition = A^D`, `mean_map = (1/D)·Σ_{i<D} A^i`,
+/// `step_end = Σ_{j<D} A^j·B`, `step_mean = (1/D)·Σ_{i<D} Σ_{j<i} A^j·B`.
+#[derive(Clone, Copy, Debug)]
+struct BlockModel<T, const S: usize> {
+    transition: [[T; S]; S],
+    mean_map: [[T; S]; S],
+    step_end: [T; S],
+    step_mean: [T; S],
+}
+
+impl<T: Real, const S: usize> BlockModel<T, S> {
+    fn new(model: &SensorModel<T, S>, decimation: u16) -> Self {
+        let mut power = identity::<T, S>();
+        let mut power_sum = [[T::ZERO; S]; S];
+        let mut step_sum = [T::ZERO; S];
+        let mut step_partial = [T::ZERO; S];
+        for _ in 0..decimation {
+            // Before multiplying: power = A^i, step_partial = Σ_{j<i} A^j·B.
+            for r in 0..S {
+                step_sum[r] += step_partial[r];
+                for c in 0..S {
+                    power_sum[r][c] += power[r][c];
+                }
+            }
+            for r in 0..S {
+                let mut acc = T::ZERO;
+                for c in 0..S {
+                    acc += power[r][c] * model.b[c];
+                }
+                step_partial[r] += acc;
+            }
+            power = multiply(&power, &model.a);
+        }
+        let inv = T::ONE / T::from_u32(decimation as u32);
+        let mut mean_map = power_sum;
+        for row in mean_map.iter_mut() {
+            for v in row.iter_mut() {
+                *v *= inv;
+            }
+        }
+        let mut step_mean = step_sum;
+        for v in step_mean.iter_mut() {
+            *v *= inv;
+        }
+        Self {
+            transition: power,
+            mean_map,
+            step_end: step_partial,
+            step_mean,
+        }
+    }
+
+    fn is_finite(&self) -> bool {
+        self.transition.iter().flatten().all(|v| v.is_finite())
+            && self.mean_map.iter().flatten().all(|v| v.is_finite())
+            && self.step_end.iter().all(|v| v.is_finite())
+            && self.step_mean.iter().all(|v| v.is_finite())
+    }
+}
+
+fn identity<T: Real, const S: usize>() -> [[T; S]; S] {
+    let mut m = [[T::ZERO; S]; S];
+    for (i, row) in m.iter_mut().enumerate() {
+        row[i] = T::ONE;
+    }
+    m
+}
+
+fn multiply<T: Real, const S: usize>(x: &[[T; S]; S], y: &[[T; S]; S]) -> [[T; S]; S] {
+    let mut out = [[T::ZERO; S]; S];
+    for r in 0..S {
+        for c in 0..S {
+            let mut acc = T::ZERO;
+            for k in 0..S {
+                acc += x[r][k] * y[k][c];
+            }
+            out[r][c] = acc;
+        }
+    }
+    out
+}
+
+/// Configuration of a [`ModelEstimator`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ModelConfig<T, const S: usize> {
+    /// The sensor model at the raw sample rate.
+    pub model: SensorModel<T, S>,
+    /// Fit block means of this many raw samples (1 = every sample). The model stays exact:
+    /// the block regressors are propagated with precomputed block matrices.
+    pub decimation: u16,
+    /// Raw samples outside `[valid_min, valid_max]` invalidate the reading.
+    pub valid_min: T,
+    /// See `valid_min`.
+    pub valid_max: T,
+}
+
+/// Least squares on `[x₀; u]` for a known model with `S` states.
+#[derive(Clone, Debug)]
+pub struct ModelEstimator<T: Real, const S: usize> {
+    config: ModelConfig<T, S>,
+    block: BlockModel<T, S>,
+    decimator: Decimator<T>,
+    /// `C·A^k`: the regressor of the initial state.
+    observability_row: [T; S],
+    /// `s(k)`: the regressor of the step.
+    step_response: T,
+    factor: Factor<T, S, 1>,
+    rows: u32,
+    /// Weighted residual sum of squares (raw units²): how well this model fits the data.
+    residual_sum: T,
+    samples: u32,
+    fault: Option<InvalidReason>,
+    state: State,
+    estimate: Option<T>,
+    residual: Option<T>,
+}
+
+impl<T: Real, const S: usize> ModelEstimator<T, S> {
+    /// A new estimator, or why the configuration is impossible.
+    pub fn new(config: ModelConfig<T, S>) -> Result<Self, ConfigError> {
+        if S == 0 || !config.model.is_finite() {
+            return Err(ConfigError::Model);
+        }
+        if config.decimation == 0 || config.decimation > MAX_DECIMATION {
+            return Err(ConfigError::Decimation);
+        }
+        if !(config.valid_min < config.valid_max) {
+            return Err(ConfigError::Range);
+        }
+        let block = BlockModel::new(&config.model, config.decimation);
+        if !block.is_finite() {
+            return Err(ConfigError::Model);
+        }
+        Ok(Self {
+            config,
+            block,
+            decimator: Decimator::new(config.decimation),
+            observability_row: config.model.c,
+            step_response: T::ZERO,
+            factor: Factor::new(),
+            rows: 0,
+            residual_sum: T::ZERO,
+            samples: 0,
+            fault: None,
+            state: State::WarmingUp,
+            estimate: None,
+            residual: None,
+        })
+    }
+
+    /// The residual sum of squares of the fit so far (raw units²).
+    pub fn residual_sum(&self) -> T {
+        self.residual_sum
+    }
+
+    fn reading(&self) -> Reading<T> {
+        Reading {
+            estimate: self.estimate,
+            samples: self.samples,
+            state: self.state,
+            residual: self.residual,
+        }
+    }
+
+    fn latch(&mut self, reason: InvalidReason) -> Reading<T> {
+        self.fault = Some(reason);
+        self.state = State::Invalid(reason);
+        self.estimate = None;
+        self.residual = None;
+        self.reading()
+    }
+
+    /// Fold the block mean `y` of block m; `observability_row` and `step_response` hold
+    /// `C·A^{mD}` and `s(mD)` at the block's first sample.
+    fn update(&mut self, y: T) {
+        let had_estimate = self.estimate.is_some();
+        let block = &self.block;
+        let mut row = [T::ZERO; S];
+        let mut next = [T::ZERO; S];
+        let mut step_mean = self.step_response;
+        let mut step_next = self.step_response;
+        for i in 0..S {
+            let ci = self.observability_row[i];
+            step_mean += ci * block.step_mean[i];
+            step_next += ci * block.step_end[i];
+            for j in 0..S {
+                row[j] += ci * block.mean_map[i][j];
+                next[j] += ci * block.transition[i][j];
+            }
+        }
+        let folded = self.factor.fold(S, row, [step_mean], y);
+        self.observability_row = next;
+        self.step_response = step_next;
+        self.rows = self.rows.saturating_add(1);
+        if had_estimate {
+            self.residual_sum += folded.row_weight * folded.residual * folded.residual;
+        }
+
+        let [u] = self.factor.tail_solution();
+        if !(u.is_finite() && folded.row_weight.is_finite() && self.residual_sum.is_finite()) {
+            self.latch(InvalidReason::NonFiniteUpdate);
+            return;
+        }
+        if (self.rows as usize) < S + 1 {
+            return;
+        }
+        let [weight] = self.factor.tail_weight();
+        let threshold = T::from_f64(100.0) * T::EPSILON * T::from_u32(self.rows);
+        let scale = self.step_response * self.step_response;
+        if !(weight > threshold * scale) {
+            self.state = State::Invalid(InvalidReason::IllConditioned);
+            self.estimate = None;
+            self.residual = None;
+            return;
+        }
+        self.residual = had_estimate.then_some(folded.residual);
+        self.state = State::Estimating;
+        self.estimate = Some(u);
+    }
+}
+
+impl<T: Real, const S: usize> Estimator<T> for ModelEstimator<T, S> {
+    fn push(&mut self, sample: T) -> Reading<T> {
+        self.samples = self.samples.saturating_add(1);
+        if self.fault.is_some() {
+            return self.reading();
+        }
+        match check_sample(sample, self.config.valid_min, self.config.valid_max) {
+            Ok(y) => {
+                if let Some(mean) = self.decimator.push(y) {
+                    self.update(mean);
+                }
+            }
+            Err(reason) => return self.latch(reason),
+        }
+        self.reading()
+    }
+
+    fn push_missing(&mut self) -> Reading<T> {
+        self.samples = self.samples.saturating_add(1);
+        if self.fault.is_some() {
+            return self.reading();
+        }
+        self.latch(InvalidReason::MissingSample)
+    }
+
+    fn reset(&mut self) {
+        if let Ok(fresh) = Self::new(self.config) {
+            *self = fresh;
+        }
+    }
+}
+
+/// `K` candidate models run side by side; the reading is that of the model with the
+/// smallest residual sum of squares (the maximum-likelihood choice over the grid under
+/// white noise), refined by a parabola through its neighbours' residuals when the grid is
+/// ordered (e.g. by resonance frequency).
+#[derive(Clone, Debug)]
+pub struct ModelBank<T: Real, const S: usize, const K: usize> {
+    models: [ModelEstimator<T, S>; K],
+    samples: u32,
+}
+
+impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
+    /// A bank over `K ≥ 1` ordered candidate configurations.
+    pub fn new(configs: [ModelConfig<T, S>; K]) -> Result<Self, ConfigError> {
+        if K == 0 {
+            return Err(ConfigError::Model);
+        }
+        let mut first_error = None;
+        let models = configs.map(|c| match ModelEstimator::new(c) {
+            Ok(m) => Some(m),
+            Err(e) => {
+                first_error.get_or_insert(e);
+                None
+            }
+        });
+        if let Some(e) = first_error {
+            return Err(e);
+        }
+        Ok(Self {
+            models: models.map(|m| m.expect("checked above")),
+            samples: 0,
+        })
+    }
+
+    /// Index of the best-fitting candidate so far.
+    pub fn best(&self) -> usize {
+        let mut best = 0;
+        for k in 1..K {
+            if self.models[k].residual_sum < self.models[best].residual_sum {
+                best = k;
+            }
+        }
+        best
+    }
+
+    /// Combine the candidates: the vertex of the parabola through the best candidate's and
+    /// its neighbours' residual sums, and the estimate interpolated there through the same
+    /// three candidates.
+    fn combined(&self, readings: &[Reading<T>; K]) -> Reading<T> {
+        let best = self.best();
+        let centre = readings[best];
+        if best == 0 || best + 1 == K {
+            return centre;
+        }
+        let (Some(u_left), Some(u_mid), Some(u_right)) = (
+            readings[best - 1].estimate,
+            centre.estimate,
+            readings[best + 1].estimate,
+        ) else {
+            return centre;
+        };
+        let (r_left, r_mid, r_right) = (
+            self.models[best - 1].residual_sum,
+            self.models[best].residual_sum,
+            self.models[best + 1].residual_sum,
+        );
+        let curvature = r_left - (r_mid + r_mid) + r_right;
+        if !(curvature > T::ZERO) {
+            return centre;
+        }
+        // Offset of the vertex from the centre, in grid steps, within [−½, ½].
+        let half = T::from_f64(0.5);
+        let mut offset = half * (r_left - r_right) / curvature;
+        if offset > half {
+            offset = half;
+        }
+        if offset < -half {
+            offset = -half;
+        }
+        // Quadratic (Lagrange) interpolation of the estimate through the three candidates.
+        let estimate = u_mid
+            + offset * half * (u_right - u_left)
+            + offset * offset * half * (u_right - (u_mid + u_mid) + u_left);
+        Reading {
+            estimate: Some(estimate),
+            ..centre
+        }
+    }
+}
+
+impl<T: Real, const S: usize, const K: usize> Estimator<T> for ModelBank<T, S, K> {
+    fn push(&mut self, sample: T) -> Reading<T> {
+        self.samples = self.samples.saturating_add(1);
+        let mut readings = [Reading {
+            estimate: None,
+            samples: self.samples,
+            state: State::WarmingUp,
+            residual: None,
+        }; K];
+        for (model, reading) in self.models.iter_mut().zip(readings.iter_mut()) {
+            *reading = model.push(sample);
+        }
+        self.combined(&readings)
+    }
+
+    fn push_missing(&mut self) -> Reading<T> {
+        self.samples = self.samples.saturating_add(1);
+        let mut last = None;
+        for model in self.models.iter_mut() {
+            last = Some(model.push_missing());
+        }
+        last.unwrap_or(Reading {
+            estimate: None,
+            samples: self.samples,
+            state: State::Invalid(InvalidReason::MissingSample),
+            residual: None,
+        })
+    }
+
+    fn reset(&mut self) {
+        for model in self.models.iter_mut() {
+            model.reset();
+        }
+        self.samples = 0;
+    }
+}
