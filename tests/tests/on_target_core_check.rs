@@ -73,6 +73,18 @@ fn a_hard_fault_on_the_target_fails_the_qemu_run() {
 }
 
 #[test]
+fn the_launcher_kills_a_run_at_its_timeout() {
+    let Some(elf) = on_target_elf("core_check") else {
+        return;
+    };
+    // QEMU cannot even start within a zero timeout, so the run must be killed and reported.
+    let run = qemu::run(&elf, &[], Duration::ZERO).expect("start qemu-system-arm");
+    assert!(run.timed_out(), "run ended with {:?}", run.status);
+    assert!(!run.success());
+    assert!(run.describe_end().contains("timeout"));
+}
+
+#[test]
 fn target_f32_matches_host_f32_bit_for_bit() {
     let Some(elf) = on_target_elf("core_check") else {
         return;
