@@ -3,8 +3,13 @@
 //! virtual time, so SysTick counts instructions (in ticks of a fixed ratio); the ratio is
 //! calibrated at boot against a loop of exactly known length, not assumed.
 
+use core::hint::black_box;
+
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::SYST;
+use estimator_core::{AdcError, AdcSource};
+
+use crate::pipeline::{self, Pipeline, SampleMessage, SampleQueue, QUEUE_CAPACITY};
 
 const RELOAD: u32 = 0x00ff_ffff;
 
@@ -73,4 +78,76 @@ pub fn calibrate(iterations: u32) -> (u32, u32) {
     known_loop(2 * iterations);
     let long = since(start);
     (short, long)
+}
+
+/// A converter seen as its data register: one volatile load per read, like the real ADC.
+pub struct RegisterAdc {
+    data_register: u32,
+}
+
+impl RegisterAdc {
+    /// A register holding `code`.
+    pub fn new(code: u32) -> Self {
+        Self {
+            data_register: code,
+        }
+    }
+}
+
+impl AdcSource for RegisterAdc {
+    fn max_code(&self) -> u32 {
+        65_535
+    }
+
+    #[inline(always)]
+    fn read(&mut self) -> Result<u32, AdcError> {
+        // Safety: reads a field of `self` through a valid, aligned reference; volatile only
+        // so the compiler cannot hoist the load out of the measured loop.
+        Ok(unsafe { core::ptr::read_volatile(&self.data_register) })
+    }
+}
+
+/// Ticks for `rounds × (QUEUE_CAPACITY − 1)` hand-offs, each followed by `after_each` (the
+/// interrupt acknowledge and the pend of the estimator task, as in the ISR); the queue is
+/// drained between rounds, outside the measurement. Returns (ticks, hand-offs).
+pub fn measure_handoff(rounds: u32, mut after_each: impl FnMut()) -> (u64, u32) {
+    let mut queue = SampleQueue::new();
+    let (mut producer, mut consumer) = queue.split();
+    let mut adc = RegisterAdc::new(30_000);
+    let mut sequence = 0u32;
+    let per_round = QUEUE_CAPACITY as u32 - 1;
+    let mut ticks = 0u64;
+    for _ in 0..rounds {
+        let start = now();
+        for _ in 0..per_round {
+            pipeline::hand_off(&mut adc, &mut producer, &mut sequence);
+            after_each();
+        }
+        ticks += since(start) as u64;
+        for _ in 0..QUEUE_CAPACITY {
+            if black_box(consumer.dequeue()).is_none() {
+                break;
+            }
+        }
+    }
+    (ticks, rounds * per_round)
+}
+
+/// Ticks for feeding `messages` through the estimator task's work (`Pipeline::accept`:
+/// sequence check, scale, estimator), one measurement over the whole slice.
+pub fn measure_pipeline(pipeline: &mut Pipeline, messages: &[SampleMessage]) -> u64 {
+    let start = now();
+    for message in messages {
+        black_box(pipeline.accept(*message));
+    }
+    since(start) as u64
+}
+
+/// Ticks of the same loop without the work, to subtract.
+pub fn measure_loop_overhead(messages: &[SampleMessage]) -> u64 {
+    let start = now();
+    for message in messages {
+        black_box(*message);
+    }
+    since(start) as u64
 }

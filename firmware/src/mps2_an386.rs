@@ -138,6 +138,8 @@ pub static __INTERRUPTS: [Vector; 24] = [
 
 /// Base address of CMSDK APB timer 0.
 pub const TIMER0_BASE: usize = 0x4000_0000;
+/// Base address of CMSDK APB timer 1.
+pub const TIMER1_BASE: usize = 0x4000_1000;
 
 /// A CMSDK APB timer: a 32-bit down-counter that reloads and raises its interrupt at zero.
 pub struct CmsdkTimer {
@@ -158,6 +160,14 @@ impl CmsdkTimer {
     /// The caller must create at most one `CmsdkTimer` per timer.
     pub unsafe fn timer0() -> Self {
         Self { base: TIMER0_BASE }
+    }
+
+    /// Take timer 1 (same contract as [`CmsdkTimer::timer0`]).
+    ///
+    /// # Safety
+    /// The caller must create at most one `CmsdkTimer` per timer.
+    pub unsafe fn timer1() -> Self {
+        Self { base: TIMER1_BASE }
     }
 
     fn write(&mut self, offset: usize, value: u32) {

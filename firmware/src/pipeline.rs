@@ -1,7 +1,7 @@
 //! What both boards share: the sample message, the estimator-side bookkeeping (sequence
 //! numbers, dropped samples, readout cadence) and the readout line format.
 
-use estimator_core::{RawSample, Scale, ScaleConfig, ScaleReading};
+use estimator_core::{AdcSource, RawSample, Scale, ScaleConfig, ScaleReading};
 
 /// Raw ADC sample rate of both boards.
 pub const SAMPLE_RATE_HZ: u32 = 4_000;
@@ -26,6 +26,27 @@ pub struct SampleMessage {
 
 /// The hand-off queue (lock-free single producer, single consumer).
 pub type SampleQueue = heapless::spsc::Queue<SampleMessage, QUEUE_CAPACITY>;
+
+/// The hand-off proper: take one conversion and queue it, no arithmetic beyond the
+/// sequence number. A full queue drops the message; the gap in sequence numbers is how the
+/// estimator task counts it.
+#[inline(always)]
+pub fn hand_off<A: AdcSource>(
+    adc: &mut A,
+    producer: &mut heapless::spsc::Producer<'_, SampleMessage>,
+    sequence: &mut u32,
+) {
+    let sample = match adc.read() {
+        Ok(code) if adc.is_saturated(code) => RawSample::Saturated,
+        Ok(code) => RawSample::Counts(code as i32),
+        Err(_) => RawSample::Lost,
+    };
+    let _ = producer.enqueue(SampleMessage {
+        sequence: *sequence,
+        sample,
+    });
+    *sequence = sequence.wrapping_add(1);
+}
 
 /// One readout line's content.
 #[derive(Clone, Copy, Debug, PartialEq)]

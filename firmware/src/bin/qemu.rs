@@ -9,7 +9,7 @@ use defmt_semihosting as _;
 
 #[rtic::app(device = firmware::mps2_an386, peripherals = false)]
 mod app {
-    use estimator_core::{AdcSource, RawSample, Scale};
+    use estimator_core::Scale;
     use firmware::mps2_an386::{CmsdkTimer, Interrupt, SYSTEM_CLOCK_HZ};
     use firmware::pipeline::{
         self, Pipeline, Readout, SampleMessage, SampleQueue, QUEUE_CAPACITY, SAMPLE_RATE_HZ,
@@ -17,9 +17,15 @@ mod app {
     use firmware::qemu::{self, scripted, RamCalibrationStore, SimulatedConverter};
     use heapless::spsc::{Consumer, Producer};
 
+    #[cfg(feature = "bench")]
     use firmware::bench;
 
     type LoadCell = scripted::ScriptedCell;
+
+    /// The load cell of the demo scene.
+    fn new_load_cell() -> LoadCell {
+        scripted::ScriptedCell::demo_scene()
+    }
 
     /// The demo scene lasts 4.0 s.
     const SCENE_SAMPLES: u32 = 4 * SAMPLE_RATE_HZ;
@@ -27,9 +33,6 @@ mod app {
     #[shared]
     struct Shared {
         latest: Option<Readout>,
-        /// Instruction counting (only filled with the `bench` feature).
-        handoff_ticks: bench::Totals,
-        estimator_ticks: bench::Totals,
     }
 
     #[local]
@@ -44,22 +47,6 @@ mod app {
 
     #[init(local = [queue: SampleQueue = SampleQueue::new()])]
     fn init(cx: init::Context) -> (Shared, Local) {
-        #[cfg(feature = "bench")]
-        {
-            let mut core = cx.core;
-            bench::start(&mut core.SYST);
-            let iterations = 100_000;
-            let (short, long) = bench::calibrate(iterations);
-            defmt::println!(
-                "bench calibration instructions={=u32} short={=u32} long={=u32}",
-                2 * iterations,
-                short,
-                long
-            );
-        }
-        #[cfg(not(feature = "bench"))]
-        let _ = cx.core;
-
         // The factory calibration of the simulated chain, stored as a record and read back
         // through the same CRC-checked decoder as the hardware's flash.
         let factory = estimator_core::Calibration {
@@ -90,18 +77,19 @@ mod app {
             SAMPLE_RATE_HZ
         );
 
+        #[cfg(feature = "bench")]
+        run_benchmarks(cx.core.SYST, Pipeline::new(scale.clone()));
+        #[cfg(not(feature = "bench"))]
+        let _ = cx.core;
+
         let (producer, consumer) = cx.local.queue.split();
-        let converter = SimulatedConverter::new(scripted::ScriptedCell::demo_scene());
+        let converter = SimulatedConverter::new(new_load_cell());
         // Safety: the only CmsdkTimer for timer 0; it moves into the hand-off task.
         let mut timer = unsafe { CmsdkTimer::timer0() };
         timer.start_periodic(SYSTEM_CLOCK_HZ / SAMPLE_RATE_HZ);
 
         (
-            Shared {
-                latest: None,
-                handoff_ticks: bench::Totals::default(),
-                estimator_ticks: bench::Totals::default(),
-            },
+            Shared { latest: None },
             Local {
                 timer,
                 converter,
@@ -115,55 +103,23 @@ mod app {
 
     /// The sample hand-off: no math, no logging. A full queue leaves a gap in the sequence
     /// numbers, which the estimator task counts as dropped samples.
-    #[task(binds = Timer0, priority = 3, local = [timer, converter, producer, sequence],
-           shared = [handoff_ticks])]
+    #[task(binds = Timer0, priority = 3, local = [timer, converter, producer, sequence])]
     fn sample_handoff(cx: sample_handoff::Context) {
-        #[cfg(feature = "bench")]
-        let started = bench::now();
-
         cx.local.timer.clear_interrupt();
-        let converter = cx.local.converter;
-        let sample = match converter.read() {
-            Ok(code) if converter.is_saturated(code) => RawSample::Saturated,
-            Ok(code) => RawSample::Counts(code as i32),
-            Err(_) => RawSample::Lost,
-        };
-        let sequence = *cx.local.sequence;
-        let _ = cx
-            .local
-            .producer
-            .enqueue(SampleMessage { sequence, sample });
-        *cx.local.sequence = sequence.wrapping_add(1);
+        pipeline::hand_off(cx.local.converter, cx.local.producer, cx.local.sequence);
         rtic::pend(Interrupt::Uart0Rx);
-
-        #[cfg(feature = "bench")]
-        {
-            let ticks = bench::since(started);
-            let mut shared = cx.shared;
-            shared.handoff_ticks.lock(|totals| totals.add(ticks));
-        }
-
         // The simulated analogue hardware produces the next conversion (not the hand-off).
-        converter.convert();
+        cx.local.converter.convert();
     }
 
     /// The estimator task: drains the queue (bounded by its capacity) into the weighing core.
-    #[task(binds = Uart0Rx, priority = 2, local = [consumer, pipeline],
-           shared = [latest, estimator_ticks])]
+    #[task(binds = Uart0Rx, priority = 2, local = [consumer, pipeline], shared = [latest])]
     fn estimate(mut cx: estimate::Context) {
         for _ in 0..QUEUE_CAPACITY {
             let Some(message) = cx.local.consumer.dequeue() else {
                 break;
             };
-            #[cfg(feature = "bench")]
-            let started = bench::now();
-            let readout = cx.local.pipeline.accept(message);
-            #[cfg(feature = "bench")]
-            {
-                let ticks = bench::since(started);
-                cx.shared.estimator_ticks.lock(|totals| totals.add(ticks));
-            }
-            if let Some(readout) = readout {
+            if let Some(readout) = cx.local.pipeline.accept(message) {
                 cx.shared.latest.lock(|latest| *latest = Some(readout));
                 rtic::pend(Interrupt::Uart1Rx);
             }
@@ -171,28 +127,13 @@ mod app {
     }
 
     /// The readout task: 20 lines a second, then the end-of-scene summary and exit.
-    #[task(binds = Uart1Rx, priority = 1, shared = [latest, handoff_ticks, estimator_ticks])]
+    #[task(binds = Uart1Rx, priority = 1, shared = [latest])]
     fn readout(mut cx: readout::Context) {
         let Some(readout) = cx.shared.latest.lock(|latest| latest.take()) else {
             return;
         };
         pipeline::log_readout(&readout);
         if readout.sample >= SCENE_SAMPLES {
-            #[cfg(feature = "bench")]
-            {
-                let handoff = cx.shared.handoff_ticks.lock(|totals| *totals);
-                let estimator = cx.shared.estimator_ticks.lock(|totals| *totals);
-                defmt::println!(
-                    "bench handoff ticks={=u64} events={=u32}",
-                    handoff.ticks,
-                    handoff.events
-                );
-                defmt::println!(
-                    "bench estimator ticks={=u64} events={=u32}",
-                    estimator.ticks,
-                    estimator.events
-                );
-            }
             defmt::println!(
                 "end samples={=u32} dropped={=u32}",
                 readout.sample,
@@ -200,5 +141,63 @@ mod app {
             );
             qemu::exit(true)
         }
+    }
+
+    /// Instruction counts (feature `bench`, run under `-icount shift=0`): the hand-off and
+    /// the estimator task's work, replayed on the same functions the tasks call, so each
+    /// figure is one long measurement instead of many one-tick ones.
+    #[cfg(feature = "bench")]
+    fn run_benchmarks(mut syst: cortex_m::peripheral::SYST, mut pipeline: Pipeline) {
+        use estimator_core::{AdcSource, RawSample};
+        use firmware::pipeline::SampleMessage;
+
+        bench::start(&mut syst);
+        let iterations = 100_000;
+        let (short, long) = bench::calibrate(iterations);
+        defmt::println!(
+            "bench calibration instructions={=u32} short={=u32} long={=u32}",
+            2 * iterations,
+            short,
+            long
+        );
+
+        // Safety: timer 1 is not used by the application; this is its only handle.
+        let mut spare_timer = unsafe { CmsdkTimer::timer1() };
+        let (ticks, events) = bench::measure_handoff(100, || {
+            spare_timer.clear_interrupt();
+            rtic::pend(Interrupt::Uart2Rx);
+        });
+        // Uart2Rx is never enabled, so the pend only costs what the real one costs.
+        cortex_m::peripheral::NVIC::unpend(Interrupt::Uart2Rx);
+        defmt::println!("bench handoff ticks={=u64} events={=u32}", ticks, events);
+
+        let mut converter = SimulatedConverter::new(new_load_cell());
+        let mut chunk = [SampleMessage {
+            sequence: 0,
+            sample: RawSample::Lost,
+        }; 2000];
+        let mut sequence = 0u32;
+        let mut ticks = 0u64;
+        for _ in 0..SCENE_SAMPLES as usize / chunk.len() {
+            for message in chunk.iter_mut() {
+                let sample = match converter.read() {
+                    Ok(code) if converter.is_saturated(code) => RawSample::Saturated,
+                    Ok(code) => RawSample::Counts(code as i32),
+                    Err(_) => RawSample::Lost,
+                };
+                converter.convert();
+                *message = SampleMessage { sequence, sample };
+                sequence += 1;
+            }
+            let work = bench::measure_pipeline(&mut pipeline, &chunk);
+            let overhead = bench::measure_loop_overhead(&chunk);
+            ticks += work.saturating_sub(overhead);
+        }
+        defmt::println!(
+            "bench estimator ticks={=u64} events={=u32} dropped={=u32}",
+            ticks,
+            sequence,
+            pipeline.dropped()
+        );
     }
 }
