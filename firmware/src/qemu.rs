@@ -83,88 +83,74 @@ unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
     exit(false)
 }
 
-/// A scripted stand-in for the host-sim sensor model: a 25 Hz, ζ = 0.03 second-order cell
-/// with pseudo-random noise, playing the demo scene. Used until `host-sim` provides its
-/// `no_std` model.
-pub mod scripted {
-    use estimator_core::{AdcError, AdcSource};
+/// The simulated load cell: host-sim's `no_std` model of the reference chain (load cell,
+/// INA114, 3rd-order Butterworth, 16-bit ADC), the same code the host studies run.
+pub mod load_cell {
+    use estimator_core::{AdcSource, Calibration, CalibrationError};
+    use host_sim::{
+        white_noise_for_snr, Disturbances, LoadEvent, Script, SensorChain, SimulatedAdc,
+    };
 
-    /// ADC counts per gram of the scripted chain.
-    pub const COUNTS_PER_GRAM: f32 = 50.0;
-    /// ADC counts of the empty pan.
-    pub const ZERO_COUNTS: f32 = 20_000.0;
-    const MAX_CODE: u32 = 65_535;
+    /// The simulated cell with room for eight scripted load changes.
+    pub type LoadCell = SimulatedAdc<8>;
 
-    /// The demo scene: (start second, load in grams).
-    const SCENE: [(f32, f32); 4] = [(0.0, 0.0), (0.3, 138.32), (2.0, 0.0), (2.5, 250.0)];
+    /// Noise seed of the demo scene (fixed, so a run is reproducible; not chosen by result).
+    pub const DEMO_SEED: u64 = 1;
+    /// Noise seed of the factory calibration run (a different cell session).
+    pub const CALIBRATION_SEED: u64 = 0x00ca_1b7a;
+    /// The known mass of the factory calibration.
+    pub const CALIBRATION_MASS_G: f64 = 200.0;
 
-    /// The scripted load cell.
-    pub struct ScriptedCell {
-        sample: u32,
-        position_g: f32,
-        velocity: f32,
-        noise_state: u32,
-        noise_g: f32,
+    /// Issue 4's demo scene: empty 0.3 s, 138.32 g, removed at 2.0 s, 250 g at 2.5 s, end
+    /// at 4.0 s, 50 dB SNR.
+    pub fn demo_scene() -> LoadCell {
+        SimulatedAdc::reference_demo(DEMO_SEED)
     }
 
-    impl ScriptedCell {
-        /// The demo scene at 50 dB SNR relative to the 138.32 g step.
-        pub fn demo_scene() -> Self {
-            Self {
-                sample: 0,
-                position_g: 0.0,
-                velocity: 0.0,
-                noise_state: 0x1234_5678,
-                noise_g: 138.32 / 316.23,
-            }
-        }
-
-        fn load_g(&self) -> f32 {
-            let t = self.sample as f32 / 4000.0;
-            let mut load = 0.0;
-            for (start, mass) in SCENE {
-                if t >= start {
-                    load = mass;
-                }
-            }
-            load
-        }
-
-        fn uniform(&mut self) -> f32 {
-            self.noise_state ^= self.noise_state << 13;
-            self.noise_state ^= self.noise_state >> 17;
-            self.noise_state ^= self.noise_state << 5;
-            (self.noise_state >> 8) as f32 / (1u32 << 24) as f32 - 0.5
+    /// The chain's nominal gain and zero: the fallback if the stored record is unusable.
+    pub fn nominal_calibration() -> Calibration {
+        let chain = SensorChain::reference();
+        Calibration {
+            counts_per_gram: chain.counts_per_gram() as f32,
+            zero_counts: chain.zero_code() as f32,
         }
     }
 
-    impl AdcSource for ScriptedCell {
-        fn max_code(&self) -> u32 {
-            MAX_CODE
-        }
-
-        fn read(&mut self) -> Result<u32, AdcError> {
-            let omega = 2.0 * core::f32::consts::PI * 25.0;
-            let dt = 1.0 / 4000.0 / 4.0;
-            let load = self.load_g();
-            for _ in 0..4 {
-                let accel =
-                    omega * omega * (load - self.position_g) - 2.0 * 0.03 * omega * self.velocity;
-                self.velocity += accel * dt;
-                self.position_g += self.velocity * dt;
+    /// The factory procedure on a simulated cell with the demo's noise: the mean code of
+    /// the empty pan over 0.5–2.0 s, then the mean with the known mass over 4.0–6.0 s (the
+    /// cell has settled far below the noise by then), and `Calibration::from_known_mass`.
+    pub fn factory_calibration() -> Result<Calibration, CalibrationError> {
+        const RATE: u32 = 4000;
+        let chain = SensorChain::reference();
+        let mut script = Script::<8>::new(6.0);
+        script
+            .push(LoadEvent::step(2.0, CALIBRATION_MASS_G))
+            .map_err(|_| CalibrationError::NoSpan)?;
+        let mut disturbances = Disturbances::white(white_noise_for_snr(
+            &chain,
+            host_sim::simulated::REFERENCE_STEP_G,
+            host_sim::simulated::REFERENCE_SNR_DB,
+            host_sim::simulated::SNR_WINDOW_SAMPLES,
+        ));
+        disturbances.amplifier_noise = true;
+        let mut cell = SimulatedAdc::new(chain, script, disturbances, CALIBRATION_SEED);
+        let (mut empty_sum, mut empty_count) = (0u64, 0u32);
+        let (mut loaded_sum, mut loaded_count) = (0u64, 0u32);
+        for sample in 0..6 * RATE {
+            let code = match cell.read() {
+                Ok(code) if !cell.is_saturated(code) => code as u64,
+                _ => return Err(CalibrationError::NoSpan),
+            };
+            if (RATE / 2..2 * RATE).contains(&sample) {
+                empty_sum += code;
+                empty_count += 1;
+            } else if sample >= 4 * RATE {
+                loaded_sum += code;
+                loaded_count += 1;
             }
-            let noise = (self.uniform() + self.uniform() + self.uniform() + self.uniform())
-                * 1.732_050_8
-                * self.noise_g;
-            self.sample += 1;
-            let counts = ZERO_COUNTS + (self.position_g + noise) * COUNTS_PER_GRAM + 0.5;
-            Ok(if counts <= 0.0 {
-                0
-            } else if counts >= MAX_CODE as f32 {
-                MAX_CODE
-            } else {
-                counts as u32
-            })
         }
+        let empty = empty_sum as f64 / empty_count as f64;
+        let loaded = loaded_sum as f64 / loaded_count as f64;
+        Calibration::from_known_mass(empty as f32, loaded as f32, CALIBRATION_MASS_G as f32)
     }
 }

@@ -590,3 +590,108 @@ mod tests {
         assert!(!check(&Scene::demo(), &silent).passed());
     }
 }
+
+/// Run the weighing core (`estimator_core::Scale`, the code the firmware's estimator task
+/// runs, in `f32`) on the host over `samples` conversions of `adc`, and log readout lines
+/// in the firmware's format. Predicts the QEMU run without QEMU (same core, same model);
+/// used to choose the firmware's configuration and as a host-side check of the decisions.
+pub fn host_replay(
+    adc: &mut impl estimator_core::AdcSource,
+    scale: &mut estimator_core::Scale<8>,
+    samples: u32,
+) -> RunLog {
+    use estimator_core::RawSample;
+    let mut lines = Vec::new();
+    let step = (SAMPLE_RATE_HZ / READOUT_HZ) as u32;
+    for index in 0..samples {
+        let sample = match adc.read() {
+            Ok(code) if adc.is_saturated(code) => RawSample::Saturated,
+            Ok(code) => RawSample::Counts(code as i32),
+            Err(_) => RawSample::Lost,
+        };
+        let reading = scale.push(sample);
+        if (index + 1) % step == 0 {
+            let mass = reading
+                .mass_g
+                .map_or("none".to_string(), |mass| format!("{mass}"));
+            lines.push(format!(
+                "readout sample={} mass_g={mass} state={:?} since={} dropped=0 changes={}",
+                index + 1,
+                reading.state,
+                reading.samples_since_change,
+                reading.load_changes
+            ));
+        }
+    }
+    lines.push(format!("end samples={samples} dropped=0"));
+    RunLog {
+        lines,
+        exited_successfully: true,
+    }
+}
+
+#[cfg(test)]
+mod host_replay_tests {
+    use super::*;
+    use estimator_core::{CountsScale, Scale, ScaleConfig};
+    use host_sim::SimulatedAdc;
+
+    fn replay(seed: u64, config: ScaleConfig) -> Report {
+        let mut adc = SimulatedAdc::reference_demo(seed);
+        let calibration = CountsScale {
+            counts_per_gram: adc.counts_per_gram() as f32,
+            zero_counts: adc.zero_code() as f32,
+        };
+        let mut scale = Scale::<8>::new(config, calibration).unwrap();
+        let run = host_replay(&mut adc, &mut scale, 16_000);
+        check(&Scene::demo(), &run)
+    }
+
+    /// The configuration study behind the firmware's default (`ScaleConfig::weighing_default`):
+    /// `cargo test -p tests --release --lib e2e::host_replay_tests::study -- --ignored --nocapture`
+    #[test]
+    #[ignore = "a study that prints a table, not a check"]
+    fn study() {
+        println!("order decim  pass/seeds  worst t(0.1%) ms [138g, 250g]  worst err g [138, 250]  worst empty g");
+        for order in [3usize, 4, 5, 6, 7, 8] {
+            for decimation in [1u16, 4, 8, 12, 16] {
+                let mut config = ScaleConfig::weighing_default(4000.0);
+                config.order = order;
+                config.decimation = decimation;
+                let mut passed = 0;
+                let mut worst_time = [0.0f64; 2];
+                let mut worst_error = [0.0f64; 2];
+                let mut worst_empty = 0.0f64;
+                let seeds = 10;
+                for seed in 1..=seeds {
+                    let report = replay(seed, config);
+                    if report.passed() {
+                        passed += 1;
+                    }
+                    for (slot, segment) in [1usize, 3].iter().enumerate() {
+                        let segment = &report.segments[*segment];
+                        worst_time[slot] = worst_time[slot]
+                            .max(segment.time_to_tolerance_s.unwrap_or(f64::INFINITY));
+                        worst_error[slot] =
+                            worst_error[slot].max(segment.largest_error_g.unwrap_or(f64::INFINITY));
+                    }
+                    for segment in [0usize, 2] {
+                        worst_empty = worst_empty.max(
+                            report.segments[segment]
+                                .largest_error_g
+                                .unwrap_or(f64::INFINITY),
+                        );
+                    }
+                }
+                println!(
+                    "{order:>5} {decimation:>5}  {passed:>4}/{seeds:<4}  {:>8.0} {:>8.0}  {:>10.4} {:>10.4}  {:>10.4}",
+                    worst_time[0] * 1e3,
+                    worst_time[1] * 1e3,
+                    worst_error[0],
+                    worst_error[1],
+                    worst_empty
+                );
+            }
+        }
+    }
+}

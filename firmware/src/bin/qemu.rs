@@ -14,17 +14,17 @@ mod app {
     use firmware::pipeline::{
         self, Pipeline, Readout, SampleMessage, SampleQueue, QUEUE_CAPACITY, SAMPLE_RATE_HZ,
     };
-    use firmware::qemu::{self, scripted, RamCalibrationStore, SimulatedConverter};
+    use firmware::qemu::{self, load_cell, RamCalibrationStore, SimulatedConverter};
     use heapless::spsc::{Consumer, Producer};
 
     #[cfg(feature = "bench")]
     use firmware::bench;
 
-    type LoadCell = scripted::ScriptedCell;
+    type LoadCell = load_cell::LoadCell;
 
     /// The load cell of the demo scene.
     fn new_load_cell() -> LoadCell {
-        scripted::ScriptedCell::demo_scene()
+        load_cell::demo_scene()
     }
 
     /// The demo scene lasts 4.0 s.
@@ -47,14 +47,18 @@ mod app {
 
     #[init(local = [queue: SampleQueue = SampleQueue::new()])]
     fn init(cx: init::Context) -> (Shared, Local) {
-        // The factory calibration of the simulated chain, stored as a record and read back
-        // through the same CRC-checked decoder as the hardware's flash.
-        let factory = estimator_core::Calibration {
-            counts_per_gram: scripted::COUNTS_PER_GRAM,
-            zero_counts: scripted::ZERO_COUNTS,
+        // The factory calibration (known mass, empty pan) on the simulated chain, stored as
+        // a record and read back through the same CRC-checked decoder as flash on hardware.
+        let defaults = load_cell::nominal_calibration();
+        let record = match load_cell::factory_calibration() {
+            Ok(factory) => factory.encode(),
+            Err(error) => {
+                defmt::error!("factory calibration failed: {}", error);
+                [0xFF; estimator_core::calibration::RECORD_LEN]
+            }
         };
-        let store = RamCalibrationStore::with_record(factory.encode());
-        let (calibration, source) = store.load(factory);
+        let store = RamCalibrationStore::with_record(record);
+        let (calibration, source) = store.load(defaults);
         defmt::println!(
             "calibration counts_per_gram={=f32} zero_counts={=f32} source={}",
             calibration.counts_per_gram,
