@@ -43,3 +43,14 @@ pub use simulated::{
     run_seed, white_noise_for_snr, Disturbances, Gaussian, LoadEvent, Script, ScriptError,
     SimulatedAdc, StepResponse,
 };
+
+#[cfg(feature = "std")]
+pub mod chart;
+#[cfg(feature = "std")]
+pub mod crlb;
+#[cfg(feature = "std")]
+pub mod estimate;
+#[cfg(feature = "std")]
+pub mod montecarlo;
+#[cfg(feature = "std")]
+pub mod scene;

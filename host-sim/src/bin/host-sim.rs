@@ -1,5 +1,370 @@
-//! The `host-sim` command (being written: issue 3).
-fn main() {
-    eprintln!("host-sim: the command line is not implemented yet");
-    std::process::exit(2);
+//! `host-sim`: simulate scenes, run the core's estimator on recorded data, Monte Carlo
+//! studies against the Cramér–Rao bound, the charts, the results table and the benchmark.
+
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Write};
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand};
+use estimator_core::AdcSource;
+use host_sim::chart;
+use host_sim::estimate::estimate_csv;
+use host_sim::montecarlo::{self, Precision, Setup, Study};
+use host_sim::scene::Scene;
+
+#[derive(Parser)]
+#[command(
+    name = "host-sim",
+    about = "The weighing scene, Monte Carlo studies and charts"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Simulate a scene: CSV `t,y,truth` (t in s, y the ADC code, truth the load in g).
+    Simulate {
+        /// A scene file, or the name of a shipped scene (host-sim/scenes/NAME.toml).
+        scene: String,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Run the core's step estimator over a CSV with a header and a column `y`; writes
+    /// `k,estimate,state` to stdout (estimate empty while not valid).
+    Estimate {
+        #[arg(long)]
+        input: PathBuf,
+        /// Model order n.
+        #[arg(long)]
+        order: usize,
+        /// Static gain: raw units of `y` per unit of the estimate (e.g. counts per gram).
+        #[arg(long)]
+        gain: f64,
+        #[arg(long, default_value_t = 1.0)]
+        forgetting: f64,
+        #[arg(long, default_value_t = 1)]
+        decimation: u16,
+        #[arg(long, default_value = "f64")]
+        precision: Precision,
+        /// Subtracted from every sample before the estimator (the tare, in raw units).
+        #[arg(long, default_value_t = 0.0)]
+        zero: f64,
+    },
+    /// Monte Carlo of the core on a scene: CSV per SNR, configuration and sample index.
+    Montecarlo {
+        scene: String,
+        #[arg(long, default_value_t = 1000)]
+        runs: usize,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// SNRs in dB (comma separated); default: the scene's.
+        #[arg(long, value_delimiter = ',')]
+        snr_db: Vec<f64>,
+        /// Estimator configurations, e.g. `--config n=7,D=1 --config n=5,D=16`.
+        #[arg(long = "config", default_value = "n=7,D=1")]
+        configs: Vec<Setup>,
+        /// Samples after the onset to study (default: up to the next event or the end).
+        #[arg(long)]
+        samples: Option<usize>,
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Print the headline figures (RMS at the readout, time to 0.1%) to stdout.
+        #[arg(long)]
+        summary: bool,
+        #[arg(long, default_value_t = 0.1)]
+        readout_s: f64,
+    },
+    /// The README's results table: the plain thesis configuration and a sweep of order and
+    /// decimation on the reference scene at 50 dB; prints the figures and the best one.
+    Table {
+        #[arg(long, default_value_t = 1000)]
+        runs: usize,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        #[arg(long, default_value_t = 50.0)]
+        snr_db: f64,
+        #[arg(long, default_value_t = 0.1)]
+        readout_s: f64,
+    },
+    /// Draw the charts (a)–(d) as SVG and PNG.
+    Chart {
+        /// Draw all four charts (the only mode so far).
+        #[arg(long)]
+        all: bool,
+        #[arg(long, default_value = "host-sim/charts")]
+        out: PathBuf,
+        #[arg(long, default_value_t = 400)]
+        runs: usize,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Configurations for (a)–(c).
+        #[arg(long = "config", default_values = ["n=7,D=1", "n=5,D=16"])]
+        configs: Vec<Setup>,
+        #[arg(long, default_value_t = 0.1)]
+        readout_s: f64,
+    },
+    /// Monte Carlo benchmark: estimator updates per second on this host.
+    Bench {
+        #[arg(long, default_value_t = 10_000)]
+        runs: usize,
+        #[arg(long, default_value_t = 6000)]
+        samples: usize,
+        #[arg(long, default_value_t = 7)]
+        order: usize,
+        #[arg(long, default_value_t = 1)]
+        decimation: u16,
+        #[arg(long, default_value = "f64")]
+        precision: Precision,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
+}
+
+fn create(path: &PathBuf) -> Result<BufWriter<File>> {
+    if let Some(parent) = path.parent() {
+        if !parent.as_os_str().is_empty() {
+            std::fs::create_dir_all(parent)
+                .with_context(|| format!("cannot create {}", parent.display()))?;
+        }
+    }
+    Ok(BufWriter::new(File::create(path).with_context(|| {
+        format!("cannot create {}", path.display())
+    })?))
+}
+
+fn main() -> Result<()> {
+    match Cli::parse().command {
+        Command::Simulate { scene, seed, out } => {
+            let scene = Scene::load(&scene)?;
+            let mut adc = scene.adc(seed);
+            let mut file = create(&out)?;
+            writeln!(file, "t,y,truth")?;
+            let rate = scene.chain.sample_rate_hz;
+            for k in 0..scene.samples() {
+                let code = adc.read().map_err(|e| anyhow::anyhow!("ADC: {e:?}"))?;
+                writeln!(file, "{:.6},{code},{}", k as f64 / rate, adc.load_g())?;
+            }
+            file.flush()?;
+            eprintln!(
+                "{}: {} samples at {} Hz; gain {:.6} counts/g, zero {:.3} counts (use: estimate --gain {:.6} --zero {:.3})",
+                out.display(),
+                scene.samples(),
+                rate,
+                scene.chain.counts_per_gram(),
+                scene.chain.zero_code(),
+                scene.chain.counts_per_gram(),
+                scene.chain.zero_code()
+            );
+        }
+        Command::Estimate {
+            input,
+            order,
+            gain,
+            forgetting,
+            decimation,
+            precision,
+            zero,
+        } => {
+            let setup = Setup {
+                order,
+                decimation,
+                forgetting,
+                precision,
+            };
+            let file =
+                File::open(&input).with_context(|| format!("cannot open {}", input.display()))?;
+            let stdout = std::io::stdout();
+            let mut out = BufWriter::new(stdout.lock());
+            estimate_csv(
+                BufReader::new(file),
+                &input.display().to_string(),
+                &setup,
+                gain,
+                zero,
+                &mut out,
+            )?;
+            out.flush()?;
+        }
+        Command::Montecarlo {
+            scene,
+            runs,
+            seed,
+            snr_db,
+            configs,
+            samples,
+            out,
+            summary,
+            readout_s,
+        } => {
+            let scene = Scene::load(&scene)?;
+            let study = Study {
+                samples: samples.unwrap_or(usize::MAX),
+                scene,
+                setups: configs,
+                runs,
+                seed,
+            };
+            let results = montecarlo::run_studies(&study, &snr_db)?;
+            if let Some(out) = out {
+                let mut file = create(&out)?;
+                montecarlo::write_csv(&results, &mut file)?;
+                file.flush()?;
+            }
+            if summary {
+                montecarlo::summary(&results, readout_s, &mut std::io::stdout())?;
+            }
+        }
+        Command::Table {
+            runs,
+            seed,
+            snr_db,
+            readout_s,
+        } => table(runs, seed, snr_db, readout_s)?,
+        Command::Chart {
+            all,
+            out,
+            runs,
+            seed,
+            configs,
+            readout_s,
+        } => {
+            if !all {
+                anyhow::bail!("only `chart --all` is implemented: it draws (a)–(d)");
+            }
+            charts(&out, runs, seed, configs, readout_s)?;
+        }
+        Command::Bench {
+            runs,
+            samples,
+            order,
+            decimation,
+            precision,
+            seed,
+        } => {
+            let scene = Scene::load("reference-step")?;
+            let setup = Setup {
+                order,
+                decimation,
+                forgetting: 1.0,
+                precision,
+            };
+            let figures = montecarlo::bench(&scene, &setup, runs, samples, seed)?;
+            let per_thread = figures.updates as f64 / figures.estimator_cpu_s;
+            println!(
+                "host-sim bench: {runs} runs x {samples} samples, {setup}, {precision:?}, reference-step at {} dB, {} threads",
+                scene.snr_db.unwrap_or(f64::INFINITY),
+                figures.threads
+            );
+            println!(
+                "  estimator: {:.3e} updates/s per thread ({:.1} ns/update), {:.3e} updates/s on {} threads",
+                per_thread,
+                1e9 / per_thread,
+                per_thread * figures.threads as f64,
+                figures.threads
+            );
+            println!(
+                "  whole Monte Carlo (simulation + estimator): {:.2} s wall, {:.3e} samples/s (checksum {:.3})",
+                figures.wall_s,
+                figures.updates as f64 / figures.wall_s,
+                figures.checksum
+            );
+        }
+    }
+    Ok(())
+}
+
+fn table(runs: usize, seed: u64, snr_db: f64, readout_s: f64) -> Result<()> {
+    let scene = Scene::load("reference-step")?.with_snr_db(snr_db);
+    let mut setups = vec![Setup::new(7, 1)];
+    for order in [3, 5, 7] {
+        for decimation in [2, 4, 8, 16, 32] {
+            setups.push(Setup::new(order, decimation));
+        }
+    }
+    let study = Study {
+        scene,
+        setups,
+        runs,
+        seed,
+        samples: usize::MAX,
+    };
+    let results = montecarlo::run_studies(&study, &[])?;
+    let mut stdout = std::io::stdout();
+    montecarlo::summary(&results, readout_s, &mut stdout)?;
+    let result = &results[0];
+    let k = ((readout_s * result.sample_rate_hz).round() as usize).min(result.crlb_g2.len() - 1);
+    let best = result
+        .setups
+        .iter()
+        .filter(|s| s.valid[k] as usize == runs)
+        .min_by(|a, b| a.rms(k).total_cmp(&b.rms(k)));
+    println!(
+        "CRLB at readout: {:.4e} g ({:.4e} relative)",
+        result.crlb_g2[k].sqrt(),
+        result.crlb_g2[k].sqrt() / result.truth_g
+    );
+    if let Some(best) = best {
+        println!(
+            "best by RMS at {} ms: {} — {:.4e} g ({:.4e} relative, {:.2}x CRLB), median time to 0.1%: {:.4} s",
+            readout_s * 1e3,
+            best.setup,
+            best.rms(k),
+            best.rms(k) / result.truth_g,
+            best.rms(k) / result.crlb_g2[k].sqrt(),
+            best.settle_quantile(1, 0.5)
+        );
+    }
+    Ok(())
+}
+
+fn charts(
+    out: &std::path::Path,
+    runs: usize,
+    seed: u64,
+    configs: Vec<Setup>,
+    readout_s: f64,
+) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let scene = Scene::load("reference-step")?;
+    let study = Study {
+        scene: scene.clone(),
+        setups: configs,
+        runs,
+        seed,
+        samples: usize::MAX,
+    };
+    let snrs = [30.0, 40.0, 50.0, 60.0, 70.0, 80.0];
+    eprintln!("charts (a)–(c): {runs} runs at each of {} SNRs", snrs.len());
+    let results = montecarlo::run_studies(&study, &snrs)?;
+    let at_50 = results
+        .iter()
+        .find(|r| r.snr_db == 50.0)
+        .context("no 50 dB study")?;
+    chart::error_against_time(at_50).write(&out.join("a-error-vs-time"))?;
+    chart::time_against_snr(&results).write(&out.join("b-time-to-accuracy-vs-snr"))?;
+    chart::rms_against_snr(&results, readout_s).write(&out.join("c-rms-at-readout-vs-snr"))?;
+    let readout_samples = 500;
+    let order_study = Study {
+        scene,
+        setups: (1..=12).map(|order| Setup::new(order, 1)).collect(),
+        runs,
+        seed,
+        samples: readout_samples,
+    };
+    eprintln!("chart (d): {runs} runs, orders 1–12, SNR 30–60 dB");
+    let by_snr = montecarlo::run_studies(&order_study, &[30.0, 40.0, 50.0, 60.0])?;
+    chart::mse_against_order(&by_snr, readout_samples).write(&out.join("d-mse-vs-order"))?;
+    let mut summary = create(&out.join("summary.csv"))?;
+    montecarlo::summary(&results, readout_s, &mut summary)?;
+    summary.flush()?;
+    eprintln!(
+        "wrote {}/{{a,b,c,d}}-*.{{svg,png}} and summary.csv",
+        out.display()
+    );
+    Ok(())
 }

@@ -1,0 +1,335 @@
+//! Charts (SVG and PNG, plotters) of the Monte Carlo studies: (a) error against time,
+//! (b) time to accuracy against SNR, (c) RMS error at the readout against SNR with the CRLB,
+//! (d) MSE against the order n. The PNG text uses DejaVu Sans, shipped in `assets/` (its
+//! licence beside it), so charts render the same on a headless machine.
+
+use std::path::Path;
+
+use anyhow::{anyhow, Result};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use crate::montecarlo::{StudyResult, TOLERANCES};
+
+static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
+
+fn register_font() -> Result<()> {
+    plotters::style::register_font("sans-serif", FontStyle::Normal, FONT)
+        .map_err(|_| anyhow!("the shipped DejaVu Sans font does not parse"))
+}
+
+/// One line on a chart.
+#[derive(Clone, Debug)]
+pub struct Series {
+    /// Legend text.
+    pub name: String,
+    /// Points; non-finite ones are left out.
+    pub points: Vec<(f64, f64)>,
+    /// Draw as a reference (thin, dark): the CRLB, the sensor's own settling.
+    pub reference: bool,
+}
+
+/// A chart with a linear x axis and a logarithmic y axis.
+#[derive(Clone, Debug)]
+pub struct Chart {
+    /// Title (state the run count here).
+    pub title: String,
+    /// x axis label.
+    pub x_label: String,
+    /// y axis label.
+    pub y_label: String,
+    /// The lines.
+    pub series: Vec<Series>,
+}
+
+const PALETTE: [RGBColor; 8] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(23, 190, 207),
+];
+
+impl Chart {
+    fn bounds(&self) -> (f64, f64, f64, f64) {
+        let points = self
+            .series
+            .iter()
+            .flat_map(|s| s.points.iter())
+            .filter(|(x, y)| x.is_finite() && y.is_finite() && *y > 0.0);
+        let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+        for &(x, y) in points {
+            x0 = x0.min(x);
+            x1 = x1.max(x);
+            y0 = y0.min(y);
+            y1 = y1.max(y);
+        }
+        if x0 > x1 {
+            return (0.0, 1.0, 1e-3, 1.0);
+        }
+        if x0 == x1 {
+            x1 = x0 + 1.0;
+        }
+        (x0, x1, y0 / 1.5, y1 * 1.5)
+    }
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<()> {
+        let error = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("drawing failed: {e:?}");
+        root.fill(&WHITE).map_err(error)?;
+        let (x0, x1, y0, y1) = self.bounds();
+        let mut chart = ChartBuilder::on(root)
+            .caption(&self.title, ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(45)
+            .y_label_area_size(75)
+            .build_cartesian_2d(x0..x1, (y0..y1).log_scale())
+            .map_err(error)?;
+        chart
+            .configure_mesh()
+            .x_desc(&self.x_label)
+            .y_desc(&self.y_label)
+            .label_style(("sans-serif", 14))
+            .y_label_formatter(&|y| format!("{y:.0e}"))
+            .draw()
+            .map_err(error)?;
+        let mut colour = 0;
+        for series in &self.series {
+            let points: Vec<(f64, f64)> = series
+                .points
+                .iter()
+                .copied()
+                .filter(|(x, y)| x.is_finite() && y.is_finite() && *y > 0.0)
+                .collect();
+            let style = if series.reference {
+                BLACK.mix(0.8).stroke_width(1)
+            } else {
+                let c = PALETTE[colour % PALETTE.len()];
+                colour += 1;
+                c.stroke_width(2)
+            };
+            let marked = points.len() <= 40;
+            chart
+                .draw_series(LineSeries::new(points.clone(), style))
+                .map_err(error)?
+                .label(series.name.clone())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+            if marked && !series.reference {
+                chart
+                    .draw_series(points.iter().map(|p| Circle::new(*p, 3, style.filled())))
+                    .map_err(error)?;
+            }
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 13))
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(error)?;
+        root.present().map_err(error)?;
+        Ok(())
+    }
+
+    /// Write `<base>.svg` and `<base>.png`.
+    pub fn write(&self, base: &Path) -> Result<()> {
+        register_font()?;
+        let size = (1000, 650);
+        let svg = base.with_extension("svg");
+        self.draw(&SVGBackend::new(&svg, size).into_drawing_area())?;
+        let png = base.with_extension("png");
+        self.draw(&BitMapBackend::new(&png, size).into_drawing_area())?;
+        Ok(())
+    }
+}
+
+/// (a) |relative error| against time: one run and the Monte Carlo RMS, with the CRLB.
+pub fn error_against_time(result: &StudyResult) -> Chart {
+    let rate = result.sample_rate_hz;
+    let mut series = Vec::new();
+    for (stats, example) in result.setups.iter().zip(&result.example_relative_error) {
+        series.push(Series {
+            name: format!("{}: one run", stats.setup),
+            points: example
+                .iter()
+                .enumerate()
+                .step_by(4)
+                .map(|(k, e)| (k as f64 / rate, e.abs()))
+                .collect(),
+            reference: false,
+        });
+        series.push(Series {
+            name: format!("{}: RMS over runs", stats.setup),
+            points: (0..stats.valid.len())
+                .step_by(4)
+                .filter(|k| stats.valid[*k] > 1)
+                .map(|k| (k as f64 / rate, stats.rms(k) / result.truth_g))
+                .collect(),
+            reference: false,
+        });
+    }
+    series.push(Series {
+        name: "CRLB (known model, onset, tare)".into(),
+        points: result
+            .crlb_g2
+            .iter()
+            .enumerate()
+            .step_by(4)
+            .map(|(k, v)| (k as f64 / rate, v.sqrt() / result.truth_g))
+            .collect(),
+        reference: true,
+    });
+    Chart {
+        title: format!(
+            "(a) {} at {} dB: |relative error| vs time ({} runs, seed {})",
+            result.scene, result.snr_db, result.runs, result.seed
+        ),
+        x_label: "time after the drop, s".into(),
+        y_label: "|relative error|".into(),
+        series,
+    }
+}
+
+/// (b) median time to reach and stay within 0.5%, 0.1%, 0.05% against SNR.
+pub fn time_against_snr(results: &[StudyResult]) -> Chart {
+    let mut series = Vec::new();
+    let Some(first) = results.first() else {
+        return empty("(b) no results");
+    };
+    for (index, setup) in first.setups.iter().map(|s| s.setup).enumerate() {
+        for (t, tolerance) in TOLERANCES.iter().enumerate() {
+            series.push(Series {
+                name: format!("{setup}: within {}%", tolerance * 100.0),
+                points: results
+                    .iter()
+                    .map(|r| (r.snr_db, r.setups[index].settle_quantile(t, 0.5)))
+                    .collect(),
+                reference: false,
+            });
+        }
+    }
+    for (t, tolerance) in TOLERANCES.iter().enumerate() {
+        let settle = first.sensor_settle_s[t];
+        series.push(Series {
+            name: format!(
+                "sensor itself settles within {}%: {settle:.3} s",
+                tolerance * 100.0
+            ),
+            points: results.iter().map(|r| (r.snr_db, settle)).collect(),
+            reference: true,
+        });
+    }
+    Chart {
+        title: format!(
+            "(b) {}: median time to reach and stay within tolerance ({} runs per point)",
+            first.scene, first.runs
+        ),
+        x_label: "SNR, dB (thesis eq. 4.39)".into(),
+        y_label: "time after the drop, s (missing: not within 1.5 s)".into(),
+        series,
+    }
+}
+
+/// (c) RMS relative error at the readout time against SNR, with the CRLB.
+pub fn rms_against_snr(results: &[StudyResult], readout_s: f64) -> Chart {
+    let Some(first) = results.first() else {
+        return empty("(c) no results");
+    };
+    let k = |r: &StudyResult| {
+        ((readout_s * r.sample_rate_hz).round() as usize).min(r.crlb_g2.len().saturating_sub(1))
+    };
+    let mut series: Vec<Series> = first
+        .setups
+        .iter()
+        .enumerate()
+        .map(|(index, stats)| Series {
+            name: format!("{}", stats.setup),
+            points: results
+                .iter()
+                .map(|r| (r.snr_db, r.setups[index].rms(k(r)) / r.truth_g))
+                .collect(),
+            reference: false,
+        })
+        .collect();
+    series.push(Series {
+        name: "CRLB (known model, onset, tare)".into(),
+        points: results
+            .iter()
+            .map(|r| (r.snr_db, r.crlb_g2[k(r)].sqrt() / r.truth_g))
+            .collect(),
+        reference: true,
+    });
+    Chart {
+        title: format!(
+            "(c) {}: RMS relative error at {} ms vs SNR ({} runs per point)",
+            first.scene,
+            readout_s * 1e3,
+            first.runs
+        ),
+        x_label: "SNR, dB (thesis eq. 4.39)".into(),
+        y_label: "RMS relative error".into(),
+        series,
+    }
+}
+
+/// (d) MSE (relative) against the order n at the readout sample, one line per SNR; each
+/// result in `by_order` holds one configuration per order.
+pub fn mse_against_order(by_snr: &[StudyResult], readout_samples: usize) -> Chart {
+    let Some(first) = by_snr.first() else {
+        return empty("(d) no results");
+    };
+    let mut series = Vec::new();
+    for result in by_snr {
+        let k = readout_samples.min(result.crlb_g2.len()).saturating_sub(1);
+        series.push(Series {
+            name: format!("{} dB", result.snr_db),
+            points: result
+                .setups
+                .iter()
+                .map(|s| (s.setup.order as f64, (s.rms(k) / result.truth_g).powi(2)))
+                .collect(),
+            reference: false,
+        });
+    }
+    for result in by_snr {
+        let k = readout_samples.min(result.crlb_g2.len()).saturating_sub(1);
+        let crlb = result.crlb_g2[k] / (result.truth_g * result.truth_g);
+        series.push(Series {
+            name: format!("CRLB {} dB", result.snr_db),
+            points: result
+                .setups
+                .iter()
+                .map(|s| (s.setup.order as f64, crlb))
+                .collect(),
+            reference: true,
+        });
+    }
+    Chart {
+        title: format!(
+            "(d) {}: relative MSE at {} samples vs order n, D = {} ({} runs per point)",
+            first.scene,
+            readout_samples,
+            first
+                .setups
+                .first()
+                .map(|s| s.setup.decimation)
+                .unwrap_or(1),
+            first.runs
+        ),
+        x_label: "order n".into(),
+        y_label: "relative MSE".into(),
+        series,
+    }
+}
+
+fn empty(title: &str) -> Chart {
+    Chart {
+        title: title.into(),
+        x_label: String::new(),
+        y_label: String::new(),
+        series: Vec::new(),
+    }
+}

@@ -1,0 +1,149 @@
+//! The Cramér–Rao lower bound on the step level, the floor drawn on every accuracy chart.
+//!
+//! Model: `y(k) = b + G·u·s(k) + e(k)`, `k = 0..N`, with `s` the unit-step response of the
+//! discretised sensor (known model and onset), `G` the static gain and `e` zero-mean
+//! Gaussian noise. The Fisher information for `u` gives (thesis §4.1.3):
+//! - white noise, known tare `b`: `var(û) ≥ σ² / (G² Σ s(k)²)`;
+//! - white noise, unknown tare: the tare's column is profiled out, `Σ s²` becomes the
+//!   centred sum `Σ (s(k) − s̄)²`;
+//! - coloured noise with covariance `C`: `var(û) ≥ 1 / (G² sᵀC⁻¹s)`. For stationary noise
+//!   `sᵀC⁻¹s` is accumulated sample by sample with the Levinson–Durbin recursion (the
+//!   innovations form of `C⁻¹`), O(N²) time and O(N) memory, so every prefix length gets its
+//!   bound in one pass.
+//!
+//! Every function returns the bound for each prefix length `k + 1`, in the unit of `u`
+//! squared (`f64::INFINITY` where the prefix does not identify `u`).
+
+use crate::sensor::SensorChain;
+use crate::simulated::StepResponse;
+
+/// The unit-step response `s(k)` of `chain` for a step of `step_g` (s → 1), `samples` long.
+pub fn unit_step_response(chain: &SensorChain, step_g: f64, samples: usize) -> Vec<f64> {
+    StepResponse::new(chain, step_g)
+        .take(samples)
+        .map(|value| value / step_g)
+        .collect()
+}
+
+/// Known model, onset and tare, white noise of variance `noise_variance` (raw units²).
+pub fn white_known_tare(unit_step: &[f64], gain: f64, noise_variance: f64) -> Vec<f64> {
+    let mut energy = 0.0;
+    unit_step
+        .iter()
+        .map(|s| {
+            energy += s * s;
+            bound(noise_variance, gain * gain * energy)
+        })
+        .collect()
+}
+
+/// Known model and onset, unknown tare, white noise: the centred form.
+pub fn white_unknown_tare(unit_step: &[f64], gain: f64, noise_variance: f64) -> Vec<f64> {
+    // Welford's running centred sum of squares.
+    let mut mean = 0.0;
+    let mut centred = 0.0;
+    unit_step
+        .iter()
+        .enumerate()
+        .map(|(index, &s)| {
+            let count = (index + 1) as f64;
+            let delta = s - mean;
+            mean += delta / count;
+            centred += delta * (s - mean);
+            bound(noise_variance, gain * gain * centred)
+        })
+        .collect()
+}
+
+/// Known model, onset and tare, stationary coloured noise with autocovariance
+/// `autocovariance[lag]` (raw units², at least as long as `unit_step`).
+pub fn coloured_known_tare(unit_step: &[f64], gain: f64, autocovariance: &[f64]) -> Vec<f64> {
+    let n = unit_step.len().min(autocovariance.len());
+    let mut bounds = Vec::with_capacity(n);
+    // predictor[i] predicts y(k) from y(k−1−i); the innovation variance is `error`.
+    let mut predictor: Vec<f64> = Vec::with_capacity(n);
+    let mut error = autocovariance.first().copied().unwrap_or(0.0);
+    let mut information = 0.0;
+    for k in 0..n {
+        if k > 0 {
+            // Levinson–Durbin step from order k−1 to k.
+            let mut acc = autocovariance[k];
+            for (i, a) in predictor.iter().enumerate() {
+                acc -= a * autocovariance[k - 1 - i];
+            }
+            let reflection = acc / error;
+            let previous = predictor.clone();
+            for i in 0..previous.len() {
+                predictor[i] = previous[i] - reflection * previous[previous.len() - 1 - i];
+            }
+            predictor.push(reflection);
+            error *= 1.0 - reflection * reflection;
+        }
+        let mut innovation = unit_step[k];
+        for (i, a) in predictor.iter().enumerate() {
+            innovation -= a * unit_step[k - 1 - i];
+        }
+        information += innovation * innovation / error;
+        bounds.push(bound(1.0, gain * gain * information));
+    }
+    bounds
+}
+
+fn bound(numerator: f64, information: f64) -> f64 {
+    if information > 0.0 {
+        numerator / information
+    } else {
+        f64::INFINITY
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn coloured_with_white_covariance_equals_white() {
+        let s: Vec<f64> = (0..50).map(|k| 1.0 - (-(k as f64) / 7.0).exp()).collect();
+        let mut r = vec![0.0; 50];
+        r[0] = 2.5;
+        let white = white_known_tare(&s, 3.0, 2.5);
+        let coloured = coloured_known_tare(&s, 3.0, &r);
+        for (a, b) in white.iter().zip(&coloured).skip(1) {
+            assert!((a - b).abs() <= 1e-12 * a, "{a} {b}");
+        }
+    }
+
+    #[test]
+    fn coloured_matches_a_dense_inverse_for_ar1() {
+        // AR(1) noise, φ = 0.8: C⁻¹ is known in closed form (tridiagonal); compare sᵀC⁻¹s.
+        let phi: f64 = 0.8;
+        let innovation_variance = 1.0;
+        let n = 40;
+        let r: Vec<f64> = (0..n)
+            .map(|lag| innovation_variance / (1.0 - phi * phi) * phi.powi(lag as i32))
+            .collect();
+        let s: Vec<f64> = (0..n).map(|k| (k as f64 * 0.3).sin() + 1.0).collect();
+        let mut quadratic = s[0] * s[0] * (1.0 - phi * phi);
+        for k in 1..n {
+            let w = s[k] - phi * s[k - 1];
+            quadratic += w * w;
+        }
+        let expected = 1.0 / quadratic;
+        let got = *coloured_known_tare(&s, 1.0, &r).last().unwrap();
+        assert!(
+            (got - expected).abs() <= 1e-10 * expected,
+            "{got} {expected}"
+        );
+    }
+
+    #[test]
+    fn unknown_tare_is_never_below_known_tare() {
+        let s: Vec<f64> = (0..100).map(|k| 1.0 - (-(k as f64) / 20.0).exp()).collect();
+        let known = white_known_tare(&s, 1.0, 1.0);
+        let unknown = white_unknown_tare(&s, 1.0, 1.0);
+        assert!(unknown[0].is_infinite());
+        for (a, b) in known.iter().zip(&unknown).skip(1) {
+            assert!(b >= a);
+        }
+    }
+}

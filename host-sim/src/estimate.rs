@@ -1,0 +1,74 @@
+//! `host-sim estimate`: run the core's step estimator over a recorded CSV (one raw sample a
+//! row in a column `y`). No second implementation: every number comes from
+//! `estimator_core::StepEstimator`.
+
+use std::io::{BufRead, Write};
+
+use anyhow::{bail, Context, Result};
+use estimator_core::{InvalidReason, State};
+
+use crate::montecarlo::{CoreEstimator, Setup};
+
+/// How a reading's state is written in the CSV.
+pub fn state_name(state: State) -> &'static str {
+    match state {
+        State::WarmingUp => "warming_up",
+        State::Estimating => "estimating",
+        State::Invalid(InvalidReason::NonFiniteInput) => "invalid_non_finite_input",
+        State::Invalid(InvalidReason::OutOfRange) => "invalid_out_of_range",
+        State::Invalid(InvalidReason::IllConditioned) => "invalid_ill_conditioned",
+        State::Invalid(InvalidReason::NonFiniteUpdate) => "invalid_non_finite_update",
+        State::Invalid(InvalidReason::MissingSample) => "invalid_missing_sample",
+    }
+}
+
+/// Read `input` (named `name` in errors), write `k,estimate,state`. `zero` is subtracted
+/// from every sample (in f64, before any conversion to f32). An empty `y` is a lost sample
+/// (the reading says so); a `y` that is not a number is an error naming the line.
+pub fn estimate_csv(
+    input: impl BufRead,
+    name: &str,
+    setup: &Setup,
+    gain: f64,
+    zero: f64,
+    out: &mut impl Write,
+) -> Result<()> {
+    let mut estimator = CoreEstimator::new(setup, gain)?;
+    let mut lines = input.lines();
+    let header = match lines.next() {
+        Some(line) => line.with_context(|| format!("{name}: cannot read the header"))?,
+        None => bail!("{name}: empty file, expected a header with a column `y`"),
+    };
+    let column = header
+        .split(',')
+        .position(|field| field.trim() == "y")
+        .with_context(|| {
+            format!("{name}: line 1: expected a column `y` in the header `{header}`")
+        })?;
+    writeln!(out, "k,estimate,state")?;
+    let mut k = 0usize;
+    for (index, line) in lines.enumerate() {
+        let line_number = index + 2;
+        let line = line.with_context(|| format!("{name}: line {line_number}: cannot read"))?;
+        if line.trim().is_empty() {
+            continue;
+        }
+        let field = line.split(',').nth(column).map(str::trim).unwrap_or("");
+        let (estimate, state) = if field.is_empty() {
+            estimator.push_missing()
+        } else {
+            let value: f64 = field.parse().with_context(|| {
+                format!(
+                    "{name}: line {line_number}: column `y`: expected a number, found `{field}`"
+                )
+            })?;
+            estimator.push(value - zero)
+        };
+        match estimate {
+            Some(value) => writeln!(out, "{k},{value:e},{}", state_name(state))?,
+            None => writeln!(out, "{k},,{}", state_name(state))?,
+        }
+        k += 1;
+    }
+    Ok(())
+}

@@ -1,0 +1,586 @@
+//! Monte Carlo studies of `estimator-core` on a scene: seeded, reproducible on any number
+//! of threads (each run's seed comes from the study seed and the run index), parallel with
+//! rayon, with a progress bar.
+//!
+//! A study estimates the scene's first step from its onset, with the tare known (the
+//! noise-free zero code, as a calibrated scale knows it), and records for every sample
+//! index after the onset the bias, standard deviation and RMS error of each estimator
+//! configuration, the CRLB, and for each run the time the estimate reaches and stays
+//! within 0.5%, 0.1% and 0.05%.
+
+use std::fmt;
+use std::io::Write;
+use std::str::FromStr;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use estimator_core::{Estimator, State, StepConfig, StepEstimator};
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+
+use crate::crlb;
+use crate::scene::Scene;
+use crate::simulated::run_seed;
+use estimator_core::AdcSource;
+
+/// The largest order the host tools accept.
+pub const CAPACITY: usize = 40;
+/// Tolerances of the "time to reach and stay within" figures (relative).
+pub const TOLERANCES: [f64; 3] = [0.005, 0.001, 0.0005];
+/// Runs accumulated together before merging (fixed, so results do not depend on threads).
+const RUNS_PER_CHUNK: usize = 16;
+
+/// Arithmetic of the estimator under test.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Precision {
+    /// Single precision, as on the Cortex-M4F.
+    F32,
+    /// Double precision.
+    F64,
+}
+
+impl FromStr for Precision {
+    type Err = anyhow::Error;
+    fn from_str(text: &str) -> Result<Self> {
+        match text {
+            "f32" => Ok(Self::F32),
+            "f64" => Ok(Self::F64),
+            other => bail!("precision must be f32 or f64, found `{other}`"),
+        }
+    }
+}
+
+/// One configuration of the step estimator.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Setup {
+    /// Order n.
+    pub order: usize,
+    /// Decimation D.
+    pub decimation: u16,
+    /// Forgetting factor λ.
+    pub forgetting: f64,
+    /// Arithmetic.
+    pub precision: Precision,
+}
+
+impl Setup {
+    /// Order n, decimation D, λ = 1, f64.
+    pub fn new(order: usize, decimation: u16) -> Self {
+        Self {
+            order,
+            decimation,
+            forgetting: 1.0,
+            precision: Precision::F64,
+        }
+    }
+}
+
+impl FromStr for Setup {
+    type Err = anyhow::Error;
+    /// `n=7,D=16[,lambda=0.999][,precision=f32]`.
+    fn from_str(text: &str) -> Result<Self> {
+        let mut setup = Setup::new(0, 1);
+        for part in text.split(',') {
+            let (key, value) = part.split_once('=').with_context(|| {
+                format!("configuration `{text}`: expected key=value, found `{part}`")
+            })?;
+            let bad = || format!("configuration `{text}`: bad value for `{key}`: `{value}`");
+            match key.trim() {
+                "n" | "order" => setup.order = value.trim().parse().with_context(bad)?,
+                "D" | "d" | "decimation" => setup.decimation = value.trim().parse().with_context(bad)?,
+                "lambda" | "forgetting" => setup.forgetting = value.trim().parse().with_context(bad)?,
+                "precision" => setup.precision = value.trim().parse().with_context(bad)?,
+                other => bail!("configuration `{text}`: unknown key `{other}` (expected n, D, lambda, precision)"),
+            }
+        }
+        if setup.order == 0 {
+            bail!("configuration `{text}`: the order n is required and must be at least 1");
+        }
+        Ok(setup)
+    }
+}
+
+impl fmt::Display for Setup {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "n={} D={}", self.order, self.decimation)?;
+        if self.forgetting != 1.0 {
+            write!(f, " lambda={}", self.forgetting)?;
+        }
+        if self.precision == Precision::F32 {
+            write!(f, " f32")?;
+        }
+        Ok(())
+    }
+}
+
+/// The core's step estimator in the precision a setup asks for.
+#[derive(Clone, Debug)]
+// One per run and configuration, kept on the stack; the f64 one is just twice the f32 one.
+#[allow(clippy::large_enum_variant)]
+pub enum CoreEstimator {
+    /// f32.
+    F32(StepEstimator<f32, CAPACITY>),
+    /// f64.
+    F64(StepEstimator<f64, CAPACITY>),
+}
+
+impl CoreEstimator {
+    /// The estimator for `setup` with static gain `gain` (raw units per gram).
+    pub fn new(setup: &Setup, gain: f64) -> Result<Self> {
+        Ok(match setup.precision {
+            Precision::F32 => Self::F32(
+                StepEstimator::new(
+                    StepConfig::new(setup.order, gain as f32)
+                        .with_forgetting(setup.forgetting as f32)
+                        .with_decimation(setup.decimation),
+                )
+                .map_err(|e| anyhow::anyhow!("{setup}: {e}"))?,
+            ),
+            Precision::F64 => Self::F64(
+                StepEstimator::new(
+                    StepConfig::new(setup.order, gain)
+                        .with_forgetting(setup.forgetting)
+                        .with_decimation(setup.decimation),
+                )
+                .map_err(|e| anyhow::anyhow!("{setup}: {e}"))?,
+            ),
+        })
+    }
+
+    /// Push one raw sample (offset removed, in f64: converted to f32 after the subtraction).
+    pub fn push(&mut self, sample: f64) -> (Option<f64>, State) {
+        match self {
+            Self::F32(estimator) => {
+                let reading = estimator.push(sample as f32);
+                (reading.estimate.map(f64::from), reading.state)
+            }
+            Self::F64(estimator) => {
+                let reading = estimator.push(sample);
+                (reading.estimate, reading.state)
+            }
+        }
+    }
+
+    /// A lost sample.
+    pub fn push_missing(&mut self) -> (Option<f64>, State) {
+        match self {
+            Self::F32(estimator) => {
+                let reading = estimator.push_missing();
+                (reading.estimate.map(f64::from), reading.state)
+            }
+            Self::F64(estimator) => {
+                let reading = estimator.push_missing();
+                (reading.estimate, reading.state)
+            }
+        }
+    }
+}
+
+/// What a study measures for one configuration.
+#[derive(Clone, Debug)]
+pub struct SetupStats {
+    /// The configuration.
+    pub setup: Setup,
+    /// Per sample index: Σ error, Σ error² over the runs with a valid estimate, g and g².
+    pub sum_error: Vec<f64>,
+    /// See `sum_error`.
+    pub sum_squared: Vec<f64>,
+    /// Per sample index: runs with a valid estimate.
+    pub valid: Vec<u32>,
+    /// Per tolerance in [`TOLERANCES`], per run: the time the estimate reached and stayed
+    /// within the tolerance, s (infinite if it never did within the window).
+    pub settle_s: [Vec<f64>; 3],
+}
+
+impl SetupStats {
+    fn new(setup: Setup, samples: usize) -> Self {
+        Self {
+            setup,
+            sum_error: vec![0.0; samples],
+            sum_squared: vec![0.0; samples],
+            valid: vec![0; samples],
+            settle_s: [Vec::new(), Vec::new(), Vec::new()],
+        }
+    }
+
+    fn merge(&mut self, other: Self) {
+        for k in 0..self.valid.len() {
+            self.sum_error[k] += other.sum_error[k];
+            self.sum_squared[k] += other.sum_squared[k];
+            self.valid[k] += other.valid[k];
+        }
+        for (mine, theirs) in self.settle_s.iter_mut().zip(other.settle_s) {
+            mine.extend(theirs);
+        }
+    }
+
+    /// Bias at sample index k, g (NaN without valid runs).
+    pub fn bias(&self, k: usize) -> f64 {
+        self.sum_error[k] / f64::from(self.valid[k])
+    }
+
+    /// RMS error at sample index k, g.
+    pub fn rms(&self, k: usize) -> f64 {
+        (self.sum_squared[k] / f64::from(self.valid[k])).sqrt()
+    }
+
+    /// Standard deviation at sample index k, g.
+    pub fn std(&self, k: usize) -> f64 {
+        let n = f64::from(self.valid[k]);
+        let mean = self.bias(k);
+        ((self.sum_squared[k] - n * mean * mean) / (n - 1.0))
+            .max(0.0)
+            .sqrt()
+    }
+
+    /// The `quantile` (0..1) of the settle times for tolerance index `tolerance`, s.
+    pub fn settle_quantile(&self, tolerance: usize, quantile: f64) -> f64 {
+        let mut times = self.settle_s[tolerance].clone();
+        times.sort_by(f64::total_cmp);
+        if times.is_empty() {
+            return f64::NAN;
+        }
+        let index = ((times.len() as f64 * quantile).ceil() as usize).clamp(1, times.len()) - 1;
+        times[index]
+    }
+}
+
+/// A finished study at one SNR.
+#[derive(Clone, Debug)]
+pub struct StudyResult {
+    /// The scene's name.
+    pub scene: String,
+    /// The SNR, dB.
+    pub snr_db: f64,
+    /// Runs.
+    pub runs: usize,
+    /// The study's seed.
+    pub seed: u64,
+    /// The true step, g.
+    pub truth_g: f64,
+    /// Sample rate, Hz.
+    pub sample_rate_hz: f64,
+    /// Per configuration.
+    pub setups: Vec<SetupStats>,
+    /// CRLB (known model, onset and tare; white noise incl. quantisation) per sample index, g².
+    pub crlb_g2: Vec<f64>,
+    /// The same with the tare unknown (centred form), g².
+    pub crlb_unknown_tare_g2: Vec<f64>,
+    /// The noise-free sensor's own time to reach and stay within each tolerance, s.
+    pub sensor_settle_s: [f64; 3],
+    /// One run's relative errors per configuration (run 0), for chart (a).
+    pub example_relative_error: Vec<Vec<f64>>,
+}
+
+/// The parameters of a study.
+#[derive(Clone, Debug)]
+pub struct Study {
+    /// The scene.
+    pub scene: Scene,
+    /// The configurations under test.
+    pub setups: Vec<Setup>,
+    /// Runs.
+    pub runs: usize,
+    /// Seed.
+    pub seed: u64,
+    /// Samples after the onset to study (at most the scene's window).
+    pub samples: usize,
+}
+
+/// The last index after which `|error|/truth` stays within `tolerance`, as a time.
+fn settle_time(errors: &[Option<f64>], truth: f64, tolerance: f64, rate: f64) -> f64 {
+    let mut last_outside: Option<usize> = None;
+    for (k, error) in errors.iter().enumerate() {
+        let inside = matches!(error, Some(e) if (e / truth).abs() <= tolerance);
+        if !inside {
+            last_outside = Some(k);
+        }
+    }
+    match last_outside {
+        None => 0.0,
+        Some(k) if k + 1 >= errors.len() => f64::INFINITY,
+        Some(k) => (k + 1) as f64 / rate,
+    }
+}
+
+/// The time the noise-free response of the scene's sensor reaches and stays within each
+/// tolerance of its final value, s.
+pub fn sensor_settle_s(scene: &Scene, truth_g: f64) -> [f64; 3] {
+    let response = crlb::unit_step_response(&scene.chain, truth_g, 40_000);
+    let errors: Vec<Option<f64>> = response.iter().map(|s| Some(s - 1.0)).collect();
+    TOLERANCES.map(|t| settle_time(&errors, 1.0, t, scene.chain.sample_rate_hz))
+}
+
+impl Study {
+    /// Run the study at the scene's SNR, with a progress bar.
+    pub fn run(&self, progress: &ProgressBar) -> Result<StudyResult> {
+        let chain = self.scene.chain;
+        let (onset, truth_g, _) = self.scene.studied_step();
+        let samples = self.samples.min(self.scene.studied_window()).max(1);
+        let gain = chain.counts_per_gram();
+        let zero = chain.zero_code();
+        // Refuse impossible configurations before spending time.
+        for setup in &self.setups {
+            CoreEstimator::new(setup, gain)?;
+        }
+        let rate = chain.sample_rate_hz;
+        let scene = &self.scene;
+        let setups = &self.setups;
+        let run_one = |run: usize| -> (Vec<Vec<Option<f64>>>, ()) {
+            let mut adc = scene.adc(run_seed(self.seed, run as u64));
+            for _ in 0..onset {
+                let _ = adc.read();
+            }
+            let record: Vec<f64> = (0..samples)
+                .map(|_| {
+                    adc.read()
+                        .map(|code| f64::from(code) - zero)
+                        .unwrap_or(f64::NAN)
+                })
+                .collect();
+            let errors = setups
+                .iter()
+                .map(|setup| {
+                    // Validated above.
+                    let mut estimator = CoreEstimator::new(setup, gain).expect("validated");
+                    record
+                        .iter()
+                        .map(|&sample| estimator.push(sample).0.map(|estimate| estimate - truth_g))
+                        .collect()
+                })
+                .collect();
+            progress.inc(1);
+            (errors, ())
+        };
+        let empty = || -> Vec<SetupStats> {
+            setups
+                .iter()
+                .map(|setup| SetupStats::new(*setup, samples))
+                .collect()
+        };
+        // Fixed chunks of runs, each accumulated in run order and merged in chunk order:
+        // the sums are bit-identical on any number of threads.
+        let chunks: Vec<Vec<SetupStats>> = (0..self.runs.div_ceil(RUNS_PER_CHUNK))
+            .into_par_iter()
+            .map(|chunk| {
+                let mut stats = empty();
+                let first = chunk * RUNS_PER_CHUNK;
+                for run in first..(first + RUNS_PER_CHUNK).min(self.runs) {
+                    let (errors, ()) = run_one(run);
+                    for (stat, errors) in stats.iter_mut().zip(&errors) {
+                        for (k, error) in errors.iter().enumerate() {
+                            if let Some(e) = error {
+                                stat.sum_error[k] += e;
+                                stat.sum_squared[k] += e * e;
+                                stat.valid[k] += 1;
+                            }
+                        }
+                        for (t, tolerance) in TOLERANCES.iter().enumerate() {
+                            stat.settle_s[t].push(settle_time(errors, truth_g, *tolerance, rate));
+                        }
+                    }
+                }
+                stats
+            })
+            .collect();
+        let mut stats = empty();
+        for chunk in chunks {
+            for (mine, theirs) in stats.iter_mut().zip(chunk) {
+                mine.merge(theirs);
+            }
+        }
+        let example = run_one(0).0;
+        let example_relative_error = example
+            .iter()
+            .map(|errors| {
+                errors
+                    .iter()
+                    .map(|e| e.map(|e| e / truth_g).unwrap_or(f64::NAN))
+                    .collect()
+            })
+            .collect();
+        progress.dec(1);
+        let oversampling = f64::from(chain.adc.oversampling.max(1));
+        let white_counts =
+            scene.disturbances.white_noise_g * chain.volts_per_gram() / chain.adc.volts_per_code();
+        // Per conversion: the white noise plus uniform quantisation (LSB²/12); summed over
+        // the oversampled conversions.
+        let noise_variance = oversampling * (white_counts * white_counts + 1.0 / 12.0);
+        let unit_step = crlb::unit_step_response(&chain, truth_g, samples);
+        Ok(StudyResult {
+            scene: scene.name.clone(),
+            snr_db: scene.snr_db.unwrap_or(f64::INFINITY),
+            runs: self.runs,
+            seed: self.seed,
+            truth_g,
+            sample_rate_hz: rate,
+            setups: stats,
+            crlb_g2: crlb::white_known_tare(&unit_step, gain, noise_variance),
+            crlb_unknown_tare_g2: crlb::white_unknown_tare(&unit_step, gain, noise_variance),
+            sensor_settle_s: sensor_settle_s(scene, truth_g),
+            example_relative_error,
+        })
+    }
+}
+
+/// A progress bar for `total` runs (drawn on stderr only when it is a terminal).
+pub fn progress_bar(total: u64) -> ProgressBar {
+    let bar = ProgressBar::new(total);
+    bar.set_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} runs ({eta} left)")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar
+}
+
+/// Run a study for each SNR.
+pub fn run_studies(base: &Study, snrs_db: &[f64]) -> Result<Vec<StudyResult>> {
+    let progress = progress_bar((base.runs * snrs_db.len().max(1)) as u64);
+    let mut results = Vec::new();
+    if snrs_db.is_empty() {
+        results.push(base.run(&progress)?);
+    }
+    for &snr in snrs_db {
+        let study = Study {
+            scene: base.scene.with_snr_db(snr),
+            ..base.clone()
+        };
+        results.push(study.run(&progress)?);
+    }
+    progress.finish_and_clear();
+    Ok(results)
+}
+
+/// Write the per-sample-index CSV.
+pub fn write_csv(results: &[StudyResult], out: &mut impl Write) -> Result<()> {
+    writeln!(
+        out,
+        "snr_db,config,k,t_s,valid_runs,bias_g,std_g,rms_g,rms_rel,crlb_g,mse_over_crlb"
+    )?;
+    for result in results {
+        for stats in &result.setups {
+            for k in 0..stats.valid.len() {
+                let crlb = result.crlb_g2[k];
+                let (bias, std, rms) = if stats.valid[k] > 1 {
+                    (stats.bias(k), stats.std(k), stats.rms(k))
+                } else {
+                    (f64::NAN, f64::NAN, f64::NAN)
+                };
+                writeln!(
+                    out,
+                    "{},{},{},{:.6},{},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e}",
+                    result.snr_db,
+                    stats.setup,
+                    k,
+                    k as f64 / result.sample_rate_hz,
+                    stats.valid[k],
+                    bias,
+                    std,
+                    rms,
+                    rms / result.truth_g,
+                    crlb.sqrt(),
+                    rms * rms / crlb
+                )?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The headline figures of a study for each configuration at `readout_s` after the onset.
+pub fn summary(results: &[StudyResult], readout_s: f64, out: &mut impl Write) -> Result<()> {
+    writeln!(
+        out,
+        "scene,snr_db,runs,seed,config,rms_g_at_readout,rms_rel_at_readout,rms_over_crlb,median_time_0.1pct_s,p95_time_0.1pct_s,share_within_0.1pct_at_readout"
+    )?;
+    for result in results {
+        let k = ((readout_s * result.sample_rate_hz).round() as usize)
+            .min(result.crlb_g2.len().saturating_sub(1));
+        for stats in &result.setups {
+            let within = stats.settle_s[1]
+                .iter()
+                .filter(|t| **t <= readout_s)
+                .count() as f64
+                / stats.settle_s[1].len().max(1) as f64;
+            writeln!(
+                out,
+                "{},{},{},{},{},{:.4e},{:.4e},{:.2},{:.4},{:.4},{:.3}",
+                result.scene,
+                result.snr_db,
+                result.runs,
+                result.seed,
+                stats.setup,
+                stats.rms(k),
+                stats.rms(k) / result.truth_g,
+                stats.rms(k) / result.crlb_g2[k].sqrt(),
+                stats.settle_quantile(1, 0.5),
+                stats.settle_quantile(1, 0.95),
+                within
+            )?;
+        }
+    }
+    Ok(())
+}
+
+/// Figures of the Monte Carlo benchmark.
+#[derive(Clone, Copy, Debug)]
+pub struct BenchFigures {
+    /// Estimator updates in all.
+    pub updates: u64,
+    /// Seconds spent in the estimator, summed over threads.
+    pub estimator_cpu_s: f64,
+    /// Wall-clock seconds of the whole benchmark (simulation and estimation).
+    pub wall_s: f64,
+    /// Threads used.
+    pub threads: usize,
+    /// A checksum of the final estimates, so the work cannot be optimised away.
+    pub checksum: f64,
+}
+
+/// `runs` × `samples` updates of `setup` on the reference scene at its SNR.
+pub fn bench(
+    scene: &Scene,
+    setup: &Setup,
+    runs: usize,
+    samples: usize,
+    seed: u64,
+) -> Result<BenchFigures> {
+    let chain = scene.chain;
+    let gain = chain.counts_per_gram();
+    let zero = chain.zero_code();
+    CoreEstimator::new(setup, gain)?;
+    let progress = progress_bar(runs as u64);
+    let start = Instant::now();
+    let (cpu, checksum) = (0..runs)
+        .into_par_iter()
+        .map(|run| {
+            let mut adc = scene.adc(run_seed(seed, run as u64));
+            let record: Vec<f64> = (0..samples)
+                .map(|_| {
+                    adc.read()
+                        .map(|code| f64::from(code) - zero)
+                        .unwrap_or(f64::NAN)
+                })
+                .collect();
+            let mut estimator = CoreEstimator::new(setup, gain).expect("validated");
+            let timer = Instant::now();
+            let mut last = 0.0;
+            for &sample in &record {
+                if let (Some(estimate), _) = estimator.push(sample) {
+                    last = estimate;
+                }
+            }
+            let elapsed = timer.elapsed().as_secs_f64();
+            progress.inc(1);
+            (elapsed, std::hint::black_box(last))
+        })
+        .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+    progress.finish_and_clear();
+    Ok(BenchFigures {
+        updates: (runs * samples) as u64,
+        estimator_cpu_s: cpu,
+        wall_s: start.elapsed().as_secs_f64(),
+        threads: rayon::current_num_threads(),
+        checksum,
+    })
+}

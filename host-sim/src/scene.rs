@@ -1,0 +1,513 @@
+//! Scenes as small TOML files: only what a scene needs, defaults for the rest.
+//!
+//! ```toml
+//! description = "138.32 g dropped on the empty platform"
+//! duration_s = 1.5            # default 1.5
+//! [[events]]                  # in time order; a step unless ramp_s > 0
+//! time_s = 0.0
+//! mass_g = 138.32
+//! [noise]                     # every key optional
+//! snr_db = 50.0               # white noise, thesis eq. 4.39, relative to the first step
+//! vibration_rms_g = 0.0       # narrow-band force disturbance near the resonance
+//! mains_amplitude_g = 0.0     # 50 Hz pickup
+//! drift_g_per_s = 0.0         # zero drift
+//! creep_fraction = 0.0        # creep towards (1 + fraction)·load ...
+//! creep_time_constant_s = 60  # ... with this time constant
+//! [adc]
+//! bits = 16                   # 12 or 16
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use serde::Deserialize;
+
+use crate::sensor::{Adc, Ina114, LoadCell, SensorChain, SAMPLE_RATE_HZ};
+use crate::simulated::{
+    white_noise_for_snr, Disturbances, LoadEvent, Script, SimulatedAdc, SNR_WINDOW_SAMPLES,
+};
+
+/// The most events a scene file may hold.
+pub const MAX_EVENTS: usize = 64;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EventFile {
+    time_s: f64,
+    mass_g: f64,
+    #[serde(default)]
+    ramp_s: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct NoiseFile {
+    snr_db: Option<f64>,
+    snr_step_g: Option<f64>,
+    amplifier: bool,
+    vibration_rms_g: f64,
+    vibration_hz: f64,
+    vibration_bandwidth_hz: f64,
+    mains_amplitude_g: f64,
+    mains_hz: f64,
+    drift_g_per_s: f64,
+    creep_fraction: f64,
+    creep_time_constant_s: f64,
+}
+
+impl Default for NoiseFile {
+    fn default() -> Self {
+        let none = Disturbances::none();
+        Self {
+            snr_db: Some(50.0),
+            snr_step_g: None,
+            amplifier: true,
+            vibration_rms_g: 0.0,
+            vibration_hz: none.vibration_hz,
+            vibration_bandwidth_hz: none.vibration_bandwidth_hz,
+            mains_amplitude_g: 0.0,
+            mains_hz: none.mains_hz,
+            drift_g_per_s: 0.0,
+            creep_fraction: 0.0,
+            creep_time_constant_s: none.creep_time_constant_s,
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct AdcFile {
+    bits: u32,
+    reference_v: f64,
+    oversampling: u16,
+}
+
+impl Default for AdcFile {
+    fn default() -> Self {
+        let adc = Adc::reference();
+        Self {
+            bits: adc.bits,
+            reference_v: adc.reference_v,
+            oversampling: adc.oversampling,
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct CellFile {
+    platform_mass_kg: f64,
+    design_load_g: f64,
+    ring_hz: f64,
+    damping_ratio: f64,
+}
+
+impl Default for CellFile {
+    fn default() -> Self {
+        Self {
+            platform_mass_kg: 0.120,
+            design_load_g: 138.32,
+            ring_hz: 25.0,
+            damping_ratio: 0.03,
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneFile {
+    #[serde(default)]
+    description: String,
+    #[serde(default = "default_duration")]
+    duration_s: f64,
+    #[serde(default = "default_cutoff")]
+    filter_cutoff_hz: f64,
+    events: Vec<EventFile>,
+    #[serde(default)]
+    noise: NoiseFile,
+    #[serde(default)]
+    adc: AdcFile,
+    #[serde(default)]
+    cell: CellFile,
+}
+
+fn default_duration() -> f64 {
+    1.5
+}
+
+fn default_cutoff() -> f64 {
+    100.0
+}
+
+/// A scene ready to simulate.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// The scene's name (its file stem).
+    pub name: String,
+    /// What the scene shows.
+    pub description: String,
+    /// The sensor chain.
+    pub chain: SensorChain,
+    /// The load events.
+    pub script: Script<MAX_EVENTS>,
+    /// The noises, white noise resolved from the SNR.
+    pub disturbances: Disturbances,
+    /// The SNR the white noise was set from, dB (None: no white noise).
+    pub snr_db: Option<f64>,
+    /// The step the SNR refers to, g.
+    pub snr_step_g: f64,
+}
+
+/// The directory the shipped scenes live in.
+pub fn scenes_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes")
+}
+
+/// A path as given, or a shipped scene's name (`reference-step`).
+pub fn resolve(scene: &str) -> PathBuf {
+    let path = PathBuf::from(scene);
+    if path.exists() {
+        return path;
+    }
+    let shipped = scenes_dir().join(format!("{scene}.toml"));
+    if shipped.exists() {
+        shipped
+    } else {
+        path
+    }
+}
+
+fn check(
+    file: &Path,
+    key: &str,
+    ok: bool,
+    expected: &str,
+    found: impl std::fmt::Display,
+) -> Result<()> {
+    if !ok {
+        bail!(
+            "scene file {}: key `{key}`: expected {expected}, found {found}",
+            file.display()
+        );
+    }
+    Ok(())
+}
+
+impl Scene {
+    /// Load a scene by path or shipped name.
+    pub fn load(scene: &str) -> Result<Self> {
+        let path = resolve(scene);
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("cannot read scene file {}", path.display()))?;
+        Self::parse(&path, &text)
+    }
+
+    /// Parse the text of a scene file; `file` names it in errors.
+    pub fn parse(file: &Path, text: &str) -> Result<Self> {
+        let raw: SceneFile = toml::from_str(text)
+            .map_err(|error| anyhow::anyhow!("scene file {}: {error}", file.display()))?;
+        let finite_positive = |v: f64| v.is_finite() && v > 0.0;
+        check(
+            file,
+            "duration_s",
+            finite_positive(raw.duration_s),
+            "a positive number of seconds",
+            raw.duration_s,
+        )?;
+        check(
+            file,
+            "filter_cutoff_hz",
+            finite_positive(raw.filter_cutoff_hz) && raw.filter_cutoff_hz < SAMPLE_RATE_HZ / 2.0,
+            "a cut-off between 0 and 2000 Hz",
+            raw.filter_cutoff_hz,
+        )?;
+        check(
+            file,
+            "adc.bits",
+            raw.adc.bits == 12 || raw.adc.bits == 16,
+            "12 or 16",
+            raw.adc.bits,
+        )?;
+        check(
+            file,
+            "adc.reference_v",
+            finite_positive(raw.adc.reference_v),
+            "a positive voltage",
+            raw.adc.reference_v,
+        )?;
+        check(
+            file,
+            "adc.oversampling",
+            (1..=256).contains(&raw.adc.oversampling),
+            "1..=256",
+            raw.adc.oversampling,
+        )?;
+        let c = &raw.cell;
+        check(
+            file,
+            "cell.platform_mass_kg",
+            finite_positive(c.platform_mass_kg),
+            "a positive mass in kg",
+            c.platform_mass_kg,
+        )?;
+        check(
+            file,
+            "cell.ring_hz",
+            finite_positive(c.ring_hz),
+            "a positive frequency",
+            c.ring_hz,
+        )?;
+        check(
+            file,
+            "cell.damping_ratio",
+            c.damping_ratio.is_finite() && c.damping_ratio > 0.0 && c.damping_ratio < 1.0,
+            "a damping ratio in (0, 1)",
+            c.damping_ratio,
+        )?;
+        check(
+            file,
+            "events",
+            !raw.events.is_empty(),
+            "at least one [[events]] entry",
+            "none",
+        )?;
+        check(
+            file,
+            "events",
+            raw.events.len() <= MAX_EVENTS,
+            "at most 64 events",
+            raw.events.len(),
+        )?;
+
+        let cell = {
+            let mut cell = LoadCell::designed(
+                c.platform_mass_kg,
+                c.design_load_g,
+                c.ring_hz,
+                c.damping_ratio,
+            );
+            cell.capacity_g = LoadCell::reference().capacity_g;
+            cell
+        };
+        let chain = SensorChain {
+            cell,
+            amplifier: Ina114::reference(),
+            filter_cutoff_hz: raw.filter_cutoff_hz,
+            adc: Adc {
+                bits: raw.adc.bits,
+                reference_v: raw.adc.reference_v,
+                oversampling: raw.adc.oversampling,
+            },
+            sample_rate_hz: SAMPLE_RATE_HZ,
+        };
+        let mut script = Script::new(raw.duration_s);
+        for (index, event) in raw.events.iter().enumerate() {
+            let key = format!("events[{index}]");
+            check(
+                file,
+                &format!("{key}.mass_g"),
+                event.mass_g.is_finite() && (0.0..=cell.capacity_g).contains(&event.mass_g),
+                "a mass in 0..=600 g",
+                event.mass_g,
+            )?;
+            script
+                .push(LoadEvent {
+                    time_s: event.time_s,
+                    mass_g: event.mass_g,
+                    ramp_s: event.ramp_s,
+                })
+                .map_err(|error| {
+                    anyhow::anyhow!(
+                        "scene file {}: key `{key}.time_s`: expected a time after the previous event ends and within duration_s = {}, found {} ({error:?})",
+                        file.display(),
+                        raw.duration_s,
+                        event.time_s
+                    )
+                })?;
+        }
+        let n = &raw.noise;
+        let snr_step_g = n.snr_step_g.unwrap_or(raw.events[0].mass_g.abs());
+        check(
+            file,
+            "noise.snr_step_g",
+            finite_positive(snr_step_g),
+            "a positive step in grams",
+            snr_step_g,
+        )?;
+        for (key, value) in [
+            ("noise.vibration_rms_g", n.vibration_rms_g),
+            ("noise.mains_amplitude_g", n.mains_amplitude_g),
+            ("noise.creep_fraction", n.creep_fraction.abs()),
+        ] {
+            check(
+                file,
+                key,
+                value.is_finite() && value >= 0.0,
+                "a finite, non-negative number",
+                value,
+            )?;
+        }
+        let white_noise_g = match n.snr_db {
+            Some(snr) => {
+                check(
+                    file,
+                    "noise.snr_db",
+                    snr.is_finite(),
+                    "a finite SNR in dB",
+                    snr,
+                )?;
+                white_noise_for_snr(&chain, snr_step_g, snr, SNR_WINDOW_SAMPLES)
+            }
+            None => 0.0,
+        };
+        let disturbances = Disturbances {
+            white_noise_g,
+            amplifier_noise: n.amplifier,
+            vibration_rms_g: n.vibration_rms_g,
+            vibration_hz: n.vibration_hz,
+            vibration_bandwidth_hz: n.vibration_bandwidth_hz,
+            mains_amplitude_g: n.mains_amplitude_g,
+            mains_hz: n.mains_hz,
+            drift_g_per_s: n.drift_g_per_s,
+            creep_fraction: n.creep_fraction,
+            creep_time_constant_s: n.creep_time_constant_s,
+        };
+        Ok(Self {
+            name: file
+                .file_stem()
+                .map(|stem| stem.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            description: raw.description,
+            chain,
+            script,
+            disturbances,
+            snr_db: n.snr_db,
+            snr_step_g,
+        })
+    }
+
+    /// The same scene with white noise at another SNR (relative to the same step).
+    pub fn with_snr_db(&self, snr_db: f64) -> Self {
+        let mut scene = self.clone();
+        scene.snr_db = Some(snr_db);
+        scene.disturbances.white_noise_g =
+            white_noise_for_snr(&self.chain, self.snr_step_g, snr_db, SNR_WINDOW_SAMPLES);
+        scene
+    }
+
+    /// A simulated ADC playing this scene.
+    pub fn adc(&self, seed: u64) -> SimulatedAdc<MAX_EVENTS> {
+        SimulatedAdc::new(self.chain, self.script, self.disturbances, seed)
+    }
+
+    /// Number of output samples in the scene.
+    pub fn samples(&self) -> usize {
+        (self.script.end_s() * self.chain.sample_rate_hz).round() as usize
+    }
+
+    /// The first event: the step a study estimates. Returns (onset sample, step in grams,
+    /// load before it).
+    pub fn studied_step(&self) -> (usize, f64, f64) {
+        let events = self.script.events();
+        let first = events[0];
+        let onset = (first.time_s * self.chain.sample_rate_hz - 1e-9)
+            .ceil()
+            .max(0.0) as usize;
+        (onset, first.mass_g, 0.0)
+    }
+
+    /// Samples from the studied step's onset to the next event or the end of the scene.
+    pub fn studied_window(&self) -> usize {
+        let (onset, _, _) = self.studied_step();
+        let end_s = self
+            .script
+            .events()
+            .get(1)
+            .map(|event| event.time_s)
+            .unwrap_or(self.script.end_s());
+        ((end_s * self.chain.sample_rate_hz).round() as usize).saturating_sub(onset)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn error_of(text: &str) -> String {
+        format!(
+            "{:#}",
+            Scene::parse(Path::new("bad.toml"), text).unwrap_err()
+        )
+    }
+
+    #[test]
+    fn shipped_scenes_parse() {
+        for name in [
+            "reference-step",
+            "drop-and-remove",
+            "two-items",
+            "conveyor-ramp",
+            "vibration",
+        ] {
+            let scene = Scene::load(name).unwrap_or_else(|e| panic!("{name}: {e:#}"));
+            assert!(scene.samples() > 0, "{name}");
+        }
+    }
+
+    #[test]
+    fn minimal_scene_takes_the_defaults() {
+        let scene = Scene::parse(
+            Path::new("m.toml"),
+            "[[events]]\ntime_s = 0.0\nmass_g = 138.32\n",
+        )
+        .unwrap();
+        assert_eq!(scene.chain, SensorChain::reference());
+        assert_eq!(scene.snr_db, Some(50.0));
+        assert_eq!(scene.samples(), 6000);
+    }
+
+    #[test]
+    fn wrong_type_names_file_key_and_expectation() {
+        let message =
+            error_of("[[events]]\ntime_s = 0.0\nmass_g = 1.0\n[noise]\nsnr_db = \"high\"\n");
+        assert!(message.contains("bad.toml"), "{message}");
+        assert!(message.contains("snr_db"), "{message}");
+        assert!(
+            message.contains("expected f64") || message.contains("expected a"),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn unknown_key_is_named_with_the_expected_ones() {
+        let message = error_of("[[events]]\ntime_s = 0.0\nmass_g = 1.0\n[adc]\nbitz = 12\n");
+        assert!(
+            message.contains("bad.toml") && message.contains("bitz"),
+            "{message}"
+        );
+        assert!(
+            message.contains("expected one of") && message.contains("bits"),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn bad_values_name_the_key() {
+        let message = error_of("[[events]]\ntime_s = 0.0\nmass_g = 1.0\n[adc]\nbits = 14\n");
+        assert!(
+            message.contains("bad.toml")
+                && message.contains("`adc.bits`")
+                && message.contains("expected 12 or 16"),
+            "{message}"
+        );
+        let message = error_of(
+            "[[events]]\ntime_s = 0.5\nmass_g = 1.0\n[[events]]\ntime_s = 0.2\nmass_g = 0.0\n",
+        );
+        assert!(message.contains("`events[1].time_s`"), "{message}");
+        let message = error_of("duration_s = 1.0\n");
+        assert!(
+            message.contains("bad.toml") && message.contains("events"),
+            "{message}"
+        );
+    }
+}
