@@ -647,6 +647,27 @@ mod host_replay_tests {
         check(&Scene::demo(), &run)
     }
 
+    /// The firmware's default over 40 noise seeds: how many pass, and every failure.
+    /// `cargo test -p tests --release --lib e2e::host_replay_tests::default_over_seeds -- --ignored --nocapture`
+    #[test]
+    #[ignore = "a study that prints figures, not a check"]
+    fn default_over_seeds() {
+        let config = ScaleConfig::weighing_default(4000.0);
+        let mut passed = 0;
+        for seed in 1..=40 {
+            let report = replay(seed, config);
+            if report.passed() {
+                passed += 1;
+            } else {
+                println!("seed {seed}: {}", report.failures.join("; "));
+            }
+        }
+        println!(
+            "n = {}, D = {}: {passed}/40 seeds meet every criterion",
+            config.order, config.decimation
+        );
+    }
+
     /// The configuration study behind the firmware's default (`ScaleConfig::weighing_default`):
     /// `cargo test -p tests --release --lib e2e::host_replay_tests::study -- --ignored --nocapture`
     #[test]
