@@ -92,7 +92,7 @@ impl Chart {
             .x_desc(&self.x_label)
             .y_desc(&self.y_label)
             .label_style(("sans-serif", 14))
-            .y_label_formatter(&|y| format!("{y:.0e}"))
+            .y_label_formatter(&|y| log_label(*y))
             .draw()
             .map_err(error)?;
         let mut colour = 0;
@@ -275,53 +275,70 @@ pub fn rms_against_snr(results: &[StudyResult], readout_s: f64) -> Chart {
     }
 }
 
-/// (d) MSE (relative) against the order n at the readout sample, one line per SNR; each
-/// result in `by_order` holds one configuration per order.
+/// (d) MSE (relative) against the order n at the readout sample, one line per SNR and
+/// decimation; each result holds the configurations of one SNR.
 pub fn mse_against_order(by_snr: &[StudyResult], readout_samples: usize) -> Chart {
     let Some(first) = by_snr.first() else {
         return empty("(d) no results");
     };
+    let mut decimations: Vec<u16> = first.setups.iter().map(|s| s.setup.decimation).collect();
+    decimations.sort_unstable();
+    decimations.dedup();
     let mut series = Vec::new();
-    for result in by_snr {
-        let k = readout_samples.min(result.crlb_g2.len()).saturating_sub(1);
-        series.push(Series {
-            name: format!("{} dB", result.snr_db),
-            points: result
-                .setups
-                .iter()
-                .map(|s| (s.setup.order as f64, (s.rms(k) / result.truth_g).powi(2)))
-                .collect(),
-            reference: false,
-        });
+    for &decimation in &decimations {
+        for result in by_snr {
+            let k = readout_samples.min(result.crlb_g2.len()).saturating_sub(1);
+            series.push(Series {
+                name: format!("{} dB, D = {decimation}", result.snr_db),
+                points: result
+                    .setups
+                    .iter()
+                    .filter(|s| {
+                        s.setup.decimation == decimation && s.valid[k] as usize == result.runs
+                    })
+                    .map(|s| (s.setup.order as f64, (s.rms(k) / result.truth_g).powi(2)))
+                    .collect(),
+                reference: false,
+            });
+        }
     }
     for result in by_snr {
         let k = readout_samples.min(result.crlb_g2.len()).saturating_sub(1);
         let crlb = result.crlb_g2[k] / (result.truth_g * result.truth_g);
+        let orders = first.setups.iter().map(|s| s.setup.order as f64);
         series.push(Series {
             name: format!("CRLB {} dB", result.snr_db),
-            points: result
-                .setups
-                .iter()
-                .map(|s| (s.setup.order as f64, crlb))
-                .collect(),
+            points: orders.map(|n| (n, crlb)).collect(),
             reference: true,
         });
     }
     Chart {
         title: format!(
-            "(d) {}: relative MSE at {} samples vs order n, D = {} ({} runs per point)",
-            first.scene,
-            readout_samples,
-            first
-                .setups
-                .first()
-                .map(|s| s.setup.decimation)
-                .unwrap_or(1),
-            first.runs
+            "(d) {}: relative MSE at {} samples vs order n ({} runs per point)",
+            first.scene, readout_samples, first.runs
         ),
         x_label: "order n".into(),
         y_label: "relative MSE".into(),
         series,
+    }
+}
+
+/// Labels at 1, 2 and 5 times a power of ten only, so a log axis stays readable.
+fn log_label(y: f64) -> String {
+    if !(y > 0.0) {
+        return String::new();
+    }
+    let exponent = y.log10().floor();
+    let mantissa = y / 10f64.powf(exponent);
+    let keep = [1.0, 2.0, 5.0]
+        .iter()
+        .any(|m| (mantissa - m).abs() < 1e-6 * m);
+    if !keep {
+        String::new()
+    } else if (-3.0..=2.0).contains(&exponent) {
+        format!("{}", (y * 1e6).round() / 1e6)
+    } else {
+        format!("{}e{}", mantissa.round(), exponent)
     }
 }
 

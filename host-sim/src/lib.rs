@@ -32,6 +32,8 @@
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 #![allow(clippy::needless_range_loop)]
+// `!(a > b)` is how a comparison that must also fail on NaN is written.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 // index loops mirror the matrix algebra
 
 pub mod expm;

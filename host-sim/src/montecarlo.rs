@@ -502,19 +502,35 @@ pub fn summary(results: &[StudyResult], readout_s: f64, out: &mut impl Write) ->
                 .filter(|t| **t <= readout_s)
                 .count() as f64
                 / stats.settle_s[1].len().max(1) as f64;
+            let time = |t: f64| {
+                if t.is_finite() {
+                    format!("{t:.4}")
+                } else {
+                    "never".to_string()
+                }
+            };
+            // An estimate not yet valid in every run at the readout has no RMS there.
+            let (rms, rel, ratio) = if stats.valid[k] as usize == result.runs {
+                let rms = stats.rms(k);
+                (
+                    format!("{rms:.4e}"),
+                    format!("{:.4e}", rms / result.truth_g),
+                    format!("{:.2}", rms / result.crlb_g2[k].sqrt()),
+                )
+            } else {
+                let na = || "not_valid".to_string();
+                (na(), na(), na())
+            };
             writeln!(
                 out,
-                "{},{},{},{},{},{:.4e},{:.4e},{:.2},{:.4},{:.4},{:.3}",
+                "{},{},{},{},{},{rms},{rel},{ratio},{},{},{:.3}",
                 result.scene,
                 result.snr_db,
                 result.runs,
                 result.seed,
                 stats.setup,
-                stats.rms(k),
-                stats.rms(k) / result.truth_g,
-                stats.rms(k) / result.crlb_g2[k].sqrt(),
-                stats.settle_quantile(1, 0.5),
-                stats.settle_quantile(1, 0.95),
+                time(stats.settle_quantile(1, 0.5)),
+                time(stats.settle_quantile(1, 0.95)),
                 within
             )?;
         }

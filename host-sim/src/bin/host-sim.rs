@@ -98,12 +98,12 @@ enum Command {
         all: bool,
         #[arg(long, default_value = "host-sim/charts")]
         out: PathBuf,
-        #[arg(long, default_value_t = 400)]
+        #[arg(long, default_value_t = 1000)]
         runs: usize,
         #[arg(long, default_value_t = 1)]
         seed: u64,
         /// Configurations for (a)–(c).
-        #[arg(long = "config", default_values = ["n=7,D=1", "n=5,D=16"])]
+        #[arg(long = "config", default_values = ["n=7,D=1", "n=7,D=12"])]
         configs: Vec<Setup>,
         #[arg(long, default_value_t = 0.1)]
         readout_s: f64,
@@ -281,8 +281,8 @@ fn main() -> Result<()> {
 fn table(runs: usize, seed: u64, snr_db: f64, readout_s: f64) -> Result<()> {
     let scene = Scene::load("reference-step")?.with_snr_db(snr_db);
     let mut setups = vec![Setup::new(7, 1)];
-    for order in [3, 5, 7] {
-        for decimation in [2, 4, 8, 16, 32] {
+    for order in [3, 4, 5, 6, 7] {
+        for decimation in [4, 8, 12, 16, 24, 32] {
             setups.push(Setup::new(order, decimation));
         }
     }
@@ -351,12 +351,14 @@ fn charts(
     let readout_samples = 500;
     let order_study = Study {
         scene,
-        setups: (1..=12).map(|order| Setup::new(order, 1)).collect(),
+        setups: (1..=12)
+            .flat_map(|order| [Setup::new(order, 1), Setup::new(order, 12)])
+            .collect(),
         runs,
         seed,
         samples: readout_samples,
     };
-    eprintln!("chart (d): {runs} runs, orders 1–12, SNR 30–60 dB");
+    eprintln!("chart (d): {runs} runs, orders 1–12, D = 1 and 12, SNR 30–60 dB");
     let by_snr = montecarlo::run_studies(&order_study, &[30.0, 40.0, 50.0, 60.0])?;
     chart::mse_against_order(&by_snr, readout_samples).write(&out.join("d-mse-vs-order"))?;
     let mut summary = create(&out.join("summary.csv"))?;
