@@ -95,9 +95,10 @@ impl Pipeline {
             self.dropped = self.dropped.saturating_add(1);
         }
         let reading = self.scale.push(message.sample);
-        if (message.sequence + 1) % SAMPLES_PER_READOUT == 0 {
+        let samples_done = message.sequence.wrapping_add(1);
+        if samples_done % SAMPLES_PER_READOUT == 0 {
             Some(Readout {
-                sample: message.sequence + 1,
+                sample: samples_done,
                 reading,
                 dropped: self.dropped,
             })

@@ -55,8 +55,25 @@ pub fn demo() -> Result<()> {
     Ok(())
 }
 
-/// The end-to-end test: the demo scene in QEMU, judged by `tests::e2e::check`.
+/// The firmware checks of `cargo xtask test`: the STM32F411 image builds and leaves at least
+/// half the chip's flash free (issue 4), and the demo scene in QEMU meets the readout
+/// criteria of `tests::e2e::check`.
 pub fn e2e_test() -> Result<()> {
+    let stm32_elf = build(Board::Stm32f411, false)?;
+    let stm32_size = image_size(&stm32_elf)?;
+    let flash_free = 1.0 - stm32_size.flash as f64 / STM32F411_FLASH_BYTES as f64;
+    println!(
+        "{STM32_BIN}: {} B flash, {:.1} % of the STM32F411CE's flash free",
+        stm32_size.flash,
+        100.0 * flash_free
+    );
+    if flash_free < 0.5 {
+        bail!(
+            "{STM32_BIN} uses {} B: less than half of the {} KiB flash is free",
+            stm32_size.flash,
+            STM32F411_FLASH_BYTES / 1024
+        );
+    }
     let elf = build(Board::Qemu, false)?;
     let run = run_firmware(&elf, &ICOUNT_FAST, false)?;
     let report = e2e::check(&Scene::demo(), &run);
