@@ -11,6 +11,9 @@
 //!   innovations form of `C⁻¹`), O(N²) time and O(N) memory, so every prefix length gets its
 //!   bound in one pass.
 //!
+//! The amplifier's noise is coloured by the anti-alias filter:
+//! [`amplifier_autocovariance_g2`] gives its autocovariance for the coloured form.
+//!
 //! Every function returns the bound for each prefix length `k + 1`, in the unit of `u`
 //! squared (`f64::INFINITY` where the prefix does not identify `u`).
 
@@ -87,6 +90,34 @@ pub fn coloured_known_tare(unit_step: &[f64], gain: f64, autocovariance: &[f64])
         bounds.push(bound(1.0, gain * gain * information));
     }
     bounds
+}
+
+/// The autocovariance (g², lags `0..lags`) at the filter output of the INA114's input noise,
+/// white over one conversion period with the variance of
+/// [`SensorChain::amplifier_noise_g`], coloured by the anti-alias filter:
+/// `r(l) = σ² Σ_j h(j)·h(j+l)` with `h` the discretised impulse response.
+pub fn amplifier_autocovariance_g2(chain: &SensorChain, lags: usize) -> Vec<f64> {
+    // The noise enters the filter only, so the load does not matter; 0.25 s of impulse
+    // response is ~150 time constants of the 100 Hz filter.
+    let model = chain.discretise(0.0);
+    let length = (0.25 / chain.conversion_period_s()) as usize + lags;
+    let mut state = [0.0; crate::sensor::STATES];
+    let mut impulse = Vec::with_capacity(length);
+    for k in 0..length {
+        let input = if k == 0 { 1.0 } else { 0.0 };
+        impulse.push(model.step(&mut state, [0.0, 0.0, input]));
+    }
+    let variance = chain.amplifier_noise_g().powi(2);
+    (0..lags)
+        .map(|lag| {
+            variance
+                * impulse
+                    .iter()
+                    .zip(impulse.iter().skip(lag))
+                    .map(|(a, b)| a * b)
+                    .sum::<f64>()
+        })
+        .collect()
 }
 
 fn bound(numerator: f64, information: f64) -> f64 {

@@ -262,7 +262,8 @@ pub struct StudyResult {
     pub sample_rate_hz: f64,
     /// Per configuration.
     pub setups: Vec<SetupStats>,
-    /// CRLB (known model, onset and tare; white noise incl. quantisation) per sample index, g².
+    /// CRLB (known model, onset and tare; white noise, quantisation and, when the scene has
+    /// it, the amplifier's coloured noise) per sample index, g².
     pub crlb_g2: Vec<f64>,
     /// The same with the tare unknown (centred form), g².
     pub crlb_unknown_tare_g2: Vec<f64>,
@@ -306,9 +307,15 @@ fn settle_time(errors: &[Option<f64>], truth: f64, tolerance: f64, rate: f64) ->
 /// The time the noise-free response of the scene's sensor reaches and stays within each
 /// tolerance of its final value, s.
 pub fn sensor_settle_s(scene: &Scene, truth_g: f64) -> [f64; 3] {
+    TOLERANCES.map(|t| sensor_settle_time_s(scene, truth_g, t))
+}
+
+/// The time the noise-free step response of the scene's sensor to `truth_g` reaches and
+/// stays within `tolerance` (relative) of its final value, s (10 s of response examined).
+pub fn sensor_settle_time_s(scene: &Scene, truth_g: f64, tolerance: f64) -> f64 {
     let response = crlb::unit_step_response(&scene.chain, truth_g, 40_000);
     let errors: Vec<Option<f64>> = response.iter().map(|s| Some(s - 1.0)).collect();
-    TOLERANCES.map(|t| settle_time(&errors, 1.0, t, scene.chain.sample_rate_hz))
+    settle_time(&errors, 1.0, tolerance, scene.chain.sample_rate_hz)
 }
 
 impl Study {
@@ -415,7 +422,19 @@ impl Study {
             truth_g,
             sample_rate_hz: rate,
             setups: stats,
-            crlb_g2: crlb::white_known_tare(&unit_step, gain, noise_variance),
+            crlb_g2: if scene.disturbances.amplifier_noise && oversampling == 1.0 {
+                // The INA114's noise is coloured by the anti-alias filter: add its
+                // autocovariance and use the coloured bound.
+                let mut autocovariance: Vec<f64> =
+                    crlb::amplifier_autocovariance_g2(&chain, samples)
+                        .iter()
+                        .map(|r| r * gain * gain)
+                        .collect();
+                autocovariance[0] += noise_variance;
+                crlb::coloured_known_tare(&unit_step, gain, &autocovariance)
+            } else {
+                crlb::white_known_tare(&unit_step, gain, noise_variance)
+            },
             crlb_unknown_tare_g2: crlb::white_unknown_tare(&unit_step, gain, noise_variance),
             sensor_settle_s: sensor_settle_s(scene, truth_g),
             example_relative_error,

@@ -180,3 +180,38 @@ fn coloured_crlb_matches_the_gls_estimator_on_ar1_noise() {
         "white {white:e} vs coloured {bound:e}"
     );
 }
+
+#[test]
+fn amplifier_noise_autocovariance_matches_simulation() {
+    // Only the INA114's noise, empty platform: the empirical variance and lag-10
+    // autocovariance of 400,000 output samples against the computed ones. The noise is
+    // correlated over ~10 samples (100 Hz at 4 kHz), so these are ~40,000 effective samples
+    // and the variance is known to ~√(2/40000) = 0.7%; we allow 5%.
+    let chain = SensorChain::reference();
+    let mut disturbances = Disturbances::none();
+    disturbances.amplifier_noise = true;
+    let mut adc = SimulatedAdc::new(chain, Script::<1>::new(1000.0), disturbances, 5);
+    let zero = chain.zero_code();
+    let gain = chain.counts_per_gram();
+    let y: Vec<f64> = (0..400_000)
+        .map(|_| (adc.read_analog() - zero) / gain)
+        .collect();
+    let lag_product = |lag: usize| {
+        y.iter()
+            .zip(y.iter().skip(lag))
+            .map(|(a, b)| a * b)
+            .sum::<f64>()
+            / (y.len() - lag) as f64
+    };
+    let computed = crlb::amplifier_autocovariance_g2(&chain, 11);
+    for lag in [0, 10] {
+        let measured = lag_product(lag);
+        assert!(
+            (measured / computed[lag] - 1.0).abs() < 0.05,
+            "lag {lag}: measured {measured:e} vs computed {:e}",
+            computed[lag]
+        );
+    }
+    // The noise is coloured: the lag-10 correlation is far from zero.
+    assert!(computed[10] / computed[0] > 0.1, "{:?}", &computed[..11]);
+}
