@@ -49,6 +49,7 @@ mod app {
     fn init(cx: init::Context) -> (Shared, Local) {
         // The factory calibration (known mass, empty pan) on the simulated chain, stored as
         // a record and read back through the same CRC-checked decoder as flash on hardware.
+        defmt::println!("factory calibration: 6 s of the simulated cell, empty then 200 g...");
         let defaults = load_cell::nominal_calibration();
         let record = match load_cell::factory_calibration() {
             Ok(factory) => factory.encode(),
@@ -182,7 +183,9 @@ mod app {
         }; 2000];
         let mut sequence = 0u32;
         let mut ticks = 0u64;
+        let mut model_ticks = 0u64;
         for _ in 0..SCENE_SAMPLES as usize / chunk.len() {
+            let model_start = bench::now();
             for message in chunk.iter_mut() {
                 let sample = match converter.read() {
                     Ok(code) if converter.is_saturated(code) => RawSample::Saturated,
@@ -193,10 +196,16 @@ mod app {
                 *message = SampleMessage { sequence, sample };
                 sequence += 1;
             }
+            model_ticks += bench::since(model_start) as u64;
             let work = bench::measure_pipeline(&mut pipeline, &chunk);
             let overhead = bench::measure_loop_overhead(&chunk);
             ticks += work.saturating_sub(overhead);
         }
+        defmt::println!(
+            "bench model ticks={=u64} events={=u32}",
+            model_ticks,
+            sequence
+        );
         defmt::println!(
             "bench estimator ticks={=u64} events={=u32} dropped={=u32}",
             ticks,

@@ -141,6 +141,12 @@ pub fn bench() -> Result<()> {
         per_event(&estimator)?,
         field(&estimator, "events")?
     );
+    if let Ok(model) = find_fields(&run, "bench model") {
+        println!(
+            "  (the QEMU board's simulated analogue chain, host-sim's model in soft f64, not firmware: {:.0} instructions per sample)",
+            per_event(&model)?
+        );
+    }
     println!("image sizes (release, as `cargo size` counts them):");
     println!(
         "  {QEMU_BIN:<20} flash {:>7} B  RAM {:>6} B (static; the stack takes the rest)",
