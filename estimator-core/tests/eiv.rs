@@ -266,14 +266,15 @@ fn recursive_iv_equals_batch_iv_at_every_sample() {
 }
 
 /// Independent batch BCLS from the QR of K (nalgebra): with R θ = w, the compensated
-/// equations `(RᵀR − S) θ = Rᵀc − r` become `(I − X Xᵀ) w = c − R⁻ᵀ r` with `X = R⁻ᵀ H`
+/// equations `(RᵀR − S) θ = Rᵀc − r` become `B w = c − R⁻ᵀ r`, `B = I − X Xᵀ`, `X = R⁻ᵀ H`
 /// (`S = H Hᵀ`): a different algorithm from the recursive hyperbolic downdate. Returns u,
-/// the tolerance on it, and the smallest eigenvalue of `I − X Xᵀ` (the compensated matrix is
-/// positive definite iff it is > 0, by Sylvester's law of inertia).
+/// the tolerance on it, the smallest LDLᵀ pivot of `B` (no pivoting; these pivots are the
+/// shares of each direction's energy the compensation leaves, which the estimator tests),
+/// and the effective row count.
 ///
-/// Tolerance: the LS part contributes `ls_tolerance` (κ of K); the square symmetric solve,
-/// backward stable, adds `c·ε·κ(B)·‖w‖/|w_u|` relative to u (u = w_u / R_uu).
-fn batch_bcls(x: &[f64], order: usize, forgetting: f64, variance: f64) -> (f64, f64, f64) {
+/// Tolerance: the LS part contributes `ls_tolerance` (κ of K); the square solve, backward
+/// stable, adds `c·ε·κ(B)·‖w‖/|w_u|` relative to u (u = w_u / R_uu).
+fn batch_bcls(x: &[f64], order: usize, forgetting: f64, variance: f64) -> (f64, f64, f64, f64) {
     let (k_mat, rhs) = hankel_system(x, order, forgetting, x.len());
     let rows = k_mat.nrows();
     let effective_rows: f64 = (0..rows).map(|r| forgetting.powi(r as i32)).sum();
@@ -297,19 +298,31 @@ fn batch_bcls(x: &[f64], order: usize, forgetting: f64, variance: f64) -> (f64, 
     let x_mat = rt.solve_lower_triangular(&h).unwrap();
     let t = rt.solve_lower_triangular(&r_vec).unwrap();
     let b_mat = DMatrix::<f64>::identity(p, p) - &x_mat * x_mat.transpose();
-    let eig = b_mat.clone().symmetric_eigen();
-    let min_eig = eig.eigenvalues.min();
-    let w = b_mat.clone().lu().solve(&(c_vec - t)).unwrap();
+    // LDLᵀ without pivoting: d_k = B_kk − Σ_{j<k} L_kj² d_j.
+    let mut l = DMatrix::<f64>::identity(p, p);
+    let mut pivots = DVector::<f64>::zeros(p);
+    for k in 0..p {
+        pivots[k] = b_mat[(k, k)] - (0..k).map(|j| l[(k, j)].powi(2) * pivots[j]).sum::<f64>();
+        for i in (k + 1)..p {
+            l[(i, k)] = (b_mat[(i, k)]
+                - (0..k)
+                    .map(|j| l[(i, j)] * l[(k, j)] * pivots[j])
+                    .sum::<f64>())
+                / pivots[k];
+        }
+    }
+    let w = b_mat.clone().full_piv_lu().solve(&(c_vec - t)).unwrap();
     let u = w[order] / r_mat[(order, order)];
-    let cond_b = eig.eigenvalues.abs().max() / eig.eigenvalues.abs().min();
+    let eig = b_mat.symmetric_eigen().eigenvalues;
+    let cond_b = eig.abs().max() / eig.abs().min();
     let c = 10.0 * p as f64;
     let tol = ls_tolerance(&batch_solve(&k_mat, &rhs))
         + c * f64::EPSILON * cond_b * w.norm() / w[order].abs();
-    (u, tol, min_eig)
+    (u, tol, pivots.min(), effective_rows)
 }
 
 #[test]
-fn recursive_bcls_equals_batch_bcls_and_flags_exactly_the_indefinite_systems() {
+fn recursive_bcls_equals_batch_bcls_and_is_refused_exactly_where_a_share_is_unresolved() {
     let scenes = [
         (thermometer(), 1usize, 60usize, 1u16, 40.0),
         (mass_spring_damper(), 2, 60, 1, 40.0),
@@ -328,22 +341,27 @@ fn recursive_bcls_equals_batch_bcls_and_flags_exactly_the_indefinite_systems() {
                 .with_decimation(decimation);
             let mut bc = Bc::new(BiasCompensatedConfig::new(step, sigma * sigma)).unwrap();
             let variance = sigma * sigma / (g * g * decimation as f64);
-            let (mut worst_ratio, mut checked, mut flagged) = (0.0_f64, 0, 0);
+            let (mut worst_ratio, mut checked, mut refused, mut borderline) = (0.0_f64, 0, 0, 0);
             for (k, &sample) in y.iter().enumerate() {
                 let reading = bc.push(sample);
                 let blocks = (k + 1) / decimation as usize;
                 if (k + 1) % decimation as usize != 0 || blocks < 2 * order + 1 {
                     continue;
                 }
-                let (reference, tol, min_eig) =
+                let (reference, tol, min_share, effective_rows) =
                     batch_bcls(&x[..blocks], order, forgetting, variance);
+                // The documented floor. The shares computed two ways agree to far better
+                // than 1e-6 on these scenes, so only shares within 1e-6 of it are undecided.
+                let floor = (2.0 / effective_rows).sqrt();
+                if (min_share - floor).abs() < 1e-6 {
+                    borderline += 1;
+                    continue;
+                }
                 match reading.estimate {
                     Some(estimate) => {
-                        // The recursive pivots are all > 100ε of their LS values: positive
-                        // definite up to rounding.
                         assert!(
-                            min_eig > -1e-9,
-                            "{} k={k}: λ_min {min_eig:.2e}",
+                            min_share > floor,
+                            "{} k={k}: kept, share {min_share:.3e}",
                             sensor.name
                         );
                         let err = (estimate - reference).abs() / reference.abs();
@@ -361,16 +379,16 @@ fn recursive_bcls_equals_batch_bcls_and_flags_exactly_the_indefinite_systems() {
                             State::Invalid(estimator_core::InvalidReason::IllConditioned)
                         );
                         assert!(
-                            min_eig < 1e-9,
-                            "{} k={k}: flagged, λ_min {min_eig:.2e}",
+                            min_share < floor,
+                            "{} k={k}: refused, share {min_share:.3e}",
                             sensor.name
                         );
-                        flagged += 1;
+                        refused += 1;
                     }
                 }
             }
             println!(
-                "{:40} n={order} D={decimation:2} λ={forgetting}: {checked} readings equal batch (max diff/bound {worst_ratio:.1e}), {flagged} flagged indefinite",
+                "{:40} n={order} D={decimation:2} λ={forgetting}: {checked} readings equal batch (max diff/bound {worst_ratio:.1e}), {refused} refused, {borderline} at the floor",
                 sensor.name
             );
             assert!(checked > 0);
@@ -596,27 +614,31 @@ fn on_the_load_cell_the_variants_lose_to_decimated_least_squares_and_say_so() {
         assert!(iv.valid * 10 >= iv.runs * 9, "{iv:?}");
         full_rate_iv_rms = full_rate_iv_rms.min(iv.rms);
         // BCLS: with noise-only directions in the regressor space (fast filter modes, order
-        // above the data's), the compensated matrix is indefinite in most runs and flagged;
-        // the few readings kept are not worse than LS's.
+        // above the data's), some direction's signal share is unresolved in most runs and the
+        // compensation is refused; the readings kept carry less bias than LS's.
         let bc = &full.bc;
-        assert!(bc.valid * 2 < bc.runs, "expected mostly indefinite: {bc:?}");
+        assert!(bc.valid * 2 < bc.runs, "expected mostly refused: {bc:?}");
         assert!(bc.valid == 0 || bc.rms < ls.rms, "{bc:?}");
 
-        // D = 12: LS is at ~1.2× the CRLB with no resolved bias: nothing to remove, and
-        // both variants only add variance. The loss is bounded (measured ≤ 3×).
+        // D = 12: LS is at ~1.2× the CRLB with a bias of a few mg at most: nothing to
+        // remove. IV only adds variance; BCLS is refused in most runs. The loss of what is
+        // kept is bounded: the floors keep readings whose noise gain is within √10 of LS's
+        // (IV) or whose every direction is resolved (BCLS), so ≤ 3× the LS RMS (2,000-run
+        // study: IV 1.3–1.6×, BCLS 1.0–1.2×).
         let ls = &decimated.ls;
         decimated_ls_rms = decimated_ls_rms.max(ls.rms);
-        assert!(ls.bias.abs() < 4.0 * ls.bias_se + 0.01, "{ls:?}");
-        for s in [&decimated.iv, &decimated.bc] {
-            assert!(
-                s.valid == 0 || s.rms > ls.rms,
-                "a variant won at D = 12? {s:?}"
-            );
-            assert!(
-                s.valid == 0 || s.rms < 5.0 * ls.rms,
-                "unbounded loss: {s:?}"
-            );
-        }
+        assert!(ls.bias.abs() < 0.01, "{ls:?}");
+        let iv = &decimated.iv;
+        assert!(
+            iv.rms > ls.rms && iv.rms < 3.0 * ls.rms,
+            "IV {iv:?} vs LS {ls:?}"
+        );
+        let bc = &decimated.bc;
+        assert!(bc.valid * 2 < bc.runs, "expected mostly refused: {bc:?}");
+        assert!(
+            bc.valid == 0 || bc.rms < 3.0 * ls.rms,
+            "BCLS {bc:?} vs LS {ls:?}"
+        );
     }
     // The verdict: the best full-rate variant is still two orders of magnitude behind
     // decimated least squares.
