@@ -33,7 +33,7 @@
 //! Cost per decimated sample, `p = n + 1`: the fold ≈ `1.5·n²` Givens applications (each
 //! 2 multiplies, 2 adds; ≈ 75 at n = 7, about twice the least-squares fold), then the solve
 //! ≈ `p³/3 + 4p²` multiply–adds (≈ 430 at n = 7). Roughly 5× the cost of `StepEstimator`.
-//! Memory: see the `size_of` test in `tests/eiv.rs` (`IvStepEstimator<f32, 7>` ≈ 0.7 kB).
+//! Memory: `IvStepEstimator<f32, 7>` is 808 bytes (printed by `tests/eiv_bad_input.rs`).
 //!
 //! ## Identifiability and flags
 //! With white equation error the IV estimate's covariance is `σ²·M⁻¹M⁻ᵀ`, so the noise gain

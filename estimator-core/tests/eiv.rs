@@ -10,7 +10,7 @@
 //! - the `f32` path against `f64` on the same data.
 //!
 //! The bigger table of the module docs: `cargo test --release -p estimator-core --test eiv
-//! -- --ignored --nocapture study_table` (2,000 runs per configuration, ~10 s).
+//! -- --ignored --nocapture study_table` (2,000 runs per configuration, ~20 s).
 
 mod support;
 
@@ -649,7 +649,7 @@ fn on_the_load_cell_the_variants_lose_to_decimated_least_squares_and_say_so() {
 }
 
 #[test]
-#[ignore = "study for the module docs' table (~10 s in release)"]
+#[ignore = "study for the module docs' table (~20 s in release)"]
 fn study_table() {
     let runs = 2000;
     println!(
