@@ -65,14 +65,31 @@ impl<T: Real, const N: usize, const E: usize> Factor<T, N, E> {
     }
 
     /// Fold the row `[lead[..active], tail] θ = target` into the factor.
+    #[inline]
     pub(crate) fn fold(
+        &mut self,
+        active: usize,
+        lead: [T; N],
+        tail: [T; E],
+        target: T,
+    ) -> Folded<T> {
+        self.fold_weighted(active, lead, tail, target, T::ONE)
+    }
+
+    /// Fold a row with weight `weight`. A negative weight *removes* the row's contribution
+    /// from the information matrix (a hyperbolic downdate): the bias-compensated estimator
+    /// uses it to subtract the expected noise contribution. A downdate that would make the
+    /// matrix indefinite leaves a weight ≤ 0, which the caller must check.
+    #[inline(always)]
+    pub(crate) fn fold_weighted(
         &mut self,
         active: usize,
         mut lead: [T; N],
         mut tail: [T; E],
         mut target: T,
+        weight: T,
     ) -> Folded<T> {
-        let mut row_weight = T::ONE;
+        let mut row_weight = weight;
         for i in 0..active {
             let xi = lead[i];
             if xi == T::ZERO {
@@ -134,12 +151,34 @@ impl<T: Real, const N: usize, const E: usize> Factor<T, N, E> {
     pub(crate) fn tail_weight(&self) -> [T; E] {
         self.tail_weight
     }
+
+    /// `D` of the leading columns (the first `active` entries are meaningful).
+    pub(crate) fn lead_weight(&self) -> [T; N] {
+        self.lead_weight
+    }
+
+    /// All unknowns, leading then trailing (full back substitution, O((n+E)²)).
+    pub(crate) fn solution(&self, active: usize) -> ([T; N], [T; E]) {
+        let tail = self.tail_solution();
+        let mut lead = [T::ZERO; N];
+        for i in (0..active).rev() {
+            let mut value = self.lead_rhs[i];
+            for j in (i + 1)..active {
+                value -= self.lead_coupling[i][j] * lead[j];
+            }
+            for e in 0..E {
+                value -= self.cross_coupling[i][e] * tail[e];
+            }
+            lead[i] = value;
+        }
+        (lead, tail)
+    }
 }
 
 /// Gentleman's rotation for a column with weight `d` meeting a row entry `x` of weight `w`:
 /// updates both weights and returns the (c̄, s̄) that transform the rest of the row.
 #[inline(always)]
-fn rotation<T: Real>(d: &mut T, w: &mut T, x: T) -> (T, T) {
+pub(crate) fn rotation<T: Real>(d: &mut T, w: &mut T, x: T) -> (T, T) {
     let wx = *w * x;
     let new_d = *d + wx * x;
     let cbar = *d / new_d;
@@ -151,7 +190,7 @@ fn rotation<T: Real>(d: &mut T, w: &mut T, x: T) -> (T, T) {
 
 /// Eliminate `x` from one further entry of the row and update the factor entry.
 #[inline(always)]
-fn apply<T: Real>(row_entry: &mut T, factor_entry: &mut T, x: T, cbar: T, sbar: T) {
+pub(crate) fn apply<T: Real>(row_entry: &mut T, factor_entry: &mut T, x: T, cbar: T, sbar: T) {
     let old = *row_entry;
     *row_entry = old - x * *factor_entry;
     *factor_entry = cbar * *factor_entry + sbar * old;

@@ -20,22 +20,29 @@
 
 mod adc;
 mod baseline;
+pub mod bias_compensated;
 pub mod calibration;
 mod covariance;
 mod factor;
 mod input;
+pub mod iv;
 mod model;
+mod noise_meter;
 mod ramp;
 mod reading;
 mod real;
 pub mod scale;
+mod square;
 mod step;
 
 pub use adc::{AdcError, AdcSource};
 pub use baseline::{Baseline, BaselineConfig, BaselineMode};
+pub use bias_compensated::{BiasCompensatedConfig, BiasCompensatedStepEstimator};
 pub use calibration::{Calibration, CalibrationError, CalibrationSource, FrontEnd};
 pub use covariance::CovarianceStepEstimator;
+pub use iv::{max_instrument_delay, IvConfig, IvStepEstimator, DEFAULT_MIN_IDENTIFIABILITY};
 pub use model::{ModelBank, ModelConfig, ModelEstimator, SensorModel};
+pub use noise_meter::NoiseMeter;
 pub use ramp::{RampConfig, RampEstimator};
 pub use reading::{ConfigError, Estimator, InvalidReason, Reading, State};
 pub use real::Real;

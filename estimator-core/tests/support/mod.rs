@@ -208,3 +208,20 @@ pub fn ls_tolerance(solution: &BatchSolution) -> f64 {
     let scale = solution.theta.norm() / u.abs();
     c * f64::EPSILON * solution.cond_u * scale * (1.0 + solution.cond * solution.relative_residual)
 }
+
+/// The thesis's second-order weighing sensor (eq. 4.38): m = 0.015 kg, k_s = 500, k_d = 0.5,
+/// M = 0.1 kg, g = 9.81, y = −x₁. The thesis does not state the sample time; like
+/// host-sim's published-case test we take ts = 0.01 s, where N = 200 samples still show the
+/// transient. The step input is u = M = 0.1 (kg); the static gain is g/k_s.
+pub fn thesis_second_order() -> Sensor {
+    let (m, ks, kd, big_m, g) = (0.015, 500.0, 0.5, 0.1, 9.81);
+    let total = m + big_m;
+    Sensor {
+        name: "thesis eq. 4.38 (2nd order, N = 200)",
+        order: 2,
+        a: DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -ks / total, -kd / total]),
+        b: DVector::from_row_slice(&[0.0, -g / total]),
+        c: DVector::from_row_slice(&[-1.0, 0.0]),
+        sample_time_s: 0.01,
+    }
+}

@@ -1,0 +1,494 @@
+//! The instrumental-variable (IV) form of the data-driven step estimator (thesis §4.1.4,
+//! eq. 4.23–4.26).
+//!
+//! The least-squares estimator ([`crate::StepEstimator`]) regresses `x(k) = y(k)/G` on the
+//! row `φ(k) = [Δx(k−n) … Δx(k−1), 1]`: the regressor is built from the same noisy samples as
+//! the target, so its noise biases the estimate (an errors-in-variables problem). IV replaces
+//! the normal equations `Kᵀ K θ = Kᵀ x` by `Zᵀ K θ = Zᵀ x`, with instruments `z(k)`
+//! correlated with `φ(k)` through the signal but not through the noise.
+//!
+//! ## The instruments and their delay
+//! `z(k) = φ(k − d) = [Δx(k−n−d) … Δx(k−1−d), 1]`: the regressor `d` rows earlier. With
+//! white noise `e` on the samples, `Δx(j)` carries `e(j)` and `e(j+1)`, so the row
+//! `(φ(k), x(k))` carries `e(k−n) … e(k)` and `z(k)` carries `e(k−n−d) … e(k−d)`. They share
+//! no noise sample when `k − d < k − n`, i.e. **`d ≥ n + 1`**; that is the default
+//! ([`IvConfig::new`]) and the smallest delay accepted. The thesis's instrument matrix
+//! (eq. 4.25) is delayed by about `2n` rows (first estimate after `4n + 1` samples);
+//! [`IvConfig::with_instrument_delay`] sets any delay up to [`max_instrument_delay`]. A longer
+//! delay also tolerates noise correlated over `d − n − 1` samples, at the price of a weaker
+//! instrument (the signal decorrelates) and a later first estimate. With decimation the rows
+//! are block means, whose noise stays white, so the same rule holds at the decimated rate.
+//!
+//! ## The recursive solution
+//! Forming `Zᵀ K` squares the conditioning of the fast-sampled Hankel data. Instead, the
+//! instrument rows are folded into a QR factorisation `Z = Q R` with Gentleman's
+//! square-root-free Givens rotations (the engine of `factor.rs`), and the same rotations are
+//! applied to the row of `[K x]`, which keeps `M = Qᵀ K` and `Qᵀ x` (scaled). Since `R` is
+//! square and invertible, `Zᵀ K θ = Zᵀ x ⇔ Rᵀ Qᵀ K θ = Rᵀ Qᵀ x ⇔ M θ = Qᵀ x`: an
+//! `(n+1) × (n+1)` system whose condition number is that of `K` over the cosines of the
+//! angles between the instrument and regressor spaces, not their product. It is solved when
+//! a reading is due (every decimated sample) by LU with partial pivoting after row and column
+//! equilibration.
+//!
+//! Cost per decimated sample, `p = n + 1`: the fold ≈ `1.5·n²` Givens applications (each
+//! 2 multiplies, 2 adds; ≈ 75 at n = 7, about twice the least-squares fold), then the solve
+//! ≈ `p³/3 + 4p²` multiply–adds (≈ 430 at n = 7). Roughly 5× the cost of `StepEstimator`.
+//! Memory: `IvStepEstimator<f32, 7>` is 808 bytes (printed by `tests/eiv_bad_input.rs`).
+//!
+//! ## Identifiability and flags
+//! With white equation error the IV estimate's covariance is `σ²·M⁻¹M⁻ᵀ`, so the noise gain
+//! into `u` is the norm of the last row of `M⁻¹`. [`IvStepEstimator::identifiability`] is
+//! `1 / (rows·‖e_uᵀ M⁻¹‖²)`, in (0, 1]; for least squares (`Z = K`) it is exactly
+//! `StepEstimator::identifiability`. A singular system or an identifiability at the rounding
+//! level (≤ 100·ε, as in `StepEstimator`) gives `Invalid(IllConditioned)`, not latched; a
+//! non-finite state latches `NonFiniteUpdate`; bad samples latch as in `StepEstimator`.
+//!
+//! ## Where it wins and where it loses
+//! Measured by `tests/eiv.rs`; the table and the verdict are in [`crate::bias_compensated`]'s
+//! docs. On the thesis's second-order scene IV removes the LS bias at the same variance
+//! (thesis §4.2.4). On the 4 kHz load cell at D = 1 the delayed differences are weak, noisy
+//! instruments: IV removes most of the 4–6 g LS bias, but without the identifiability floor
+//! a few readings in a hundred are off by tens to hundreds of grams (RMS 30 g at n = 7); with
+//! the default floor 3% of readings are flagged and the rest beat LS (1.6 vs 4.3 g RMS), still
+//! ~80× the Cramér–Rao bound. At D = 12 LS has no bias left to remove and IV only adds
+//! variance (1.3–1.6× the LS RMS). A delay of `2n + 1` helps at D = 1 (median error 0.38 g
+//! against 1.1 g) and hurts at D = 12.
+
+use crate::factor::{apply, rotation};
+use crate::input::{check_sample, Decimator};
+use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
+use crate::real::Real;
+use crate::square::{Column, SolveError, Square};
+use crate::step::StepConfig;
+
+/// The ring of past differences holds `HISTORY_BLOCKS · N` values.
+const HISTORY_BLOCKS: usize = 4;
+
+/// The largest instrument delay (in decimated rows) an estimator of capacity `capacity`
+/// accepts at order `order`: the difference history holds `4·capacity` values and a row needs
+/// `order + delay` of them.
+pub const fn max_instrument_delay(capacity: usize, order: usize) -> usize {
+    HISTORY_BLOCKS * capacity - order
+}
+
+/// Configuration of an [`IvStepEstimator`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct IvConfig<T> {
+    /// Order, gain, forgetting, decimation and valid range, exactly as for `StepEstimator`.
+    pub step: StepConfig<T>,
+    /// Delay `d` of the instruments in decimated rows: `z(k) = φ(k − d)`. Must be at least
+    /// `order + 1` (see the module docs) and at most [`max_instrument_delay`].
+    pub instrument_delay: usize,
+    /// Readings whose [`IvStepEstimator::identifiability`] is not above this floor are
+    /// `Invalid(IllConditioned)`. The identifiability is the ratio of a least-squares fit's
+    /// noise variance to the IV estimate's, so the default, [`DEFAULT_MIN_IDENTIFIABILITY`]
+    /// = 0.1, flags readings whose noise gain exceeds least squares' by more than √10. The
+    /// rounding-level floor `100·ε` of `StepEstimator` always applies as well.
+    pub min_identifiability: T,
+}
+
+/// The default [`IvConfig::min_identifiability`]: flag weak-instrument readings whose noise
+/// gain exceeds that of least squares on the same rows by more than √10 ≈ 3.2 (chosen from
+/// the load-cell study in `tests/eiv.rs`, where the rare IV outliers of tens of grams all
+/// have identifiability below 0.1, and the median reading has about 0.95).
+pub const DEFAULT_MIN_IDENTIFIABILITY: f64 = 0.1;
+
+impl<T: Real> IvConfig<T> {
+    /// The given step configuration with the shortest safe delay, `order + 1`.
+    pub fn new(step: StepConfig<T>) -> Self {
+        Self {
+            step,
+            instrument_delay: step.order + 1,
+            min_identifiability: T::from_f64(DEFAULT_MIN_IDENTIFIABILITY),
+        }
+    }
+
+    /// Set the instrument delay in decimated rows.
+    pub fn with_instrument_delay(mut self, rows: usize) -> Self {
+        self.instrument_delay = rows;
+        self
+    }
+
+    /// Set the identifiability floor (0 keeps only the rounding-level test).
+    pub fn with_min_identifiability(mut self, floor: T) -> Self {
+        self.min_identifiability = floor;
+        self
+    }
+
+    /// Check against a capacity; a delay out of range, or a floor outside `[0, 1)`, is
+    /// [`ConfigError::Model`].
+    pub fn validate(&self, capacity: usize) -> Result<(), ConfigError> {
+        self.step.validate(capacity)?;
+        let order = self.step.order;
+        if self.instrument_delay < order + 1
+            || self.instrument_delay > max_instrument_delay(capacity, order)
+        {
+            return Err(ConfigError::Model);
+        }
+        // Written so that NaN fails too.
+        if !(self.min_identifiability >= T::ZERO && self.min_identifiability < T::ONE) {
+            return Err(ConfigError::Model);
+        }
+        Ok(())
+    }
+}
+
+/// The last `4·N` first differences of the decimated sequence, newest at age 0.
+#[derive(Clone, Debug)]
+struct DifferenceHistory<T, const N: usize> {
+    ring: [[T; N]; HISTORY_BLOCKS],
+    /// Flat index of the newest difference.
+    head: usize,
+    previous: T,
+    /// Values pushed so far (saturating); differences available = seen − 1.
+    seen: u32,
+}
+
+impl<T: Real, const N: usize> DifferenceHistory<T, N> {
+    fn new() -> Self {
+        Self {
+            ring: [[T::ZERO; N]; HISTORY_BLOCKS],
+            head: 0,
+            previous: T::ZERO,
+            seen: 0,
+        }
+    }
+
+    fn push(&mut self, x: T) {
+        if self.seen > 0 {
+            self.head = (self.head + 1) % (HISTORY_BLOCKS * N);
+            self.ring[self.head / N][self.head % N] = x - self.previous;
+        }
+        self.previous = x;
+        self.seen = self.seen.saturating_add(1);
+    }
+
+    fn differences(&self) -> usize {
+        self.seen.saturating_sub(1) as usize
+    }
+
+    /// `Δx` pushed `age` differences ago (age < 4N).
+    #[inline(always)]
+    fn at(&self, age: usize) -> T {
+        let len = HISTORY_BLOCKS * N;
+        let index = (self.head + len - age) % len;
+        self.ring[index / N][index % N]
+    }
+
+    /// The `n` differences from `age_of_newest + n − 1` (oldest) to `age_of_newest`.
+    fn window(&self, n: usize, age_of_newest: usize) -> [T; N] {
+        let mut window = [T::ZERO; N];
+        for (i, slot) in window.iter_mut().enumerate().take(n) {
+            *slot = self.at(age_of_newest + n - 1 - i);
+        }
+        window
+    }
+}
+
+/// The square-root-free QR factor of the instrument matrix `Z` (leading: the `n` delayed
+/// differences; trailing: the constant), with `Qᵀ [K x]` carried along, scaled by `D^{-1/2}`.
+#[derive(Clone, Debug)]
+struct InstrumentFactor<T, const N: usize> {
+    /// Strict upper triangle of `U` among the difference instruments.
+    lead_coupling: [[T; N]; N],
+    /// `U` coupling each difference instrument to the constant instrument.
+    constant_coupling: [T; N],
+    lead_weight: [T; N],
+    constant_weight: T,
+    /// `D^{-1/2}·Qᵀ K` and `D^{-1/2}·Qᵀ x`, row by pivot.
+    system: Square<T, N>,
+    rhs: Column<T, N>,
+}
+
+impl<T: Real, const N: usize> InstrumentFactor<T, N> {
+    fn new() -> Self {
+        Self {
+            lead_coupling: [[T::ZERO; N]; N],
+            constant_coupling: [T::ZERO; N],
+            lead_weight: [T::ZERO; N],
+            constant_weight: T::ZERO,
+            system: Square {
+                lead: [[T::ZERO; N]; N],
+                right: [T::ZERO; N],
+                bottom: [T::ZERO; N],
+                corner: T::ZERO,
+            },
+            rhs: Column::zero(),
+        }
+    }
+
+    fn forget(&mut self, n: usize, lambda: T) {
+        for d in self.lead_weight[..n].iter_mut() {
+            *d *= lambda;
+        }
+        self.constant_weight *= lambda;
+    }
+
+    /// Fold the instrument row `[z, 1]` with its regression row `[φ, 1]` and target `x`.
+    /// Returns the row weight left (zero while the row only fills the factor).
+    fn fold(&mut self, n: usize, mut z: [T; N], mut phi: [T; N], mut x: T) -> T {
+        let mut row_weight = T::ONE;
+        let mut z_constant = T::ONE;
+        let mut phi_constant = T::ONE;
+        for i in 0..n {
+            let zi = z[i];
+            if zi == T::ZERO {
+                continue;
+            }
+            let (cbar, sbar) = rotation(&mut self.lead_weight[i], &mut row_weight, zi);
+            let coupling = &mut self.lead_coupling[i];
+            for j in (i + 1)..n {
+                apply(&mut z[j], &mut coupling[j], zi, cbar, sbar);
+            }
+            apply(
+                &mut z_constant,
+                &mut self.constant_coupling[i],
+                zi,
+                cbar,
+                sbar,
+            );
+            let companion = &mut self.system.lead[i];
+            for j in 0..n {
+                apply(&mut phi[j], &mut companion[j], zi, cbar, sbar);
+            }
+            apply(&mut phi_constant, &mut self.system.right[i], zi, cbar, sbar);
+            apply(&mut x, &mut self.rhs.lead[i], zi, cbar, sbar);
+            if row_weight == T::ZERO {
+                return row_weight;
+            }
+        }
+        if z_constant != T::ZERO {
+            let (cbar, sbar) = rotation(&mut self.constant_weight, &mut row_weight, z_constant);
+            for j in 0..n {
+                apply(
+                    &mut phi[j],
+                    &mut self.system.bottom[j],
+                    z_constant,
+                    cbar,
+                    sbar,
+                );
+            }
+            apply(
+                &mut phi_constant,
+                &mut self.system.corner,
+                z_constant,
+                cbar,
+                sbar,
+            );
+            apply(&mut x, &mut self.rhs.last, z_constant, cbar, sbar);
+        }
+        row_weight
+    }
+}
+
+/// The instrumental-variable data-driven step estimator with capacity for orders up to `N`.
+///
+/// Same reading semantics as [`crate::StepEstimator`]; see the module docs for the method,
+/// its cost and where it loses.
+#[derive(Clone, Debug)]
+pub struct IvStepEstimator<T: Real, const N: usize> {
+    config: IvConfig<T>,
+    inv_gain: T,
+    decimator: Decimator<T>,
+    history: DifferenceHistory<T, N>,
+    factor: InstrumentFactor<T, N>,
+    /// Regression rows folded in (saturating).
+    rows: u32,
+    /// Exponentially weighted row count.
+    effective_rows: T,
+    /// The latest determined solution `[ℓ; u]`, for the next row's a-priori residual.
+    solution: Option<Column<T, N>>,
+    identifiability: T,
+    samples: u32,
+    fault: Option<InvalidReason>,
+    state: State,
+    estimate: Option<T>,
+    residual: Option<T>,
+}
+
+impl<T: Real, const N: usize> IvStepEstimator<T, N> {
+    /// A new estimator, or the reason the configuration is impossible.
+    pub fn new(config: IvConfig<T>) -> Result<Self, ConfigError> {
+        config.validate(N)?;
+        Ok(Self {
+            config,
+            inv_gain: T::ONE / config.step.gain,
+            decimator: Decimator::new(config.step.decimation),
+            history: DifferenceHistory::new(),
+            factor: InstrumentFactor::new(),
+            rows: 0,
+            effective_rows: T::ZERO,
+            solution: None,
+            identifiability: T::ZERO,
+            samples: 0,
+            fault: None,
+            state: State::WarmingUp,
+            estimate: None,
+            residual: None,
+        })
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &IvConfig<T> {
+        &self.config
+    }
+
+    /// The capacity `N`: the largest order this instance accepts.
+    pub const fn capacity() -> usize {
+        N
+    }
+
+    /// `1 / (rows·‖e_uᵀ M⁻¹‖²)` at the latest solve, in (0, 1]; zero before the first. The
+    /// IV estimate's noise is amplified by `1/√·` relative to an ideal regression on the same
+    /// number of rows, so a small value means a weak instrument (see the module docs).
+    pub fn identifiability(&self) -> T {
+        self.identifiability
+    }
+
+    /// Samples needed (at the raw rate) before the first estimate: `(2n + d + 1)·D`.
+    pub fn warm_up_samples(&self) -> u32 {
+        let step = &self.config.step;
+        (2 * step.order as u32 + self.config.instrument_delay as u32 + 1) * step.decimation as u32
+    }
+
+    /// Push an integer ADC reading, the zero offset removed in integer arithmetic first.
+    pub fn push_counts(&mut self, counts: i32, zero_counts: i32) -> Reading<T> {
+        let centred = counts.saturating_sub(zero_counts);
+        self.push(T::from_i32(centred))
+    }
+
+    fn reading(&self) -> Reading<T> {
+        Reading {
+            estimate: self.estimate,
+            samples: self.samples,
+            state: self.state,
+            residual: self.residual,
+        }
+    }
+
+    fn invalidate(&mut self, reason: InvalidReason) -> Reading<T> {
+        self.state = State::Invalid(reason);
+        self.estimate = None;
+        self.residual = None;
+        self.solution = None;
+        self.reading()
+    }
+
+    fn latch(&mut self, reason: InvalidReason) -> Reading<T> {
+        self.fault = Some(reason);
+        self.invalidate(reason)
+    }
+
+    fn update(&mut self, x: T) {
+        let n = self.config.step.order;
+        let delay = self.config.instrument_delay;
+        self.history.push(x);
+        if self.history.differences() < n + delay {
+            return;
+        }
+        let phi = self.history.window(n, 0);
+        let z = self.history.window(n, delay);
+        let prior_residual = self.solution.map(|theta| {
+            let mut prediction = theta.last;
+            for i in 0..n {
+                prediction += phi[i] * theta.lead[i];
+            }
+            x - prediction
+        });
+        let lambda = self.config.step.forgetting;
+        if lambda < T::ONE {
+            self.factor.forget(n, lambda);
+        }
+        self.effective_rows = self.effective_rows * lambda + T::ONE;
+        let row_weight = self.factor.fold(n, z, phi, x);
+        self.rows = self.rows.saturating_add(1);
+        if !(row_weight.is_finite() && self.factor.constant_weight.is_finite()) {
+            self.latch(InvalidReason::NonFiniteUpdate);
+            return;
+        }
+        if (self.rows as usize) < n + 1 {
+            return;
+        }
+        // ‖e_uᵀM⁻¹‖² with M = D^{1/2}·system: row i of `system` carries weight 1/D_i.
+        let mut row_weight = Column::<T, N>::zero();
+        for i in 0..=n {
+            let d = if i < n {
+                self.factor.lead_weight[i]
+            } else {
+                self.factor.constant_weight
+            };
+            if !(d > T::ZERO) {
+                self.invalidate(InvalidReason::IllConditioned);
+                return;
+            }
+            row_weight.set(i, n, T::ONE / d);
+        }
+        let solved = match self.factor.system.solve(n, self.factor.rhs, row_weight) {
+            Ok(solved) => solved,
+            Err(SolveError::NonFinite) => {
+                self.latch(InvalidReason::NonFiniteUpdate);
+                return;
+            }
+            Err(SolveError::Singular) => {
+                self.identifiability = T::ZERO;
+                self.invalidate(InvalidReason::IllConditioned);
+                return;
+            }
+        };
+        let step = solved.theta.last;
+        let identifiability = T::ONE / (self.effective_rows * solved.last_row_norm2);
+        self.identifiability = if identifiability.is_finite() {
+            identifiability
+        } else {
+            T::ZERO
+        };
+        // The rounding-level test of StepEstimator, and the weak-instrument floor; neither
+        // latches, more rows may cure both.
+        let rounding = T::from_f64(100.0) * T::EPSILON;
+        if !(self.identifiability > rounding)
+            || !(self.identifiability > self.config.min_identifiability)
+            || !step.is_finite()
+        {
+            self.invalidate(InvalidReason::IllConditioned);
+            return;
+        }
+        self.residual = prior_residual;
+        self.solution = Some(solved.theta);
+        self.state = State::Estimating;
+        self.estimate = Some(step);
+    }
+}
+
+impl<T: Real, const N: usize> Estimator<T> for IvStepEstimator<T, N> {
+    fn push(&mut self, sample: T) -> Reading<T> {
+        self.samples = self.samples.saturating_add(1);
+        if self.fault.is_some() {
+            return self.reading();
+        }
+        let step = &self.config.step;
+        let sample = match check_sample(sample, step.valid_min, step.valid_max) {
+            Ok(sample) => sample,
+            Err(reason) => return self.latch(reason),
+        };
+        if let Some(x) = self.decimator.push(sample * self.inv_gain) {
+            self.update(x);
+        }
+        self.reading()
+    }
+
+    fn push_missing(&mut self) -> Reading<T> {
+        self.samples = self.samples.saturating_add(1);
+        if self.fault.is_some() {
+            return self.reading();
+        }
+        self.latch(InvalidReason::MissingSample)
+    }
+
+    fn reset(&mut self) {
+        // The configuration was validated in `new`, so this cannot fail.
+        if let Ok(fresh) = Self::new(self.config) {
+            *self = fresh;
+        }
+    }
+}

@@ -1,0 +1,242 @@
+//! A small square system of size `n + 1` (n ≤ N) held in blocks, because stable Rust cannot
+//! size an array `N + 1`: the `n × n` block of the leading unknowns, the column and row of the
+//! trailing unknown (the step level) and their corner. Solved by LU with partial pivoting
+//! after row and column equilibration; used by the instrumental-variable estimator, whose
+//! normal equations are square but not symmetric.
+
+use crate::real::Real;
+
+/// A vector of length `n + 1`: `n` leading entries and the trailing one.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Column<T, const N: usize> {
+    pub lead: [T; N],
+    pub last: T,
+}
+
+impl<T: Real, const N: usize> Column<T, N> {
+    pub(crate) fn zero() -> Self {
+        Self {
+            lead: [T::ZERO; N],
+            last: T::ZERO,
+        }
+    }
+
+    #[inline(always)]
+    pub(crate) fn get(&self, i: usize, n: usize) -> T {
+        if i < n {
+            self.lead[i]
+        } else {
+            self.last
+        }
+    }
+
+    #[inline(always)]
+    pub(crate) fn set(&mut self, i: usize, n: usize, value: T) {
+        if i < n {
+            self.lead[i] = value;
+        } else {
+            self.last = value;
+        }
+    }
+
+    #[inline(always)]
+    fn swap(&mut self, i: usize, k: usize, n: usize) {
+        let (a, b) = (self.get(i, n), self.get(k, n));
+        self.set(i, n, b);
+        self.set(k, n, a);
+    }
+}
+
+/// An `(n+1) × (n+1)` matrix in blocks: `lead` (`n × n`), `right` (column `n`, rows `< n`),
+/// `bottom` (row `n`, columns `< n`) and `corner`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Square<T, const N: usize> {
+    pub lead: [[T; N]; N],
+    pub right: [T; N],
+    pub bottom: [T; N],
+    pub corner: T,
+}
+
+/// What solving `M θ = b` gives, besides θ.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Solved<T, const N: usize> {
+    pub theta: Column<T, N>,
+    /// `Σ_i ω_i·g_i²` with `g = M⁻ᵀ e_last`: the squared norm of the last row of `M⁻¹`
+    /// weighted by the caller's row weights ω (how noise on the rows reaches the last unknown).
+    pub last_row_norm2: T,
+}
+
+/// Why a solve failed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum SolveError {
+    /// A matrix or right-hand-side entry is NaN or infinite: the state is corrupted.
+    NonFinite,
+    /// An equilibrated pivot fell to the rounding level (or a row or column is zero).
+    Singular,
+}
+
+impl<T: Real, const N: usize> Square<T, N> {
+    #[inline(always)]
+    fn get(&self, i: usize, j: usize, n: usize) -> T {
+        match (i < n, j < n) {
+            (true, true) => self.lead[i][j],
+            (true, false) => self.right[i],
+            (false, true) => self.bottom[j],
+            (false, false) => self.corner,
+        }
+    }
+
+    #[inline(always)]
+    fn set(&mut self, i: usize, j: usize, n: usize, value: T) {
+        match (i < n, j < n) {
+            (true, true) => self.lead[i][j] = value,
+            (true, false) => self.right[i] = value,
+            (false, true) => self.bottom[j] = value,
+            (false, false) => self.corner = value,
+        }
+    }
+
+    fn swap_rows(&mut self, i: usize, k: usize, n: usize) {
+        for j in 0..=n {
+            let (a, b) = (self.get(i, j, n), self.get(k, j, n));
+            self.set(i, j, n, b);
+            self.set(k, j, n, a);
+        }
+    }
+
+    /// Solve `M θ = rhs` for the `(n+1) × (n+1)` matrix `self`, and weigh the last row of
+    /// `M⁻¹` by `row_weight` (ω_i, one per row of M). Consumes a copy: O((n+1)³/3)
+    /// multiply–adds for the LU, O((n+1)²) for equilibration and the three triangular solves.
+    ///
+    /// Rows and columns are scaled to a largest entry of one first, so that partial pivoting
+    /// compares like with like (the difference columns of a fast-sampled sensor are orders
+    /// of magnitude smaller than the constant column) and the singularity test is relative.
+    pub(crate) fn solve(
+        mut self,
+        n: usize,
+        mut rhs: Column<T, N>,
+        mut row_weight: Column<T, N>,
+    ) -> Result<Solved<T, N>, SolveError> {
+        let p = n + 1;
+        for i in 0..p {
+            let mut largest = T::ZERO;
+            for j in 0..p {
+                let v = self.get(i, j, n);
+                if !v.is_finite() {
+                    return Err(SolveError::NonFinite);
+                }
+                largest = max_abs(largest, v);
+            }
+            if !rhs.get(i, n).is_finite() {
+                return Err(SolveError::NonFinite);
+            }
+            if !(largest > T::ZERO) {
+                return Err(SolveError::Singular);
+            }
+            let scale = T::ONE / largest;
+            for j in 0..p {
+                self.set(i, j, n, self.get(i, j, n) * scale);
+            }
+            rhs.set(i, n, rhs.get(i, n) * scale);
+            // M⁻¹ = (row-scaled)⁻¹·S_r, so row i of the scaled problem carries weight ω_i·s_i².
+            row_weight.set(i, n, row_weight.get(i, n) * scale * scale);
+        }
+        let mut column_scale = Column::<T, N>::zero();
+        for j in 0..p {
+            let mut largest = T::ZERO;
+            for i in 0..p {
+                largest = max_abs(largest, self.get(i, j, n));
+            }
+            if !(largest > T::ZERO) {
+                return Err(SolveError::Singular);
+            }
+            let scale = T::ONE / largest;
+            column_scale.set(j, n, scale);
+            for i in 0..p {
+                self.set(i, j, n, self.get(i, j, n) * scale);
+            }
+        }
+        // Every entry is now at most one in magnitude; a pivot at the rounding level of the
+        // elimination (ε·(n+1)) means the matrix is numerically singular.
+        let singular = T::EPSILON * T::from_u32(p as u32);
+        for k in 0..p {
+            let mut pivot_row = k;
+            let mut pivot = self.get(k, k, n).abs();
+            for i in (k + 1)..p {
+                let v = self.get(i, k, n).abs();
+                if v > pivot {
+                    pivot = v;
+                    pivot_row = i;
+                }
+            }
+            if !(pivot > singular) {
+                return Err(SolveError::Singular);
+            }
+            if pivot_row != k {
+                self.swap_rows(k, pivot_row, n);
+                rhs.swap(k, pivot_row, n);
+                row_weight.swap(k, pivot_row, n);
+            }
+            let inv_pivot = T::ONE / self.get(k, k, n);
+            for i in (k + 1)..p {
+                let factor = self.get(i, k, n) * inv_pivot;
+                // Store L below the diagonal.
+                self.set(i, k, n, factor);
+                for j in (k + 1)..p {
+                    let v = self.get(i, j, n) - factor * self.get(k, j, n);
+                    self.set(i, j, n, v);
+                }
+                rhs.set(i, n, rhs.get(i, n) - factor * rhs.get(k, n));
+            }
+        }
+        // U y = (L⁻¹ P b), then θ = S_c y.
+        let mut theta = Column::<T, N>::zero();
+        for i in (0..p).rev() {
+            let mut value = rhs.get(i, n);
+            for j in (i + 1)..p {
+                value -= self.get(i, j, n) * theta.get(j, n);
+            }
+            theta.set(i, n, value / self.get(i, i, n));
+        }
+        for j in 0..p {
+            theta.set(j, n, theta.get(j, n) * column_scale.get(j, n));
+        }
+        // g = M⁻ᵀ e_last: with P M = L U, Uᵀ w = S_c e_last, Lᵀ v = w, and g = Pᵀ v; the row
+        // weights were permuted with the rows, so Σ ω_i g_i² = Σ ω'_k v_k².
+        let mut w = Column::<T, N>::zero();
+        for i in 0..p {
+            let mut value = if i == n {
+                column_scale.get(n, n)
+            } else {
+                T::ZERO
+            };
+            for j in 0..i {
+                value -= self.get(j, i, n) * w.get(j, n);
+            }
+            w.set(i, n, value / self.get(i, i, n));
+        }
+        let mut last_row_norm2 = T::ZERO;
+        for i in (0..p).rev() {
+            let mut value = w.get(i, n);
+            for j in (i + 1)..p {
+                value -= self.get(j, i, n) * w.get(j, n);
+            }
+            w.set(i, n, value);
+            last_row_norm2 += row_weight.get(i, n) * value * value;
+        }
+        Ok(Solved {
+            theta,
+            last_row_norm2,
+        })
+    }
+}
+
+#[inline(always)]
+fn max_abs<T: Real>(current: T, value: T) -> T {
+    let a = value.abs();
+    if a > current {
+        a
+    } else {
+        current
+    }
+}
