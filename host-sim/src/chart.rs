@@ -1,6 +1,7 @@
 //! Charts (SVG and PNG, plotters) of the Monte Carlo studies: (a) error against time,
 //! (b) time to accuracy against SNR, (c) RMS error at the readout against SNR with the CRLB,
-//! (d) MSE against the order n. The PNG text uses DejaVu Sans, shipped in `assets/` (its
+//! (d) MSE against the order n; for the speed study over every method (`host-sim study
+//! speed`), (e) RMS error against the readout time and (f) time to 0.1% against SNR. The PNG text uses DejaVu Sans, shipped in `assets/` (its
 //! licence beside it), so charts render the same on a headless machine.
 
 use std::path::Path;
@@ -152,7 +153,7 @@ pub fn error_against_time(result: &StudyResult) -> Chart {
     let mut series = Vec::new();
     for (stats, example) in result.setups.iter().zip(&result.example_relative_error) {
         series.push(Series {
-            name: format!("{}: one run", stats.setup),
+            name: format!("{}: one run", stats.setup.label()),
             points: example
                 .iter()
                 .enumerate()
@@ -162,7 +163,7 @@ pub fn error_against_time(result: &StudyResult) -> Chart {
             reference: false,
         });
         series.push(Series {
-            name: format!("{}: RMS over runs", stats.setup),
+            name: format!("{}: RMS over runs", stats.setup.label()),
             points: (0..stats.valid.len())
                 .step_by(4)
                 .filter(|k| stats.valid[*k] > 1)
@@ -199,7 +200,7 @@ pub fn time_against_snr(results: &[StudyResult]) -> Chart {
     let Some(first) = results.first() else {
         return empty("(b) no results");
     };
-    for (index, setup) in first.setups.iter().map(|s| s.setup).enumerate() {
+    for (index, setup) in first.setups.iter().map(|s| s.setup.label()).enumerate() {
         for (t, tolerance) in TOLERANCES.iter().enumerate() {
             series.push(Series {
                 name: format!("{setup}: within {}%", tolerance * 100.0),
@@ -246,7 +247,7 @@ pub fn rms_against_snr(results: &[StudyResult], readout_s: f64) -> Chart {
         .iter()
         .enumerate()
         .map(|(index, stats)| Series {
-            name: format!("{}", stats.setup),
+            name: stats.setup.label(),
             points: results
                 .iter()
                 .map(|r| (r.snr_db, r.setups[index].rms(k(r)) / r.truth_g))
@@ -281,7 +282,13 @@ pub fn mse_against_order(by_snr: &[StudyResult], readout_samples: usize) -> Char
     let Some(first) = by_snr.first() else {
         return empty("(d) no results");
     };
-    let mut decimations: Vec<u16> = first.setups.iter().map(|s| s.setup.decimation).collect();
+    // Only step configurations have an order; other methods in the study are left out.
+    let step = |s: &crate::montecarlo::SetupStats| s.setup.step_setup().copied();
+    let mut decimations: Vec<u16> = first
+        .setups
+        .iter()
+        .filter_map(|s| step(s).map(|setup| setup.decimation))
+        .collect();
     decimations.sort_unstable();
     decimations.dedup();
     let mut series = Vec::new();
@@ -293,10 +300,11 @@ pub fn mse_against_order(by_snr: &[StudyResult], readout_samples: usize) -> Char
                 points: result
                     .setups
                     .iter()
-                    .filter(|s| {
-                        s.setup.decimation == decimation && s.valid[k] as usize == result.runs
+                    .filter_map(|s| step(s).map(|setup| (setup, s)))
+                    .filter(|(setup, s)| {
+                        setup.decimation == decimation && s.valid[k] as usize == result.runs
                     })
-                    .map(|s| (s.setup.order as f64, (s.rms(k) / result.truth_g).powi(2)))
+                    .map(|(setup, s)| (setup.order as f64, (s.rms(k) / result.truth_g).powi(2)))
                     .collect(),
                 reference: false,
             });
@@ -305,7 +313,10 @@ pub fn mse_against_order(by_snr: &[StudyResult], readout_samples: usize) -> Char
     for result in by_snr {
         let k = readout_samples.min(result.crlb_g2.len()).saturating_sub(1);
         let crlb = result.crlb_g2[k] / (result.truth_g * result.truth_g);
-        let orders = first.setups.iter().map(|s| s.setup.order as f64);
+        let orders = first
+            .setups
+            .iter()
+            .filter_map(|s| step(s).map(|setup| setup.order as f64));
         series.push(Series {
             name: format!("CRLB {} dB", result.snr_db),
             points: orders.map(|n| (n, crlb)).collect(),
@@ -319,6 +330,114 @@ pub fn mse_against_order(by_snr: &[StudyResult], readout_samples: usize) -> Char
         ),
         x_label: "order n".into(),
         y_label: "relative MSE".into(),
+        series,
+    }
+}
+
+/// (e) speed against accuracy: RMS relative error against the readout time, one line per
+/// method (`names` in the order of the result's methods), with the CRLB. A method shows only
+/// where it is valid in every run, so no line stands on a subset of the runs.
+pub fn rms_against_readout(
+    result: &StudyResult,
+    names: &[String],
+    from_s: f64,
+    to_s: f64,
+) -> Chart {
+    let rate = result.sample_rate_hz;
+    let first = (from_s * rate).round() as usize;
+    let last = ((to_s * rate).round() as usize).min(result.crlb_g2.len().saturating_sub(1));
+    // One point a millisecond.
+    let step = ((rate / 1000.0).round() as usize).max(1);
+    let indices = move || (first..=last).step_by(step);
+    let mut series: Vec<Series> = result
+        .setups
+        .iter()
+        .zip(names)
+        .map(|(stats, name)| {
+            let points: Vec<(f64, f64)> = indices()
+                .filter(|&k| stats.valid[k] as usize == result.runs)
+                .map(|k| (k as f64 / rate * 1e3, stats.rms(k) / result.truth_g))
+                .collect();
+            Series {
+                name: if points.is_empty() {
+                    format!("{name}: not valid in every run by {:.0} ms", to_s * 1e3)
+                } else {
+                    name.clone()
+                },
+                points,
+                reference: false,
+            }
+        })
+        .collect();
+    series.push(Series {
+        name: "CRLB (known model, onset, tare)".into(),
+        points: indices()
+            .map(|k| {
+                (
+                    k as f64 / rate * 1e3,
+                    result.crlb_g2[k].sqrt() / result.truth_g,
+                )
+            })
+            .collect(),
+        reference: true,
+    });
+    Chart {
+        title: format!(
+            "(e) {} at {} dB: RMS relative error at the readout time ({} runs, seed {})",
+            result.scene, result.snr_db, result.runs, result.seed
+        ),
+        x_label: "readout time after the drop, ms (a line starts when valid in every run)".into(),
+        y_label: "RMS relative error".into(),
+        series,
+    }
+}
+
+/// (f) median time to reach and stay within 0.1% against SNR, one line per method, with the
+/// sensor's own settling time.
+pub fn settle_against_snr(results: &[StudyResult], names: &[String]) -> Chart {
+    let Some(first) = results.first() else {
+        return empty("(f) no results");
+    };
+    let tolerance = 1;
+    let mut series: Vec<Series> = names
+        .iter()
+        .enumerate()
+        .map(|(index, name)| {
+            let points: Vec<(f64, f64)> = results
+                .iter()
+                .map(|r| {
+                    (
+                        r.snr_db,
+                        r.setups[index].settle_quantile(tolerance, 0.5) * 1e3,
+                    )
+                })
+                .collect();
+            Series {
+                name: if points.iter().all(|(_, y)| !y.is_finite()) {
+                    format!("{name}: never within")
+                } else {
+                    name.clone()
+                },
+                points,
+                reference: false,
+            }
+        })
+        .collect();
+    let settle = first.sensor_settle_s[tolerance];
+    series.push(Series {
+        name: format!("sensor itself settles within 0.1%: {:.0} ms", settle * 1e3),
+        points: results.iter().map(|r| (r.snr_db, settle * 1e3)).collect(),
+        reference: true,
+    });
+    Chart {
+        title: format!(
+            "(f) {}: median time to reach and stay within {}% ({} runs per point)",
+            first.scene,
+            TOLERANCES[tolerance] * 100.0,
+            first.runs
+        ),
+        x_label: "SNR, dB (thesis eq. 4.39)".into(),
+        y_label: "time after the drop, ms (missing: not within at 1.5 s)".into(),
         series,
     }
 }

@@ -1,13 +1,13 @@
-//! `host-sim estimate`: run the core's step estimator over a recorded CSV (one raw sample a
-//! row in a column `y`). No second implementation: every number comes from
-//! `estimator_core::StepEstimator`.
+//! `host-sim estimate`: run any of the core's estimators (a [`Method`]) over a recorded CSV
+//! (one raw sample a row in a column `y`). No second implementation: every number comes from
+//! `estimator-core`.
 
 use std::io::{BufRead, Write};
 
 use anyhow::{bail, Context, Result};
 use estimator_core::{InvalidReason, State};
 
-use crate::montecarlo::{CoreEstimator, Setup};
+use crate::method::{BuildContext, Method};
 
 /// How a reading's state is written in the CSV.
 pub fn state_name(state: State) -> &'static str {
@@ -28,12 +28,12 @@ pub fn state_name(state: State) -> &'static str {
 pub fn estimate_csv(
     input: impl BufRead,
     name: &str,
-    setup: &Setup,
-    gain: f64,
+    method: &Method,
+    context: &BuildContext,
     zero: f64,
     out: &mut impl Write,
 ) -> Result<()> {
-    let mut estimator = CoreEstimator::new(setup, gain)?;
+    let mut estimator = method.build(context)?;
     let mut lines = input.lines();
     let header = match lines.next() {
         Some(line) => line.with_context(|| format!("{name}: cannot read the header"))?,
@@ -54,7 +54,7 @@ pub fn estimate_csv(
             continue;
         }
         let field = line.split(',').nth(column).map(str::trim).unwrap_or("");
-        let (estimate, state) = if field.is_empty() {
+        let reading = if field.is_empty() {
             estimator.push_missing()
         } else {
             let value: f64 = field.parse().with_context(|| {
@@ -64,9 +64,9 @@ pub fn estimate_csv(
             })?;
             estimator.push(value - zero)
         };
-        match estimate {
-            Some(value) => writeln!(out, "{k},{value:e},{}", state_name(state))?,
-            None => writeln!(out, "{k},,{}", state_name(state))?,
+        match reading.estimate {
+            Some(value) => writeln!(out, "{k},{value:e},{}", state_name(reading.state))?,
+            None => writeln!(out, "{k},,{}", state_name(reading.state))?,
         }
         k += 1;
     }

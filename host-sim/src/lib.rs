@@ -53,6 +53,10 @@ pub mod crlb;
 #[cfg(feature = "std")]
 pub mod estimate;
 #[cfg(feature = "std")]
+pub mod method;
+#[cfg(feature = "std")]
 pub mod montecarlo;
 #[cfg(feature = "std")]
 pub mod scene;
+#[cfg(feature = "std")]
+pub mod study;

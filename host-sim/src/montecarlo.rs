@@ -13,12 +13,13 @@ use std::io::Write;
 use std::str::FromStr;
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use estimator_core::{Estimator, State, StepConfig, StepEstimator};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
 use crate::crlb;
+use crate::method::{BuildContext, Method};
 use crate::scene::Scene;
 use crate::simulated::run_seed;
 use estimator_core::AdcSource;
@@ -77,26 +78,15 @@ impl Setup {
 
 impl FromStr for Setup {
     type Err = anyhow::Error;
-    /// `n=7,D=16[,lambda=0.999][,precision=f32]`.
+    /// `n=7,D=16[,lambda=0.999][,precision=f32]`: the step method's spec (see
+    /// [`crate::method`]), with or without `step:`.
     fn from_str(text: &str) -> Result<Self> {
-        let mut setup = Setup::new(0, 1);
-        for part in text.split(',') {
-            let (key, value) = part.split_once('=').with_context(|| {
-                format!("configuration `{text}`: expected key=value, found `{part}`")
-            })?;
-            let bad = || format!("configuration `{text}`: bad value for `{key}`: `{value}`");
-            match key.trim() {
-                "n" | "order" => setup.order = value.trim().parse().with_context(bad)?,
-                "D" | "d" | "decimation" => setup.decimation = value.trim().parse().with_context(bad)?,
-                "lambda" | "forgetting" => setup.forgetting = value.trim().parse().with_context(bad)?,
-                "precision" => setup.precision = value.trim().parse().with_context(bad)?,
-                other => bail!("configuration `{text}`: unknown key `{other}` (expected n, D, lambda, precision)"),
-            }
+        match text.parse::<Method>()? {
+            Method::Step(setup) => Ok(setup),
+            other => bail!(
+                "configuration `{text}`: `--config` takes a step configuration (n=..,D=..); give `{other}` with --method"
+            ),
         }
-        if setup.order == 0 {
-            bail!("configuration `{text}`: the order n is required and must be at least 1");
-        }
-        Ok(setup)
     }
 }
 
@@ -176,11 +166,11 @@ impl CoreEstimator {
     }
 }
 
-/// What a study measures for one configuration.
+/// What a study measures for one method.
 #[derive(Clone, Debug)]
 pub struct SetupStats {
-    /// The configuration.
-    pub setup: Setup,
+    /// The method (a step configuration for `--config`).
+    pub setup: Method,
     /// Per sample index: Σ error, Σ error² over the runs with a valid estimate, g and g².
     pub sum_error: Vec<f64>,
     /// See `sum_error`.
@@ -193,7 +183,7 @@ pub struct SetupStats {
 }
 
 impl SetupStats {
-    fn new(setup: Setup, samples: usize) -> Self {
+    fn new(setup: Method, samples: usize) -> Self {
         Self {
             setup,
             sum_error: vec![0.0; samples],
@@ -278,8 +268,8 @@ pub struct StudyResult {
 pub struct Study {
     /// The scene.
     pub scene: Scene,
-    /// The configurations under test.
-    pub setups: Vec<Setup>,
+    /// The methods under test (`Method::from(setup)` for a step configuration).
+    pub setups: Vec<Method>,
     /// Runs.
     pub runs: usize,
     /// Seed.
@@ -326,12 +316,32 @@ impl Study {
         let samples = self.samples.min(self.scene.studied_window()).max(1);
         let gain = chain.counts_per_gram();
         let zero = chain.zero_code();
+        let scene = &self.scene;
+        let oversampling = f64::from(chain.adc.oversampling.max(1));
+        let white_counts =
+            scene.disturbances.white_noise_g * chain.volts_per_gram() / chain.adc.volts_per_code();
+        // Per conversion: the white noise plus uniform quantisation (LSB²/12); summed over
+        // the oversampled conversions.
+        let noise_variance = oversampling * (white_counts * white_counts + 1.0 / 12.0);
+        let context = BuildContext {
+            // The variance a tare measurement would see: the white part and the amplifier's
+            // noise at lag 0 (the methods that need it are not built yet; they will
+            // measure it from a tare record where the firmware does).
+            tare_noise_variance: Some(
+                noise_variance
+                    + if scene.disturbances.amplifier_noise {
+                        crlb::amplifier_autocovariance_g2(&chain, 1)[0] * gain * gain
+                    } else {
+                        0.0
+                    },
+            ),
+            ..BuildContext::new(chain, gain)
+        };
         // Refuse impossible configurations before spending time.
-        for setup in &self.setups {
-            CoreEstimator::new(setup, gain)?;
+        for method in &self.setups {
+            method.build(&context)?;
         }
         let rate = chain.sample_rate_hz;
-        let scene = &self.scene;
         let setups = &self.setups;
         let run_one = |run: usize| -> (Vec<Vec<Option<f64>>>, ()) {
             let mut adc = scene.adc(run_seed(self.seed, run as u64));
@@ -347,12 +357,12 @@ impl Study {
                 .collect();
             let errors = setups
                 .iter()
-                .map(|setup| {
+                .map(|method| {
                     // Validated above.
-                    let mut estimator = CoreEstimator::new(setup, gain).expect("validated");
+                    let mut estimator = method.build(&context).expect("validated");
                     record
                         .iter()
-                        .map(|&sample| estimator.push(sample).0.map(|estimate| estimate - truth_g))
+                        .map(|&sample| estimator.push(sample).estimate.map(|e| e - truth_g))
                         .collect()
                 })
                 .collect();
@@ -362,7 +372,7 @@ impl Study {
         let empty = || -> Vec<SetupStats> {
             setups
                 .iter()
-                .map(|setup| SetupStats::new(*setup, samples))
+                .map(|method| SetupStats::new(*method, samples))
                 .collect()
         };
         // Fixed chunks of runs, each accumulated in run order and merged in chunk order:
@@ -407,12 +417,6 @@ impl Study {
             })
             .collect();
         progress.dec(1);
-        let oversampling = f64::from(chain.adc.oversampling.max(1));
-        let white_counts =
-            scene.disturbances.white_noise_g * chain.volts_per_gram() / chain.adc.volts_per_code();
-        // Per conversion: the white noise plus uniform quantisation (LSB²/12); summed over
-        // the oversampled conversions.
-        let noise_variance = oversampling * (white_counts * white_counts + 1.0 / 12.0);
         let unit_step = crlb::unit_step_response(&chain, truth_g, samples);
         Ok(StudyResult {
             scene: scene.name.clone(),
@@ -489,7 +493,7 @@ pub fn write_csv(results: &[StudyResult], out: &mut impl Write) -> Result<()> {
                     out,
                     "{},{},{},{:.6},{},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e}",
                     result.snr_db,
-                    stats.setup,
+                    stats.setup.label(),
                     k,
                     k as f64 / result.sample_rate_hz,
                     stats.valid[k],
@@ -547,7 +551,7 @@ pub fn summary(results: &[StudyResult], readout_s: f64, out: &mut impl Write) ->
                 result.snr_db,
                 result.runs,
                 result.seed,
-                stats.setup,
+                stats.setup.label(),
                 time(stats.settle_quantile(1, 0.5)),
                 time(stats.settle_quantile(1, 0.95)),
                 within

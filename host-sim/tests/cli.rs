@@ -1,11 +1,16 @@
 //! The `host-sim` command: `simulate` writes the scene, `estimate` on that CSV equals the
-//! core called directly (same numbers, same states), bad input becomes an error naming it.
+//! core called directly (same numbers, same states) for every method, bad input becomes an
+//! error naming it, Monte Carlo and the speed study give the same output on 1 and 2 threads.
 
 use std::path::PathBuf;
 use std::process::Command;
 
-use estimator_core::{Estimator, StepConfig, StepEstimator};
+use estimator_core::{
+    Baseline, BaselineConfig, BaselineMode, CovarianceStepEstimator, Estimator, ModelBank,
+    ModelConfig, RampConfig, RampEstimator, Reading, StepConfig, StepEstimator,
+};
 use host_sim::estimate::state_name;
+use host_sim::method::{self, Method};
 use host_sim::scene::Scene;
 
 fn host_sim() -> Command {
@@ -178,6 +183,10 @@ fn montecarlo_is_reproducible_across_thread_counts() {
                     "n=5,D=16",
                     "--config",
                     "n=3,D=1",
+                    "--method",
+                    "model:K=5",
+                    "--method",
+                    "settled",
                     "--out",
                 ])
                 .arg(&out),
@@ -188,5 +197,291 @@ fn montecarlo_is_reproducible_across_thread_counts() {
     assert!(outputs[0].starts_with(
         "snr_db,config,k,t_s,valid_runs,bias_g,std_g,rms_g,rms_rel,crlb_g,mse_over_crlb"
     ));
-    assert_eq!(outputs[0].lines().count(), 1 + 2 * 600);
+    assert_eq!(outputs[0].lines().count(), 1 + 4 * 600);
+    // The `config` column names every method by its comma-free label.
+    for label in ["n=5 D=16", "n=3 D=1", "model:D=8 K=5", "settled:block=80"] {
+        assert!(outputs[0].contains(&format!(",{label}")), "{label}");
+    }
+}
+
+/// The reference scene simulated to a CSV (seed 4), its samples, gain and zero.
+fn simulated_reference(name: &str) -> (PathBuf, Vec<f64>, f64, f64) {
+    let csv = temp(name);
+    run_ok(
+        host_sim()
+            .args(["simulate", "reference-step", "--seed", "4", "--out"])
+            .arg(&csv),
+    );
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let samples = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
+        .collect();
+    let scene = Scene::load("reference-step").unwrap();
+    (
+        csv,
+        samples,
+        scene.chain.counts_per_gram(),
+        scene.chain.zero_code(),
+    )
+}
+
+/// The CSV lines `estimate` must print for these readings.
+fn expected_lines(readings: impl Iterator<Item = Reading<f64>>) -> Vec<String> {
+    let mut lines = vec!["k,estimate,state".to_string()];
+    for (k, r) in readings.enumerate() {
+        lines.push(match r.estimate {
+            Some(value) => format!("{k},{value:e},{}", state_name(r.state)),
+            None => format!("{k},,{}", state_name(r.state)),
+        });
+    }
+    lines
+}
+
+fn widen(r: Reading<f32>) -> Reading<f64> {
+    Reading {
+        estimate: r.estimate.map(f64::from),
+        samples: r.samples,
+        state: r.state,
+        residual: r.residual.map(f64::from),
+    }
+}
+
+/// Every method through `estimate --method` equals the core's own type fed directly, in the
+/// precision the spec names (f32: the tare removed in f64, then rounded, as the CLI does).
+#[test]
+fn estimate_with_every_method_equals_the_core() {
+    let (csv, samples, gain, zero) = simulated_reference("methods.csv");
+    let centred: Vec<f64> = samples.iter().map(|s| s - zero).collect();
+    let chain = Scene::load("reference-step").unwrap().chain;
+    let all_f64 = |e: &mut dyn Estimator<f64>| -> Vec<Reading<f64>> {
+        centred.iter().map(|&x| e.push(x)).collect()
+    };
+    let all_f32 = |e: &mut dyn Estimator<f32>| -> Vec<Reading<f64>> {
+        centred.iter().map(|&x| widen(e.push(x as f32))).collect()
+    };
+    let g32 = gain as f32;
+    let model_spec = |spec: &str| match spec.parse::<Method>().unwrap() {
+        Method::Model(spec) => spec,
+        other => panic!("{other}"),
+    };
+    let bank_configs = |spec: &str| -> Vec<ModelConfig<f64, 5>> {
+        method::model_candidates(&chain, gain, &model_spec(spec))
+            .unwrap()
+            .into_iter()
+            .map(|model| ModelConfig {
+                model,
+                decimation: model_spec(spec).decimation,
+                valid_min: f64::NEG_INFINITY,
+                valid_max: f64::INFINITY,
+            })
+            .collect()
+    };
+    let baseline = |mode, gain| BaselineConfig {
+        mode,
+        gain,
+        block: 80,
+        stable_band: 0.5,
+    };
+    let cases: Vec<(&str, Vec<Reading<f64>>)> = vec![
+        (
+            "step:n=7,D=16,precision=f32",
+            all_f32(
+                &mut StepEstimator::<f32, 40>::new(StepConfig::new(7, g32).with_decimation(16))
+                    .unwrap(),
+            ),
+        ),
+        (
+            "step:n=5,D=8,lambda=0.999",
+            all_f64(
+                &mut StepEstimator::<f64, 40>::new(
+                    StepConfig::new(5, gain)
+                        .with_decimation(8)
+                        .with_forgetting(0.999),
+                )
+                .unwrap(),
+            ),
+        ),
+        (
+            "covariance:n=7,D=16,precision=f32",
+            all_f32(
+                &mut CovarianceStepEstimator::<f32, 40, 41>::new(
+                    StepConfig::new(7, g32).with_decimation(16),
+                    1e-6,
+                )
+                .unwrap(),
+            ),
+        ),
+        (
+            "model",
+            all_f64(
+                &mut ModelBank::<f64, 5, 33>::new(bank_configs("model").try_into().unwrap())
+                    .unwrap(),
+            ),
+        ),
+        (
+            "model:D=4,K=5,span=0.9-1.2,cal_g=150",
+            all_f64(
+                &mut ModelBank::<f64, 5, 5>::new(
+                    bank_configs("model:D=4,K=5,span=0.9-1.2,cal_g=150")
+                        .try_into()
+                        .unwrap(),
+                )
+                .unwrap(),
+            ),
+        ),
+        (
+            "settled",
+            all_f64(
+                &mut Baseline::<f64, 10>::new(baseline(BaselineMode::SettledAverage, gain))
+                    .unwrap(),
+            ),
+        ),
+        (
+            "moving:precision=f32",
+            all_f32(
+                &mut Baseline::<f32, 10>::new(BaselineConfig {
+                    mode: BaselineMode::MovingAverage,
+                    gain: g32,
+                    block: 80,
+                    stable_band: 0.5,
+                })
+                .unwrap(),
+            ),
+        ),
+        (
+            "ramp:n=5,D=16,lag_s=0.01",
+            all_f64(
+                &mut RampEstimator::<f64, 40>::new(RampConfig {
+                    regression: StepConfig::new(5, gain).with_decimation(16),
+                    sample_period_s: 1.0 / chain.sample_rate_hz,
+                    lag_s: 0.01,
+                })
+                .unwrap(),
+            ),
+        ),
+    ];
+    for (spec, readings) in cases {
+        // Each case must exercise a valid estimate, or equality would prove little.
+        assert!(
+            readings.iter().any(|r| r.estimate.is_some()),
+            "{spec}: never valid"
+        );
+        let stdout = run_ok(
+            host_sim()
+                .args(["estimate", "--method", spec, "--gain", &gain.to_string()])
+                .args(["--zero", &zero.to_string(), "--input"])
+                .arg(&csv),
+        );
+        let expected = expected_lines(readings.into_iter());
+        let got: Vec<&str> = stdout.lines().collect();
+        assert_eq!(got.len(), expected.len(), "{spec}");
+        for (g, e) in got.iter().zip(&expected) {
+            assert_eq!(g, e, "{spec}");
+        }
+    }
+}
+
+#[test]
+fn bad_method_specs_are_errors_naming_spec_key_and_expectation() {
+    let csv = temp("tiny.csv");
+    std::fs::write(&csv, "y\n1\n2\n").unwrap();
+    for (spec, needles) in [
+        (
+            "model:K=4",
+            vec!["model:K=4", "`K`", "[1, 3, 5, 9, 17, 33, 65]"],
+        ),
+        (
+            "step:n=7,D=2000",
+            vec!["step:n=7,D=2000", "`D`", "1 to 1024"],
+        ),
+        (
+            "kalman:n=3",
+            vec!["kalman:n=3", "unknown method", "step, covariance"],
+        ),
+        (
+            "settled:block=80,n=7",
+            vec!["`n`", "expected block, K, band_g"],
+        ),
+    ] {
+        let output = host_sim()
+            .args(["estimate", "--gain", "1", "--method", spec, "--input"])
+            .arg(&csv)
+            .output()
+            .unwrap();
+        assert!(!output.status.success(), "{spec}");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        for needle in needles {
+            assert!(stderr.contains(needle), "{spec}: {stderr}");
+        }
+    }
+    // The same parser behind montecarlo --method and --config.
+    let output = host_sim()
+        .args(["montecarlo", "reference-step", "--runs", "1"])
+        .args(["--method", "moving:band_g=0"])
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("moving:band_g=0") && stderr.contains("`band_g`"),
+        "{stderr}"
+    );
+    let output = host_sim()
+        .args(["montecarlo", "reference-step", "--runs", "1"])
+        .args(["--config", "settled"])
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    assert!(String::from_utf8_lossy(&output.stderr).contains("--method"));
+    // --method and the step shorthand exclude each other.
+    let output = host_sim()
+        .args(["estimate", "--gain", "1", "--method", "settled"])
+        .args(["--order", "3", "--input"])
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+}
+
+#[test]
+fn speed_study_is_reproducible_across_thread_counts() {
+    // A tiny study (16 runs at 50 dB): the CSV and the markdown must be byte-identical on
+    // 1 and 2 threads, hold one row per method, and the goals must be judged.
+    let mut outputs = Vec::new();
+    for threads in ["1", "2"] {
+        let dir = temp(&format!("study-{threads}"));
+        let stdout = run_ok(
+            host_sim()
+                .env("RAYON_NUM_THREADS", threads)
+                .args(["study", "speed", "--runs", "16", "--seed", "3"])
+                .args(["--snr-db", "50", "--out"])
+                .arg(&dir),
+        );
+        assert_eq!(
+            stdout.matches("PASS: ").count() + stdout.matches("GAP: ").count(),
+            3,
+            "{stdout}"
+        );
+        let csv = std::fs::read_to_string(dir.join("speed-study.csv")).unwrap();
+        let markdown = std::fs::read_to_string(dir.join("speed-study.md")).unwrap();
+        for chart in ["e-rms-vs-readout-time", "f-time-to-0p1pct-vs-snr"] {
+            for extension in ["svg", "png"] {
+                assert!(dir.join(format!("{chart}.{extension}")).exists());
+            }
+        }
+        outputs.push((csv, markdown));
+    }
+    assert_eq!(outputs[0], outputs[1]);
+    let csv = &outputs[0].0;
+    assert_eq!(
+        csv.lines().count(),
+        1 + host_sim::study::default_entries().len()
+    );
+    assert!(csv
+        .lines()
+        .nth(1)
+        .unwrap()
+        .starts_with("firmware default,step:n=7 D=16 precision=f32,50,16,"));
 }

@@ -10,8 +10,10 @@ use clap::{Parser, Subcommand};
 use estimator_core::AdcSource;
 use host_sim::chart;
 use host_sim::estimate::estimate_csv;
+use host_sim::method::{BuildContext, Method};
 use host_sim::montecarlo::{self, Precision, Setup, Study};
 use host_sim::scene::Scene;
+use host_sim::study;
 
 #[derive(Parser)]
 #[command(
@@ -34,26 +36,35 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Run the core's step estimator over a CSV with a header and a column `y`; writes
-    /// `k,estimate,state` to stdout (estimate empty while not valid).
+    /// Run one of the core's estimators over a CSV with a header and a column `y`; writes
+    /// `k,estimate,state` to stdout (estimate empty while not valid). Give `--method SPEC`
+    /// (e.g. `model:D=8`, `settled`, `step:n=7,D=16,precision=f32`), or the step estimator's
+    /// shorthand `--order N [--decimation D --forgetting L --precision P]`.
     Estimate {
         #[arg(long)]
         input: PathBuf,
-        /// Model order n.
-        #[arg(long)]
-        order: usize,
+        /// The estimator: step, covariance, model, settled, moving or ramp with its keys (see
+        /// host-sim/README.md).
+        #[arg(long, conflicts_with_all = ["order", "forgetting", "decimation", "precision"])]
+        method: Option<Method>,
+        /// Shorthand for `--method step:n=N,...`: model order n.
+        #[arg(long, required_unless_present = "method")]
+        order: Option<usize>,
         /// Static gain: raw units of `y` per unit of the estimate (e.g. counts per gram).
         #[arg(long)]
         gain: f64,
-        #[arg(long, default_value_t = 1.0)]
-        forgetting: f64,
-        #[arg(long, default_value_t = 1)]
-        decimation: u16,
-        #[arg(long, default_value = "f64")]
-        precision: Precision,
+        #[arg(long)]
+        forgetting: Option<f64>,
+        #[arg(long)]
+        decimation: Option<u16>,
+        #[arg(long)]
+        precision: Option<Precision>,
         /// Subtracted from every sample before the estimator (the tare, in raw units).
         #[arg(long, default_value_t = 0.0)]
         zero: f64,
+        /// The scene whose sensor chain the `model` method takes its dynamics from.
+        #[arg(long, default_value = "reference-step")]
+        scene: String,
     },
     /// Monte Carlo of the core on a scene: CSV per SNR, configuration and sample index.
     Montecarlo {
@@ -65,9 +76,14 @@ enum Command {
         /// SNRs in dB (comma separated); default: the scene's.
         #[arg(long, value_delimiter = ',')]
         snr_db: Vec<f64>,
-        /// Estimator configurations, e.g. `--config n=7,D=1 --config n=5,D=16`.
-        #[arg(long = "config", default_value = "n=7,D=1")]
+        /// Step estimator configurations, e.g. `--config n=7,D=1 --config n=5,D=16`
+        /// (default, when neither --config nor --method is given: n=7,D=1).
+        #[arg(long = "config")]
         configs: Vec<Setup>,
+        /// Any estimator by its spec, e.g. `--method model --method settled`; after the
+        /// `--config` ones. The CSV's `config` column holds each one's label.
+        #[arg(long = "method")]
+        methods: Vec<Method>,
         /// Samples after the onset to study (default: up to the next event or the end).
         #[arg(long)]
         samples: Option<usize>,
@@ -108,6 +124,26 @@ enum Command {
         #[arg(long, default_value_t = 0.1)]
         readout_s: f64,
     },
+    /// Studies over every method. `study speed`: speed against accuracy on the reference
+    /// scene at 30–80 dB (time to 0.1%, RMS at 50/100/200 ms against the CRLB), CSV +
+    /// markdown + charts, and the firmware default's goal figures.
+    Study {
+        /// The study (only `speed` so far).
+        which: StudyKind,
+        #[arg(long, default_value_t = 1000)]
+        runs: usize,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// SNRs in dB (comma separated).
+        #[arg(long, value_delimiter = ',', default_values_t = study::SNRS_DB)]
+        snr_db: Vec<f64>,
+        /// More methods, after the default list (e.g. a variant under development).
+        #[arg(long = "method")]
+        methods: Vec<Method>,
+        /// Where the CSV, the markdown table and the charts go.
+        #[arg(long, default_value = "host-sim/charts")]
+        out: PathBuf,
+    },
     /// Monte Carlo benchmark: estimator updates per second on this host.
     Bench {
         #[arg(long, default_value_t = 10_000)]
@@ -123,6 +159,12 @@ enum Command {
         #[arg(long, default_value_t = 1)]
         seed: u64,
     },
+}
+
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum StudyKind {
+    /// Speed against accuracy (issue 5, study 7).
+    Speed,
 }
 
 fn create(path: &PathBuf) -> Result<BufWriter<File>> {
@@ -163,19 +205,26 @@ fn main() -> Result<()> {
         }
         Command::Estimate {
             input,
+            method,
             order,
             gain,
             forgetting,
             decimation,
             precision,
             zero,
+            scene,
         } => {
-            let setup = Setup {
-                order,
-                decimation,
-                forgetting,
-                precision,
+            let method = match (method, order) {
+                (Some(method), _) => method,
+                (None, Some(order)) => Method::Step(Setup {
+                    order,
+                    decimation: decimation.unwrap_or(1),
+                    forgetting: forgetting.unwrap_or(1.0),
+                    precision: precision.unwrap_or(Precision::F64),
+                }),
+                (None, None) => anyhow::bail!("give --method SPEC or --order N"),
             };
+            let context = BuildContext::new(Scene::load(&scene)?.chain, gain);
             let file =
                 File::open(&input).with_context(|| format!("cannot open {}", input.display()))?;
             let stdout = std::io::stdout();
@@ -183,8 +232,8 @@ fn main() -> Result<()> {
             estimate_csv(
                 BufReader::new(file),
                 &input.display().to_string(),
-                &setup,
-                gain,
+                &method,
+                &context,
                 zero,
                 &mut out,
             )?;
@@ -196,16 +245,22 @@ fn main() -> Result<()> {
             seed,
             snr_db,
             configs,
+            methods,
             samples,
             out,
             summary,
             readout_s,
         } => {
             let scene = Scene::load(&scene)?;
+            let mut setups: Vec<Method> = configs.into_iter().map(Method::from).collect();
+            setups.extend(methods);
+            if setups.is_empty() {
+                setups.push(Method::from(Setup::new(7, 1)));
+            }
             let study = Study {
                 samples: samples.unwrap_or(usize::MAX),
                 scene,
-                setups: configs,
+                setups,
                 runs,
                 seed,
             };
@@ -238,6 +293,14 @@ fn main() -> Result<()> {
             }
             charts(&out, runs, seed, configs, readout_s)?;
         }
+        Command::Study {
+            which: StudyKind::Speed,
+            runs,
+            seed,
+            snr_db,
+            methods,
+            out,
+        } => study::speed_command(runs, seed, &snr_db, methods, &out)?,
         Command::Bench {
             runs,
             samples,
@@ -280,10 +343,10 @@ fn main() -> Result<()> {
 
 fn table(runs: usize, seed: u64, snr_db: f64, readout_s: f64) -> Result<()> {
     let scene = Scene::load("reference-step")?.with_snr_db(snr_db);
-    let mut setups = vec![Setup::new(7, 1)];
+    let mut setups = vec![Method::from(Setup::new(7, 1))];
     for order in [3, 4, 5, 6, 7] {
         for decimation in [4, 8, 12, 16, 24, 32] {
-            setups.push(Setup::new(order, decimation));
+            setups.push(Method::from(Setup::new(order, decimation)));
         }
     }
     let study = Study {
@@ -324,7 +387,7 @@ fn table(runs: usize, seed: u64, snr_db: f64, readout_s: f64) -> Result<()> {
         println!(
             "best by RMS at {} ms: {} - {:.4e} g ({:.4e} relative, {:.2}x CRLB), median time to 0.1%: {:.4} s",
             readout_s * 1e3,
-            best.setup,
+            best.setup.label(),
             best.rms(k),
             best.rms(k) / result.truth_g,
             best.rms(k) / result.crlb_g2[k].sqrt(),
@@ -345,7 +408,7 @@ fn charts(
     let scene = Scene::load("reference-step")?;
     let study = Study {
         scene: scene.clone(),
-        setups: configs,
+        setups: configs.into_iter().map(Method::from).collect(),
         runs,
         seed,
         samples: usize::MAX,
@@ -365,6 +428,7 @@ fn charts(
         scene,
         setups: (1..=12)
             .flat_map(|order| [Setup::new(order, 1), Setup::new(order, 12)])
+            .map(Method::from)
             .collect(),
         runs,
         seed,

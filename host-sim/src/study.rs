@@ -1,0 +1,506 @@
+//! Study 7 of issue 5, speed against accuracy: every method on the reference scene
+//! (138.32 g dropped at t = 0) at 30–80 dB, with the same seeds for every method. For each
+//! method and SNR: the time to reach and stay within 0.1% (median and 95th percentile over
+//! the runs, "never" when a run is not within at the end of the 1.5 s window), the RMS error
+//! at 50, 100 and 200 ms and its ratio to the Cramér–Rao bound at that time. It writes a CSV
+//! and a markdown table, draws the two charts and prints the firmware default's goals.
+//!
+//! What it must never do: pick a method's figures from a different run or seed than its
+//! rivals' (one Monte Carlo holds them all), or report an RMS over a subset of runs as if it
+//! were over all of them (a method not yet valid in every run says so instead).
+
+use std::io::Write;
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+
+use crate::chart;
+use crate::method::Method;
+use crate::montecarlo::{self, SetupStats, Study, StudyResult};
+use crate::scene::Scene;
+
+/// The SNRs of the study, dB (thesis eq. 4.39).
+pub const SNRS_DB: [f64; 6] = [30.0, 40.0, 50.0, 60.0, 70.0, 80.0];
+/// The readout times of the table, s.
+pub const READOUTS_S: [f64; 3] = [0.05, 0.1, 0.2];
+/// The tolerance of "time to reach and stay within" (index 1 of `montecarlo::TOLERANCES`).
+const TOLERANCE_INDEX: usize = 1;
+/// The SNR the goals are judged at, dB.
+pub const GOAL_SNR_DB: f64 = 50.0;
+/// The readout time the goals are judged at, s.
+pub const GOAL_READOUT_S: f64 = 0.1;
+
+/// One method of the study with the name the table gives it.
+#[derive(Clone, Debug)]
+pub struct Entry {
+    /// What the row is, in words.
+    pub name: String,
+    /// The method.
+    pub method: Method,
+}
+
+fn entry(name: &str, spec: &str) -> Entry {
+    Entry {
+        name: name.to_string(),
+        method: spec.parse().expect("the study's own specs parse"),
+    }
+}
+
+/// The firmware's default estimator (firmware/README.md: n = 7, D = 16, f32).
+pub const FIRMWARE_DEFAULT: &str = "step:n=7,D=16,precision=f32";
+/// The thesis's plain configuration.
+pub const PLAIN_THESIS: &str = "step:n=7,D=1";
+
+/// The methods of the study, in table order. A new estimator joins with one line here.
+pub fn default_entries() -> Vec<Entry> {
+    vec![
+        entry("firmware default", FIRMWARE_DEFAULT),
+        entry("plain thesis configuration", PLAIN_THESIS),
+        // The best of the n × D sweep of `host-sim table` (README results).
+        entry("best decimated step (f64)", "step:n=7,D=12"),
+        entry(
+            "covariance form in f32",
+            "covariance:n=7,D=16,precision=f32",
+        ),
+        entry("model bank, true model at 200 g calibration", "model"),
+        entry("settled average (baseline)", "settled"),
+        entry("moving average (baseline)", "moving"),
+    ]
+}
+
+/// The study's results at every SNR, in the order of the entries.
+pub struct SpeedStudy {
+    /// The methods.
+    pub entries: Vec<Entry>,
+    /// One result per SNR.
+    pub results: Vec<StudyResult>,
+}
+
+/// Run the Monte Carlo: `runs` runs per SNR, seeded from `seed`, every entry on every run.
+pub fn run(entries: Vec<Entry>, runs: usize, seed: u64, snrs_db: &[f64]) -> Result<SpeedStudy> {
+    let study = Study {
+        scene: Scene::load("reference-step")?,
+        setups: entries.iter().map(|e| e.method).collect(),
+        runs,
+        seed,
+        samples: usize::MAX,
+    };
+    let results = montecarlo::run_studies(&study, snrs_db)?;
+    Ok(SpeedStudy { entries, results })
+}
+
+/// Figures of one method at one readout time.
+#[derive(Clone, Copy, Debug)]
+pub struct AtReadout {
+    /// Readout time, s.
+    pub time_s: f64,
+    /// Share of runs with a valid estimate then.
+    pub valid_share: f64,
+    /// RMS error over the valid runs, g (NaN without any).
+    pub rms_g: f64,
+    /// The CRLB then, g.
+    pub crlb_g: f64,
+}
+
+impl AtReadout {
+    /// RMS over CRLB, only when every run is valid.
+    pub fn ratio(&self) -> Option<f64> {
+        (self.valid_share == 1.0).then_some(self.rms_g / self.crlb_g)
+    }
+}
+
+/// Figures of one method at one SNR.
+#[derive(Clone, Debug)]
+pub struct Row {
+    /// The entry's name.
+    pub name: String,
+    /// The method's spec.
+    pub spec: String,
+    /// SNR, dB.
+    pub snr_db: f64,
+    /// Runs.
+    pub runs: usize,
+    /// Median time to reach and stay within 0.1%, s (infinite: never).
+    pub median_s: f64,
+    /// 95th percentile of that time, s.
+    pub p95_s: f64,
+    /// Share of runs within 0.1% (and staying) by 100 ms.
+    pub share_within_at_goal: f64,
+    /// At [`READOUTS_S`].
+    pub readouts: Vec<AtReadout>,
+}
+
+fn sample_index(result: &StudyResult, time_s: f64) -> usize {
+    ((time_s * result.sample_rate_hz).round() as usize).min(result.crlb_g2.len().saturating_sub(1))
+}
+
+fn at_readout(result: &StudyResult, stats: &SetupStats, time_s: f64) -> AtReadout {
+    let k = sample_index(result, time_s);
+    AtReadout {
+        time_s,
+        valid_share: f64::from(stats.valid[k]) / result.runs as f64,
+        rms_g: stats.rms(k),
+        crlb_g: result.crlb_g2[k].sqrt(),
+    }
+}
+
+impl SpeedStudy {
+    /// One row per SNR and method, SNR-major.
+    pub fn rows(&self) -> Vec<Row> {
+        let mut rows = Vec::new();
+        for result in &self.results {
+            for (entry, stats) in self.entries.iter().zip(&result.setups) {
+                let settle = &stats.settle_s[TOLERANCE_INDEX];
+                rows.push(Row {
+                    name: entry.name.clone(),
+                    spec: entry.method.to_string(),
+                    snr_db: result.snr_db,
+                    runs: result.runs,
+                    median_s: stats.settle_quantile(TOLERANCE_INDEX, 0.5),
+                    p95_s: stats.settle_quantile(TOLERANCE_INDEX, 0.95),
+                    share_within_at_goal: settle.iter().filter(|t| **t <= GOAL_READOUT_S).count()
+                        as f64
+                        / settle.len().max(1) as f64,
+                    readouts: READOUTS_S
+                        .iter()
+                        .map(|&t| at_readout(result, stats, t))
+                        .collect(),
+                });
+            }
+        }
+        rows
+    }
+
+    fn row(&self, spec: &str, snr_db: f64) -> Option<Row> {
+        let method: Method = spec.parse().ok()?;
+        self.rows()
+            .into_iter()
+            .find(|r| r.snr_db == snr_db && r.spec == method.to_string())
+    }
+
+    /// The three goals of the firmware default at 50 dB, measured in this run.
+    pub fn goals(&self) -> Vec<Goal> {
+        let (Some(default), Some(plain)) = (
+            self.row(FIRMWARE_DEFAULT, GOAL_SNR_DB),
+            self.row(PLAIN_THESIS, GOAL_SNR_DB),
+        ) else {
+            return Vec::new();
+        };
+        let at = |row: &Row| {
+            *row.readouts
+                .iter()
+                .find(|r| r.time_s == GOAL_READOUT_S)
+                .expect("the goal readout is in the table")
+        };
+        let (default_at, plain_at) = (at(&default), at(&plain));
+        let ratio = default_at.ratio().unwrap_or(f64::INFINITY);
+        let improvement = if default_at.valid_share == 1.0 && plain_at.valid_share == 1.0 {
+            plain_at.rms_g / default_at.rms_g
+        } else {
+            0.0
+        };
+        vec![
+            Goal {
+                what: format!(
+                    "RMS at 100 ms <= 1.5x CRLB: {:.4} g = {ratio:.2}x the CRLB ({:.4} g)",
+                    default_at.rms_g, default_at.crlb_g
+                ),
+                pass: ratio <= 1.5,
+            },
+            Goal {
+                what: format!(
+                    "95% of runs within 0.1% (and staying) by 100 ms: {:.1}% (95th percentile {})",
+                    100.0 * default.share_within_at_goal,
+                    time_text(default.p95_s)
+                ),
+                pass: default.share_within_at_goal >= 0.95,
+            },
+            Goal {
+                what: format!(
+                    "RMS at 100 ms >= 20x below the plain thesis configuration (n=7, D=1, same runs): {:.4} g vs {:.4} g, {improvement:.0}x",
+                    default_at.rms_g, plain_at.rms_g
+                ),
+                pass: improvement >= 20.0,
+            },
+        ]
+    }
+}
+
+/// One goal and whether this run met it.
+#[derive(Clone, Debug)]
+pub struct Goal {
+    /// The goal and the figure measured.
+    pub what: String,
+    /// Met.
+    pub pass: bool,
+}
+
+/// A time for a table: ms, or "never" when not within 0.1% at the end of the window.
+pub fn time_text(time_s: f64) -> String {
+    if time_s.is_finite() {
+        format!("{:.1} ms", time_s * 1e3)
+    } else {
+        "never".to_string()
+    }
+}
+
+/// Write the CSV: one line per method and SNR.
+pub fn write_csv(rows: &[Row], out: &mut impl Write) -> Result<()> {
+    write!(
+        out,
+        "method,spec,snr_db,runs,median_time_0.1pct_s,p95_time_0.1pct_s,share_within_0.1pct_by_100ms"
+    )?;
+    for t in READOUTS_S {
+        let ms = (t * 1e3).round();
+        write!(
+            out,
+            ",valid_share_{ms}ms,rms_g_{ms}ms,crlb_g_{ms}ms,rms_over_crlb_{ms}ms"
+        )?;
+    }
+    writeln!(out)?;
+    let time = |t: f64| {
+        if t.is_finite() {
+            format!("{t:.5}")
+        } else {
+            "never".into()
+        }
+    };
+    for row in rows {
+        // The spec's commas would split the field; the CSV carries its label form.
+        write!(
+            out,
+            "{},{},{},{},{},{},{:.4}",
+            row.name.replace(',', ";"),
+            row.spec.replace(',', " "),
+            row.snr_db,
+            row.runs,
+            time(row.median_s),
+            time(row.p95_s),
+            row.share_within_at_goal
+        )?;
+        for r in &row.readouts {
+            let ratio = r.ratio().map(|v| format!("{v:.4}")).unwrap_or_default();
+            write!(
+                out,
+                ",{:.4},{:.6e},{:.6e},{ratio}",
+                r.valid_share, r.rms_g, r.crlb_g
+            )?;
+        }
+        writeln!(out)?;
+    }
+    Ok(())
+}
+
+fn ratio_text(ratio: f64) -> String {
+    if ratio >= 100.0 {
+        format!("{ratio:.0}")
+    } else if ratio >= 10.0 {
+        format!("{ratio:.1}")
+    } else {
+        format!("{ratio:.2}")
+    }
+}
+
+fn rms_cell(r: &AtReadout) -> String {
+    match r.ratio() {
+        Some(ratio) => format!("{} ({}×)", grams(r.rms_g), ratio_text(ratio)),
+        None => format!("not valid in all runs ({:.0}%)", 100.0 * r.valid_share),
+    }
+}
+
+fn grams(value: f64) -> String {
+    if value >= 1.0 {
+        format!("{value:.2} g")
+    } else if value >= 0.01 {
+        format!("{value:.4} g")
+    } else {
+        format!("{value:.2e} g")
+    }
+}
+
+/// The table at one SNR, markdown.
+pub fn markdown_at(rows: &[Row], snr_db: f64, out: &mut impl Write) -> Result<()> {
+    let rows: Vec<&Row> = rows.iter().filter(|r| r.snr_db == snr_db).collect();
+    let Some(first) = rows.first() else {
+        return Ok(());
+    };
+    writeln!(
+        out,
+        "| method | spec | time to 0.1%: median / 95th pct | within 0.1% by 100 ms | RMS at 50 ms (× CRLB) | RMS at 100 ms (× CRLB) | RMS at 200 ms (× CRLB) |"
+    )?;
+    writeln!(out, "|---|---|---|---|---|---|---|")?;
+    for row in &rows {
+        writeln!(
+            out,
+            "| {} | `{}` | {} / {} | {:.1}% | {} | {} | {} |",
+            row.name,
+            row.spec,
+            time_text(row.median_s),
+            time_text(row.p95_s),
+            100.0 * row.share_within_at_goal,
+            rms_cell(&row.readouts[0]),
+            rms_cell(&row.readouts[1]),
+            rms_cell(&row.readouts[2]),
+        )?;
+    }
+    writeln!(
+        out,
+        "| CRLB (known model, onset, tare) | | | | {} | {} | {} |",
+        grams(first.readouts[0].crlb_g),
+        grams(first.readouts[1].crlb_g),
+        grams(first.readouts[2].crlb_g)
+    )?;
+    Ok(())
+}
+
+/// Method × SNR matrices: median time to 0.1%, and RMS at 100 ms over the CRLB.
+pub fn markdown_by_snr(rows: &[Row], out: &mut impl Write) -> Result<()> {
+    let mut snrs: Vec<f64> = rows.iter().map(|r| r.snr_db).collect();
+    snrs.dedup();
+    let mut names: Vec<&str> = Vec::new();
+    for row in rows {
+        if !names.contains(&row.name.as_str()) {
+            names.push(&row.name);
+        }
+    }
+    let header = |out: &mut dyn Write, what: &str| -> Result<()> {
+        write!(out, "| {what} |")?;
+        for snr in &snrs {
+            write!(out, " {snr} dB |")?;
+        }
+        writeln!(out)?;
+        writeln!(out, "|---|{}", "---|".repeat(snrs.len()))?;
+        Ok(())
+    };
+    type Cell = fn(&Row) -> String;
+    let tables: [(&str, Cell); 2] = [
+        ("median / 95th pct time to 0.1%", |row| {
+            format!("{} / {}", time_text(row.median_s), time_text(row.p95_s))
+        }),
+        ("RMS at 100 ms / CRLB", |row| {
+            row.readouts[1]
+                .ratio()
+                .map(ratio_text)
+                .unwrap_or_else(|| format!("n/v ({:.0}%)", 100.0 * row.readouts[1].valid_share))
+        }),
+    ];
+    for (what, cell) in tables {
+        header(out, what)?;
+        for name in &names {
+            write!(out, "| {name} |")?;
+            for snr in &snrs {
+                let text = rows
+                    .iter()
+                    .find(|r| r.name == *name && r.snr_db == *snr)
+                    .map(cell)
+                    .unwrap_or_default();
+                write!(out, " {text} |")?;
+            }
+            writeln!(out)?;
+        }
+        writeln!(out)?;
+    }
+    Ok(())
+}
+
+/// The whole markdown report.
+pub fn write_markdown(study: &SpeedStudy, command: &str, out: &mut impl Write) -> Result<()> {
+    let rows = study.rows();
+    let first = study.results.first().context("no results")?;
+    writeln!(
+        out,
+        "Speed against accuracy on `{}` ({} g at t = 0), {} runs per SNR, seed {} (`{command}`).\n",
+        first.scene, first.truth_g, first.runs, first.seed
+    )?;
+    writeln!(out, "Time to 0.1%: the time after which the estimate stays within 0.1% until the end of the 1.5 s window (\"never\": outside at the end). RMS over all runs; a method not yet valid in every run shows the share that is. The CRLB assumes the model, onset and tare known.\n")?;
+    for result in &study.results {
+        writeln!(out, "### {} dB\n", result.snr_db)?;
+        markdown_at(&rows, result.snr_db, out)?;
+        writeln!(out)?;
+    }
+    writeln!(out, "### Across SNR\n")?;
+    markdown_by_snr(&rows, out)?;
+    writeln!(
+        out,
+        "### Goals of the firmware default (`{FIRMWARE_DEFAULT}`) at {GOAL_SNR_DB} dB\n"
+    )?;
+    for goal in study.goals() {
+        writeln!(
+            out,
+            "- {}: {}",
+            if goal.pass { "PASS" } else { "GAP" },
+            goal.what
+        )?;
+    }
+    Ok(())
+}
+
+fn create(path: &Path) -> Result<std::io::BufWriter<std::fs::File>> {
+    Ok(std::io::BufWriter::new(
+        std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?,
+    ))
+}
+
+/// `host-sim study speed`: run, write `speed-study.{csv,md}`, the charts (e) and (f), print
+/// the goals.
+pub fn speed_command(
+    runs: usize,
+    seed: u64,
+    snrs_db: &[f64],
+    extra: Vec<Method>,
+    out: &Path,
+) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let mut entries = default_entries();
+    entries.extend(extra.into_iter().map(|method| Entry {
+        name: method.label(),
+        method,
+    }));
+    eprintln!(
+        "study speed: {} methods, {runs} runs at each of {} SNRs",
+        entries.len(),
+        snrs_db.len()
+    );
+    let start = Instant::now();
+    let study = run(entries, runs, seed, snrs_db)?;
+    let elapsed = start.elapsed().as_secs_f64();
+    let rows = study.rows();
+    let mut csv = create(&out.join("speed-study.csv"))?;
+    write_csv(&rows, &mut csv)?;
+    csv.flush()?;
+    let snr_text: Vec<String> = snrs_db.iter().map(|s| s.to_string()).collect();
+    let command = format!(
+        "host-sim study speed --runs {runs} --seed {seed} --snr-db {}",
+        snr_text.join(",")
+    );
+    let mut markdown = create(&out.join("speed-study.md"))?;
+    write_markdown(&study, &command, &mut markdown)?;
+    markdown.flush()?;
+    let names: Vec<String> = study.entries.iter().map(|e| e.name.clone()).collect();
+    if let Some(at_goal) = study.results.iter().find(|r| r.snr_db == GOAL_SNR_DB) {
+        chart::rms_against_readout(at_goal, &names, 0.025, 0.4)
+            .write(&out.join("e-rms-vs-readout-time"))?;
+    }
+    chart::settle_against_snr(&study.results, &names)
+        .write(&out.join("f-time-to-0p1pct-vs-snr"))?;
+    let mut stdout = std::io::stdout();
+    if snrs_db.contains(&GOAL_SNR_DB) {
+        markdown_at(&rows, GOAL_SNR_DB, &mut stdout)?;
+    }
+    println!("firmware default `{FIRMWARE_DEFAULT}` at {GOAL_SNR_DB} dB ({runs} runs; an RMS over {runs} runs is known to about {:.1}%, 1/sqrt(2N)):", 100.0 / (2.0 * runs as f64).sqrt());
+    for goal in study.goals() {
+        println!(
+            "  {}: {}",
+            if goal.pass { "PASS" } else { "GAP" },
+            goal.what
+        );
+    }
+    println!(
+        "{:.1} s on {} threads; wrote {}/speed-study.{{csv,md}}, e-rms-vs-readout-time.{{svg,png}}, f-time-to-0p1pct-vs-snr.{{svg,png}}",
+        elapsed,
+        rayon::current_num_threads(),
+        out.display()
+    );
+    Ok(())
+}
