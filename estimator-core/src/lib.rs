@@ -22,6 +22,7 @@ mod adc;
 mod baseline;
 pub mod calibration;
 mod covariance;
+pub mod expm;
 mod factor;
 mod input;
 mod model;
