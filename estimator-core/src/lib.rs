@@ -36,7 +36,7 @@ pub use adc::{AdcError, AdcSource};
 pub use baseline::{Baseline, BaselineConfig, BaselineMode};
 pub use calibration::{Calibration, CalibrationError, CalibrationSource, FrontEnd};
 pub use covariance::CovarianceStepEstimator;
-pub use model::{ModelBank, ModelConfig, ModelEstimator, SensorModel};
+pub use model::{InitialState, ModelBank, ModelConfig, ModelEstimator, SensorModel};
 pub use ramp::{RampConfig, RampEstimator};
 pub use reading::{ConfigError, Estimator, InvalidReason, Reading, State};
 pub use real::Real;
