@@ -10,6 +10,8 @@
 //!
 //! The core method is [`StepEstimator`], the data-driven estimator of Markovsky (2015) as
 //! analysed by Quintana-Carapia (2020), solved recursively in square-root information form.
+//! The model-based alternative is [`ModelEstimator`] / [`ModelBank`] on a [`LoadCellModel`]
+//! identified at calibration by [`identify()`](crate::identify::identify).
 #![no_std]
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
@@ -24,7 +26,9 @@ pub mod calibration;
 mod covariance;
 pub mod expm;
 mod factor;
+pub mod identify;
 mod input;
+mod loadcell;
 mod model;
 mod ramp;
 mod reading;
@@ -36,6 +40,8 @@ pub use adc::{AdcError, AdcSource};
 pub use baseline::{Baseline, BaselineConfig, BaselineMode};
 pub use calibration::{Calibration, CalibrationError, CalibrationSource, FrontEnd};
 pub use covariance::CovarianceStepEstimator;
+pub use identify::{identify, Identified, IdentifyConfig, IdentifyError};
+pub use loadcell::{LoadCellModel, MAX_DAMPING_RATIO};
 pub use model::{InitialState, ModelBank, ModelConfig, ModelEstimator, SensorModel};
 pub use ramp::{RampConfig, RampEstimator};
 pub use reading::{ConfigError, Estimator, InvalidReason, Reading, State};
