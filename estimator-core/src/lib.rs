@@ -10,6 +10,8 @@
 //!
 //! The core method is [`StepEstimator`], the data-driven estimator of Markovsky (2015) as
 //! analysed by Quintana-Carapia (2020), solved recursively in square-root information form.
+//! The model-based alternative is [`ModelEstimator`] / [`ModelBank`] on a [`LoadCellModel`]
+//! identified at calibration by [`identify()`](crate::identify::identify).
 #![no_std]
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
@@ -23,9 +25,12 @@ mod baseline;
 pub mod bias_compensated;
 pub mod calibration;
 mod covariance;
+pub mod expm;
 mod factor;
+pub mod identify;
 mod input;
 pub mod iv;
+mod loadcell;
 mod model;
 mod noise_meter;
 mod ramp;
@@ -40,8 +45,10 @@ pub use baseline::{Baseline, BaselineConfig, BaselineMode};
 pub use bias_compensated::{BiasCompensatedConfig, BiasCompensatedStepEstimator};
 pub use calibration::{Calibration, CalibrationError, CalibrationSource, FrontEnd};
 pub use covariance::CovarianceStepEstimator;
+pub use identify::{identify, Identified, IdentifyConfig, IdentifyError};
 pub use iv::{max_instrument_delay, IvConfig, IvStepEstimator, DEFAULT_MIN_IDENTIFIABILITY};
-pub use model::{ModelBank, ModelConfig, ModelEstimator, SensorModel};
+pub use loadcell::{LoadCellModel, MAX_DAMPING_RATIO};
+pub use model::{InitialState, ModelBank, ModelConfig, ModelEstimator, SensorModel};
 pub use noise_meter::NoiseMeter;
 pub use ramp::{RampConfig, RampEstimator};
 pub use reading::{ConfigError, Estimator, InvalidReason, Reading, State};

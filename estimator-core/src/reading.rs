@@ -15,6 +15,19 @@ pub enum InvalidReason {
     NonFiniteUpdate,
     /// A sample was reported missing by the caller; the Hankel structure is broken.
     MissingSample,
+    /// A bank of models fits best with a candidate on its edge: the sensor's dynamics (the
+    /// load) may lie outside the range the candidates cover, so the estimate would be
+    /// biased. Like ill-conditioning it is a property of the data so far and clears when the
+    /// best fit moves inside.
+    OutsideModelRange,
+}
+
+impl InvalidReason {
+    /// True for the faults that latch until `reset()`: all but [`Self::IllConditioned`] and
+    /// [`Self::OutsideModelRange`], which describe the data so far and may clear.
+    pub fn latches(self) -> bool {
+        !matches!(self, Self::IllConditioned | Self::OutsideModelRange)
+    }
 }
 
 /// The state a reading is in.
@@ -25,9 +38,9 @@ pub enum State {
     WarmingUp,
     /// The estimate is the least-squares solution of the data so far.
     Estimating,
-    /// The reading cannot be trusted. Faults of the data stream or of the state (all reasons
-    /// but [`InvalidReason::IllConditioned`]) latch until `reset()`; ill-conditioning is a
-    /// property of the data so far and clears when more data make the step identifiable.
+    /// The reading cannot be trusted. Faults of the data stream or of the state latch until
+    /// `reset()` ([`InvalidReason::latches`]); ill-conditioning and a best fit on a bank's
+    /// edge are properties of the data so far and clear when more data resolve them.
     Invalid(InvalidReason),
 }
 

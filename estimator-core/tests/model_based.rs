@@ -29,12 +29,7 @@ fn config(model: SensorModel<f64, 5>) -> ModelConfig<f64, 5> {
 }
 
 fn config_decimated(model: SensorModel<f64, 5>, decimation: u16) -> ModelConfig<f64, 5> {
-    ModelConfig {
-        model,
-        decimation,
-        valid_min: f64::NEG_INFINITY,
-        valid_max: f64::INFINITY,
-    }
+    ModelConfig::new(model).with_decimation(decimation)
 }
 
 /// CRLB of u when x₀ and u are unknown: σ²·[(ΦᵀΦ)⁻¹]_uu with rows [C·A^k, s(k)].

@@ -36,7 +36,9 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 // index loops mirror the matrix algebra
 
-pub mod expm;
+/// The matrix exponential lives in the core (one implementation); re-exported for the
+/// simulator's exact ZOH and its tests.
+pub use estimator_core::expm;
 pub mod sensor;
 pub mod simulated;
 

@@ -256,11 +256,8 @@ impl Method {
                 let configs: Vec<ModelConfig<T, STATES>> =
                     model_candidates(&context.chain, context.gain, spec)?
                         .iter()
-                        .map(|model| ModelConfig {
-                            model: convert_model(model),
-                            decimation: spec.decimation,
-                            valid_min: T::from_f64(f64::NEG_INFINITY),
-                            valid_max: T::from_f64(f64::INFINITY),
+                        .map(|model| {
+                            ModelConfig::new(convert_model(model)).with_decimation(spec.decimation)
                         })
                         .collect();
                 model_bank::<T>(&configs)?

@@ -270,12 +270,7 @@ fn estimate_with_every_method_equals_the_core() {
         method::model_candidates(&chain, gain, &model_spec(spec))
             .unwrap()
             .into_iter()
-            .map(|model| ModelConfig {
-                model,
-                decimation: model_spec(spec).decimation,
-                valid_min: f64::NEG_INFINITY,
-                valid_max: f64::INFINITY,
-            })
+            .map(|model| ModelConfig::new(model).with_decimation(model_spec(spec).decimation))
             .collect()
     };
     let baseline = |mode, gain| BaselineConfig {
