@@ -59,6 +59,8 @@ pub mod method;
 #[cfg(feature = "std")]
 pub mod montecarlo;
 #[cfg(feature = "std")]
+pub mod ramp_study;
+#[cfg(feature = "std")]
 pub mod scene;
 #[cfg(feature = "std")]
 pub mod study;

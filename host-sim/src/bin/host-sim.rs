@@ -128,7 +128,8 @@ enum Command {
     /// scene at 30–80 dB (time to 0.1%, RMS at 50/100/200 ms against the CRLB), CSV +
     /// markdown + charts, and the firmware default's goal figures.
     Study {
-        /// The study (only `speed` so far).
+        /// `speed` (issue 5, study 7) or `ramp` (conveyor weighing, the `conveyor-ramp` scene:
+        /// its SNRs default to 30,40,50 dB; `--method ramp:n=..,D=..` replaces its setups).
         which: StudyKind,
         #[arg(long, default_value_t = 1000)]
         runs: usize,
@@ -165,6 +166,8 @@ enum Command {
 enum StudyKind {
     /// Speed against accuracy (issue 5, study 7).
     Speed,
+    /// Conveyor weighing: slope error at the end of the `conveyor-ramp` scene's ramp.
+    Ramp,
 }
 
 fn create(path: &PathBuf) -> Result<BufWriter<File>> {
@@ -301,6 +304,33 @@ fn main() -> Result<()> {
             methods,
             out,
         } => study::speed_command(runs, seed, &snr_db, methods, &out)?,
+        Command::Study {
+            which: StudyKind::Ramp,
+            runs,
+            seed,
+            snr_db,
+            methods,
+            out: _,
+        } => {
+            // The ramp study takes the regression part of `ramp:` specs (or step specs).
+            let setups = methods
+                .into_iter()
+                .map(|method| match method {
+                    Method::Ramp(spec) => Ok(spec.setup),
+                    Method::Step(setup) => Ok(setup),
+                    other => Err(anyhow::anyhow!(
+                        "study ramp: `{other}` is not a ramp: give `ramp:n=..,D=..`"
+                    )),
+                })
+                .collect::<Result<Vec<_>>>()?;
+            // The speed study's default SNRs are 30–80 dB; the ramp's goal is at 40 dB.
+            let snr_db = if snr_db == study::SNRS_DB {
+                vec![30.0, 40.0, 50.0]
+            } else {
+                snr_db
+            };
+            host_sim::ramp_study::ramp_command("conveyor-ramp", setups, &snr_db, runs, seed)?
+        }
         Command::Bench {
             runs,
             samples,
