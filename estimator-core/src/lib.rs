@@ -21,6 +21,7 @@
 mod adc;
 mod baseline;
 pub mod calibration;
+pub mod command;
 mod covariance;
 mod factor;
 mod input;
@@ -34,6 +35,10 @@ mod step;
 pub use adc::{AdcError, AdcSource};
 pub use baseline::{Baseline, BaselineConfig, BaselineMode};
 pub use calibration::{Calibration, CalibrationError, CalibrationSource, FrontEnd};
+pub use command::{
+    CalibrationFailure, CalibrationStore, Command, CommandConfig, CommandOutcome, CommandRefusal,
+    Commands, KeyDebouncer, KeyPress, StoreFailure,
+};
 pub use covariance::CovarianceStepEstimator;
 pub use model::{ModelBank, ModelConfig, ModelEstimator, SensorModel};
 pub use ramp::{RampConfig, RampEstimator};
