@@ -5,7 +5,12 @@
 //! The boards only move bytes and button levels here: a UART byte becomes a [`Command`]
 //! (QEMU), a debounced [`KeyPress`] becomes one (STM32F411), and [`Commands::handle`]
 //! decides against the scale's current reading, with a typed [`CommandRefusal`] when it says
-//! no. Calibration takes two settled readings in ADC counts: the empty pan when the command
+//! no. A tare is taken from the estimate when the reading is stable, which can be as early
+//! as 50 ms into a load; while that load stays on, [`Commands::poll`] re-takes it from the
+//! estimator's longer average, within the stability band around the first value, so the
+//! early estimate's error does not stay in every net reading (it freezes at the next load
+//! change, and the band bounds what a slow, undetected change could pull into it).
+//! Calibration takes two settled readings in ADC counts: the empty pan when the command
 //! arrives, then the known mass once it is on and settled ([`Commands::poll`]); the result
 //! goes through [`store_calibration`] (encode, write, read back through the CRC decoder) and
 //! only what the store gives back is applied ([`Scale::recalibrate`]), so the calibration
@@ -157,12 +162,20 @@ enum Phase {
     },
 }
 
-/// The command state machine: decides each command against a scale and carries a
-/// calibration from its zero to its known mass.
+/// A tare being refined: the gross mass when it was taken, and the load-change count then.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct TareRefinement {
+    tare_g: f32,
+    load_changes: u32,
+}
+
+/// The command state machine: decides each command against a scale, refines a fresh tare
+/// and carries a calibration from its zero to its known mass.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Commands {
     config: CommandConfig,
     phase: Phase,
+    refining: Option<TareRefinement>,
 }
 
 impl Commands {
@@ -171,6 +184,7 @@ impl Commands {
         Self {
             config,
             phase: Phase::Idle,
+            refining: None,
         }
     }
 
@@ -197,16 +211,20 @@ impl Commands {
         }
         match command {
             Command::Tare => {
-                settled(&scale.reading(), 0)?;
-                scale
-                    .tare()
-                    .map_err(|_| CommandRefusal::Unstable)
-                    .map(|()| CommandOutcome::Tared {
-                        tare_g: scale.tare_g(),
-                    })
+                let reading = scale.reading();
+                settled(&reading, 0)?;
+                scale.tare().map_err(|_| CommandRefusal::Unstable)?;
+                self.refining = Some(TareRefinement {
+                    tare_g: scale.tare_g(),
+                    load_changes: reading.load_changes,
+                });
+                Ok(CommandOutcome::Tared {
+                    tare_g: scale.tare_g(),
+                })
             }
             Command::ClearTare => {
                 scale.clear_tare();
+                self.refining = None;
                 Ok(CommandOutcome::TareCleared)
             }
             Command::Calibrate { known_mass_g } => {
@@ -221,6 +239,8 @@ impl Commands {
                 if !(gross_g.abs() <= self.config.zero_limit_fraction * known_mass_g) {
                     return Err(CommandRefusal::NotEmpty);
                 }
+                // The calibration ends in a new scale without a tare; stop refining this one.
+                self.refining = None;
                 self.phase = Phase::AwaitingMass {
                     known_mass_g,
                     zero_counts,
@@ -243,16 +263,18 @@ impl Commands {
         }
     }
 
-    /// Advance a calibration in progress; call it regularly (each readout). `Some` once it
-    /// ends: the measured calibration, which the board stores with [`store_calibration`]
-    /// and applies with [`Scale::recalibrate`], or why it failed. The known mass counts
-    /// once a load change happened after the zero and the reading has been stable for
-    /// `calibration_settle_samples` since that change; an empty pan after a bump does not.
+    /// Refine a fresh tare and advance a calibration in progress; call it regularly (each
+    /// readout). `Some` when a calibration ends: the measured calibration, which the board
+    /// stores with [`store_calibration`] and applies with [`Scale::recalibrate`], or why it
+    /// failed. The known mass counts once a load change happened after the zero and the
+    /// reading has been stable for `calibration_settle_samples` since that change; an empty
+    /// pan after a bump does not.
     pub fn poll<const N: usize>(
         &mut self,
-        scale: &Scale<N>,
+        scale: &mut Scale<N>,
         now_sample: u32,
     ) -> Option<Result<Calibration, CalibrationFailure>> {
+        self.refine_tare(scale);
         let Phase::AwaitingMass {
             known_mass_g,
             zero_counts,
@@ -286,6 +308,36 @@ impl Commands {
             Some(Ok(measured))
         } else {
             Some(Err(CalibrationFailure::GainImplausible))
+        }
+    }
+}
+
+impl Commands {
+    /// Re-take the tare from the current estimate while the tared load is still on (no load
+    /// change since), the reading is stable, and the estimate is within the stability band
+    /// of the tare first taken; stop refining otherwise, keeping the last value.
+    fn refine_tare<const N: usize>(&mut self, scale: &mut Scale<N>) {
+        let Some(refinement) = self.refining else {
+            return;
+        };
+        let reading = scale.reading();
+        if reading.load_changes != refinement.load_changes {
+            self.refining = None;
+            return;
+        }
+        if settled(&reading, 0).is_err() {
+            // Momentarily unstable (or invalid): keep the tare, try again next time.
+            return;
+        }
+        let config = scale.config();
+        let band = config.stable_band_g + config.stable_band_relative * refinement.tare_g.abs();
+        let gross_g = reading.mass_g.map(|net| net + scale.tare_g());
+        match gross_g {
+            Some(gross_g) if (gross_g - refinement.tare_g).abs() <= band => {
+                // `tare` accepts a stable or empty reading, which `settled` just checked.
+                let _ = scale.tare();
+            }
+            _ => self.refining = None,
         }
     }
 }
@@ -530,7 +582,7 @@ mod tests {
         fn poll_for_s(&mut self, seconds: f32) -> Option<Result<Calibration, CalibrationFailure>> {
             for _ in 0..(seconds * 20.0) as u32 {
                 self.run_s(0.05);
-                if let Some(result) = self.commands.poll(&self.scale, self.now) {
+                if let Some(result) = self.commands.poll(&mut self.scale, self.now) {
                     return Some(result);
                 }
             }
@@ -623,6 +675,70 @@ mod tests {
         );
         let gross = bench.run_s(0.05).mass_g.unwrap();
         assert!((gross - 138.32).abs() < 0.1383, "gross {gross}");
+    }
+
+    /// Drop `mass_g`, push until the reading is first stable, and tare there.
+    fn tare_at_first_stability(bench: &mut Bench, mass_g: f64) -> f32 {
+        bench.run_s(0.5);
+        bench.cell.load_g = mass_g;
+        for _ in 0..(0.5 * FS) as u32 {
+            bench.now += 1;
+            if bench.scale.push(bench.cell.sample()).state == ScaleState::Stable {
+                break;
+            }
+        }
+        match bench.command(Command::Tare) {
+            Ok(CommandOutcome::Tared { tare_g }) => tare_g,
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_fresh_tare_follows_the_estimate_within_the_stability_band_until_a_change() {
+        let mut bench = Bench::new(1.0);
+        let first_g = tare_at_first_stability(&mut bench, 138.32);
+        assert_eq!(bench.poll_for_s(2.0), None);
+        let config = *bench.scale.config();
+        let band = config.stable_band_g + config.stable_band_relative * first_g;
+        let refined_g = bench.scale.tare_g();
+        assert!(
+            (refined_g - first_g).abs() <= band,
+            "{first_g} → {refined_g}"
+        );
+        // The refined tare is the estimate of at most one readout period (50 ms) ago: the
+        // net reading is what the estimator moved since, far inside the 0.05 g criterion.
+        let net = bench.scale.reading().mass_g.unwrap();
+        assert!(net.abs() < 0.01, "net {net}");
+
+        // A second load: the tare freezes, the net reading is the new load.
+        bench.cell.load_g += 20.0;
+        bench.poll_for_s(1.0);
+        let frozen_g = bench.scale.tare_g();
+        bench.poll_for_s(1.0);
+        assert_eq!(bench.scale.tare_g(), frozen_g);
+        let net = bench.scale.reading().mass_g.unwrap();
+        assert!((net - 20.0).abs() < 0.02 + 0.05, "net {net}");
+    }
+
+    #[test]
+    fn a_slow_undetected_change_cannot_pull_the_tare_beyond_the_band() {
+        let mut bench = Bench::new(1.0);
+        let first_g = tare_at_first_stability(&mut bench, 100.0);
+        bench.poll_for_s(0.2);
+        // 0.5 g crept on over 1 s, polled at the readout cadence: ten times the band.
+        for _ in 0..20 {
+            bench.cell.load_g += 0.5 / 20.0;
+            bench.run_s(0.05);
+            let _ = bench.commands.poll(&mut bench.scale, bench.now);
+        }
+        let config = *bench.scale.config();
+        let band = config.stable_band_g + config.stable_band_relative * first_g;
+        let tare_g = bench.scale.tare_g();
+        assert!((tare_g - first_g).abs() <= band, "{first_g} → {tare_g}");
+        // Nor later, whether the scale catches the creep as a change or not.
+        bench.poll_for_s(2.0);
+        let tare_g = bench.scale.tare_g();
+        assert!((tare_g - first_g).abs() <= band, "{first_g} → {tare_g}");
     }
 
     #[test]
