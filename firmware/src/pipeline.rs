@@ -105,8 +105,9 @@ impl Pipeline {
         self.commands.is_calibrating()
     }
 
-    /// Advance a calibration in progress (call it once per readout); `Some` when it ends.
-    pub fn poll_calibration(&mut self) -> Option<Result<Calibration, CalibrationFailure>> {
+    /// Refine a fresh tare and advance a calibration in progress (call it once per
+    /// readout); `Some` when a calibration ends.
+    pub fn poll_commands(&mut self) -> Option<Result<Calibration, CalibrationFailure>> {
         self.commands.poll(&mut self.scale, self.next_sequence)
     }
 

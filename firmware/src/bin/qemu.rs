@@ -199,20 +199,16 @@ mod app {
         }
     }
 
-    /// The readout task: 20 lines a second, a calibration in progress carried on (stored,
-    /// read back and applied once the known mass has settled), then the end-of-scene
-    /// summary and exit.
+    /// The readout task: 20 lines a second; the commands' regular work after each (a fresh
+    /// tare refined, a calibration in progress carried on: stored, read back and applied
+    /// once the known mass has settled); the end-of-scene summary and exit.
     #[task(binds = Uart1Rx, priority = 1, local = [store, scene_samples], shared = [latest, pipeline])]
     fn readout(mut cx: readout::Context) {
         let Some(readout) = cx.shared.latest.lock(|latest| latest.take()) else {
             return;
         };
         pipeline::log_readout(&readout);
-        if let Some(result) = cx
-            .shared
-            .pipeline
-            .lock(|pipeline| pipeline.poll_calibration())
-        {
+        if let Some(result) = cx.shared.pipeline.lock(|pipeline| pipeline.poll_commands()) {
             let shared_pipeline = &mut cx.shared.pipeline;
             pipeline::finish_calibration(result, cx.local.store, |work| {
                 shared_pipeline.lock(|pipeline| work(pipeline))
