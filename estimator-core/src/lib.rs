@@ -24,6 +24,7 @@ mod adc;
 mod baseline;
 pub mod bias_compensated;
 pub mod calibration;
+pub mod command;
 mod covariance;
 pub mod expm;
 mod factor;
@@ -44,6 +45,10 @@ pub use adc::{AdcError, AdcSource};
 pub use baseline::{Baseline, BaselineConfig, BaselineMode};
 pub use bias_compensated::{BiasCompensatedConfig, BiasCompensatedStepEstimator};
 pub use calibration::{Calibration, CalibrationError, CalibrationSource, FrontEnd};
+pub use command::{
+    CalibrationFailure, CalibrationStore, Command, CommandConfig, CommandOutcome, CommandRefusal,
+    Commands, KeyDebouncer, KeyPress, StoreFailure,
+};
 pub use covariance::CovarianceStepEstimator;
 pub use identify::{identify, Identified, IdentifyConfig, IdentifyError};
 pub use iv::{max_instrument_delay, IvConfig, IvStepEstimator, DEFAULT_MIN_IDENTIFIABILITY};

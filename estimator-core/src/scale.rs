@@ -323,6 +323,37 @@ impl<const N: usize> Scale<N> {
         self.tare_g = 0.0;
     }
 
+    /// The gain and (tracked) zero the scale converts counts with now.
+    pub fn counts_scale(&self) -> CountsScale {
+        CountsScale {
+            counts_per_gram: self.counts_per_gram,
+            zero_counts: self.zero_counts,
+        }
+    }
+
+    /// The current gross estimate expressed in ADC counts (what the estimator sees on the
+    /// pan, independent of the tare), `None` while it shows no mass. This is what a
+    /// calibration measures: counts, not grams of a calibration about to be replaced.
+    pub fn gross_counts(&self) -> Option<f32> {
+        match self.state {
+            ScaleState::Invalid(_) => None,
+            _ => self
+                .gross_g
+                .map(|gross| gross * self.counts_per_gram + self.zero_counts),
+        }
+    }
+
+    /// Convert with a new calibration from now on: the estimate restarts (its data were
+    /// scaled with the old gain), the tare is cleared (it was grams of the old gain) and
+    /// the restart counts as a load change. An impossible calibration leaves the scale
+    /// showing `Invalid(Uncalibrated)`, as at boot.
+    pub fn recalibrate(&mut self, calibration: CountsScale) -> Result<(), ConfigError> {
+        let mut fresh = Self::new(self.config, calibration)?;
+        fresh.load_changes = self.load_changes.saturating_add(1);
+        *self = fresh;
+        Ok(())
+    }
+
     /// Start a new estimator run: a load changed, or the data stream broke.
     fn restart(&mut self) {
         self.estimator.reset();

@@ -1,10 +1,12 @@
 //! A minimal hand-written device module for QEMU's `mps2-an386` (ARM MPS2 with the AN386
 //! Cortex-M4F image), in the shape RTIC expects: an `Interrupt` enum, `NVIC_PRIO_BITS`,
-//! and the interrupt vector table. Only what the firmware uses is here: the CMSDK timer.
+//! and the interrupt vector table. Only what the firmware uses is here: the CMSDK timers
+//! and the receive side of CMSDK UART 0 (the operator's command console).
 //!
 //! Interrupt numbers and addresses follow QEMU's `hw/arm/mps2.c` (and ARM's AN385/AN386
 //! application notes): CMSDK APB timer 0 at `0x4000_0000` on IRQ 8, timer 1 at
-//! `0x4000_1000` on IRQ 9; the system clock is 25 MHz.
+//! `0x4000_1000` on IRQ 9, UART 0 at `0x4000_4000` with its receive interrupt on IRQ 0
+//! (QEMU connects it to the first `-serial` device); the system clock is 25 MHz.
 #![allow(unsafe_code)]
 
 /// The system (and APB timer) clock of the board in QEMU.
@@ -191,5 +193,91 @@ impl CmsdkTimer {
     #[inline(always)]
     pub fn clear_interrupt(&mut self) {
         self.write(Self::INTCLEAR, 1);
+    }
+}
+
+/// Base address of CMSDK APB UART 0.
+pub const UART0_BASE: usize = 0x4000_4000;
+
+/// What went wrong on a UART's receive side.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
+pub enum UartError {
+    /// A byte arrived before the previous one was read: at least one byte was lost.
+    Overrun,
+}
+
+/// The receive side of a CMSDK APB UART (ARM DDI 0479, "APB UART"): a one-byte receive
+/// buffer with a full flag, an overrun flag and a receive interrupt.
+pub struct CmsdkUart {
+    base: usize,
+}
+
+impl CmsdkUart {
+    const DATA: usize = 0x00;
+    const STATE: usize = 0x04;
+    const CTRL: usize = 0x08;
+    /// INTSTATUS on read, INTCLEAR (write 1 to clear) on write.
+    const INTCLEAR: usize = 0x0C;
+    const BAUDDIV: usize = 0x10;
+    const STATE_RX_FULL: u32 = 1 << 1;
+    const STATE_RX_OVERRUN: u32 = 1 << 3;
+    const CTRL_RX_ENABLE: u32 = 1 << 1;
+    const CTRL_RX_INTERRUPT_ENABLE: u32 = 1 << 3;
+    const INT_RX: u32 = 1 << 1;
+    const INT_RX_OVERRUN: u32 = 1 << 3;
+    /// The smallest divisor the UART accepts (16 clocks per bit).
+    const MIN_BAUDDIV: u32 = 16;
+
+    /// Take UART 0. Only one owner may exist: RTIC's `init` creates it once and moves it
+    /// into the command task.
+    ///
+    /// # Safety
+    /// The caller must create at most one `CmsdkUart` per UART.
+    pub unsafe fn uart0() -> Self {
+        Self { base: UART0_BASE }
+    }
+
+    fn read(&self, offset: usize) -> u32 {
+        // Safety: `base + offset` is a register of the UART this value owns; device
+        // memory, so the access is volatile and aligned.
+        unsafe { core::ptr::read_volatile((self.base + offset) as *const u32) }
+    }
+
+    fn write(&mut self, offset: usize, value: u32) {
+        // Safety: as in `read`; this value is the only owner of the UART.
+        unsafe { core::ptr::write_volatile((self.base + offset) as *mut u32, value) }
+    }
+
+    /// Enable the receiver and its interrupt at `baud` (transmitter off: the readout goes
+    /// out over semihosting, not this UART).
+    pub fn start_receiver(&mut self, baud: u32) {
+        self.write(Self::CTRL, 0);
+        let divisor = SYSTEM_CLOCK_HZ / baud.max(1);
+        self.write(Self::BAUDDIV, divisor.max(Self::MIN_BAUDDIV));
+        self.write(Self::STATE, Self::STATE_RX_OVERRUN);
+        self.write(Self::INTCLEAR, Self::INT_RX | Self::INT_RX_OVERRUN);
+        self.write(
+            Self::CTRL,
+            Self::CTRL_RX_ENABLE | Self::CTRL_RX_INTERRUPT_ENABLE,
+        );
+    }
+
+    /// The received byte, if there is one. The interrupt is acknowledged before the buffer
+    /// is read, so a byte that arrives meanwhile raises it again instead of sitting in the
+    /// buffer unannounced (which would also stop QEMU from delivering any further byte).
+    /// An overrun is reported once and cleared; the byte then in the buffer is dropped with
+    /// the lost one, as a command stream that lost a byte cannot be trusted.
+    pub fn take_byte(&mut self) -> Result<Option<u8>, UartError> {
+        self.write(Self::INTCLEAR, Self::INT_RX);
+        let state = self.read(Self::STATE);
+        if state & Self::STATE_RX_OVERRUN != 0 {
+            self.write(Self::STATE, Self::STATE_RX_OVERRUN);
+            let _ = self.read(Self::DATA);
+            return Err(UartError::Overrun);
+        }
+        if state & Self::STATE_RX_FULL == 0 {
+            return Ok(None);
+        }
+        Ok(Some(self.read(Self::DATA) as u8))
     }
 }

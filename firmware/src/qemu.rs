@@ -1,7 +1,12 @@
-//! The QEMU board: the simulated load cell behind a converter "data register", the
-//! RAM-backed calibration store, and the exits that tell CI how a run ended.
+//! The QEMU board: the simulated load cell behind a converter "data register", the scene
+//! it plays (chosen on QEMU's command line), the RAM-backed calibration store, and the
+//! exits that tell CI how a run ended.
 
-use estimator_core::calibration::{self, Calibration, CalibrationSource, RECORD_LEN};
+use core::convert::Infallible;
+use core::mem::MaybeUninit;
+
+use estimator_core::calibration::{Calibration, CalibrationSource, RECORD_LEN};
+use estimator_core::command::{self, CalibrationStore};
 use estimator_core::{AdcError, AdcSource};
 
 /// The simulated converter as the hand-off sees it: a data register holding the latest
@@ -49,7 +54,8 @@ impl<M: AdcSource> AdcSource for SimulatedConverter<M> {
 }
 
 /// The calibration store of the QEMU board: a record in RAM, written at "the factory"
-/// (boot) and read back through the same decoder as flash on the hardware.
+/// (boot) and by the operator's calibration, and read back through the same decoder as
+/// flash on the hardware.
 pub struct RamCalibrationStore {
     record: [u8; RECORD_LEN],
 }
@@ -62,7 +68,65 @@ impl RamCalibrationStore {
 
     /// The calibration to use at boot: the stored one if valid, else `defaults` + reason.
     pub fn load(&self, defaults: Calibration) -> (Calibration, CalibrationSource) {
-        calibration::load_or_default(Some(&self.record), defaults)
+        command::load_calibration(self, defaults)
+    }
+}
+
+impl CalibrationStore for RamCalibrationStore {
+    type Error = Infallible;
+
+    fn write_record(&mut self, record: &[u8; RECORD_LEN]) -> Result<(), Infallible> {
+        self.record = *record;
+        Ok(())
+    }
+
+    fn read_record(&self) -> Option<[u8; RECORD_LEN]> {
+        Some(self.record)
+    }
+}
+
+/// The semihosting command line names no scene this firmware knows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
+pub struct UnknownScene;
+
+/// What the QEMU board plays, chosen by the first argument after the program on QEMU's
+/// semihosting command line (`-semihosting-config …,arg=firmware,arg=commands`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
+pub enum Scene {
+    /// Issue 4's demo (the default): no commands needed.
+    Demo,
+    /// The command path's end-to-end scene: tare, refused tare, calibration, with the
+    /// harness typing the commands on UART 0 (`tests::commands`).
+    Commands,
+}
+
+impl Scene {
+    /// The scene QEMU was asked for; the demo when there is no argument (or semihosting
+    /// cannot say). An unknown name is an error, so a typo in the harness fails the run
+    /// instead of silently playing the demo.
+    pub fn from_command_line() -> Result<Self, UnknownScene> {
+        let mut buffer = [MaybeUninit::<u8>::uninit(); 96];
+        let Ok(line) = semihosting::sys::arm_compat::sys_get_cmdline_uninit(&mut buffer) else {
+            return Ok(Self::Demo);
+        };
+        // The first word is the program; the scene name follows.
+        match line
+            .split(|&byte| byte == b' ')
+            .filter(|word| !word.is_empty())
+            .nth(1)
+        {
+            None | Some(b"demo") => Ok(Self::Demo),
+            Some(b"commands") => Ok(Self::Commands),
+            Some(_) => Err(UnknownScene),
+        }
+    }
+
+    /// The simulated cell playing this scene.
+    pub fn load_cell(self) -> load_cell::LoadCell {
+        match self {
+            Self::Demo => load_cell::demo_scene(),
+            Self::Commands => load_cell::command_scene(),
+        }
     }
 }
 
@@ -83,74 +147,6 @@ unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
     exit(false)
 }
 
-/// The simulated load cell: host-sim's `no_std` model of the reference chain (load cell,
-/// INA114, 3rd-order Butterworth, 16-bit ADC), the same code the host studies run.
-pub mod load_cell {
-    use estimator_core::{AdcSource, Calibration, CalibrationError};
-    use host_sim::{
-        white_noise_for_snr, Disturbances, LoadEvent, Script, SensorChain, SimulatedAdc,
-    };
-
-    /// The simulated cell with room for eight scripted load changes.
-    pub type LoadCell = SimulatedAdc<8>;
-
-    /// Noise seed of the demo scene (fixed, so a run is reproducible; not chosen by result).
-    pub const DEMO_SEED: u64 = 1;
-    /// Noise seed of the factory calibration run (a different cell session).
-    pub const CALIBRATION_SEED: u64 = 0x00ca_1b7a;
-    /// The known mass of the factory calibration.
-    pub const CALIBRATION_MASS_G: f64 = 200.0;
-
-    /// Issue 4's demo scene: empty 0.3 s, 138.32 g, removed at 2.0 s, 250 g at 2.5 s, end
-    /// at 4.0 s, 50 dB SNR.
-    pub fn demo_scene() -> LoadCell {
-        SimulatedAdc::reference_demo(DEMO_SEED)
-    }
-
-    /// The chain's nominal gain and zero: the fallback if the stored record is unusable.
-    pub fn nominal_calibration() -> Calibration {
-        let chain = SensorChain::reference();
-        Calibration {
-            counts_per_gram: chain.counts_per_gram() as f32,
-            zero_counts: chain.zero_code() as f32,
-        }
-    }
-
-    /// The factory procedure on a simulated cell with the demo's noise: the mean code of
-    /// the empty pan over 0.5–2.0 s, then the mean with the known mass over 4.0–6.0 s (the
-    /// cell has settled far below the noise by then), and `Calibration::from_known_mass`.
-    pub fn factory_calibration() -> Result<Calibration, CalibrationError> {
-        const RATE: u32 = 4000;
-        let chain = SensorChain::reference();
-        let mut script = Script::<8>::new(6.0);
-        script
-            .push(LoadEvent::step(2.0, CALIBRATION_MASS_G))
-            .map_err(|_| CalibrationError::NoSpan)?;
-        let mut disturbances = Disturbances::white(white_noise_for_snr(
-            &chain,
-            host_sim::simulated::REFERENCE_STEP_G,
-            host_sim::simulated::REFERENCE_SNR_DB,
-            host_sim::simulated::SNR_WINDOW_SAMPLES,
-        ));
-        disturbances.amplifier_noise = true;
-        let mut cell = SimulatedAdc::new(chain, script, disturbances, CALIBRATION_SEED);
-        let (mut empty_sum, mut empty_count) = (0u64, 0u32);
-        let (mut loaded_sum, mut loaded_count) = (0u64, 0u32);
-        for sample in 0..6 * RATE {
-            let code = match cell.read() {
-                Ok(code) if !cell.is_saturated(code) => code as u64,
-                _ => return Err(CalibrationError::NoSpan),
-            };
-            if (RATE / 2..2 * RATE).contains(&sample) {
-                empty_sum += code;
-                empty_count += 1;
-            } else if sample >= 4 * RATE {
-                loaded_sum += code;
-                loaded_count += 1;
-            }
-        }
-        let empty = empty_sum as f64 / empty_count as f64;
-        let loaded = loaded_sum as f64 / loaded_count as f64;
-        Calibration::from_known_mass(empty as f32, loaded as f32, CALIBRATION_MASS_G as f32)
-    }
-}
+/// The simulated load cell and its scenes (a file of its own: the host tests replay the very
+/// same scenes, see `tests::commands`).
+pub mod load_cell;

@@ -51,7 +51,8 @@ impl Scene {
         }
     }
 
-    fn change_sample(time_s: f64) -> u32 {
+    /// The sample at which a change at `time_s` takes effect.
+    pub fn change_sample(time_s: f64) -> u32 {
         (time_s * SAMPLE_RATE_HZ).round() as u32
     }
 
@@ -215,34 +216,31 @@ impl Report {
     }
 }
 
-/// Judge a run against a scene with the criteria.
-pub fn check(scene: &Scene, run: &RunLog) -> Report {
-    let mut report = Report::default();
+/// The criteria every run must meet whatever its scene: QEMU exited with status 0, no
+/// panic or fault in the log, the scene ran to its end, every readout line is there (one
+/// per 50 ms, none missing) and no sample was dropped. Failures go to `failures`; returns
+/// the largest dropped-sample count seen.
+pub fn check_run_health(scene: &Scene, run: &RunLog, failures: &mut Vec<String>) -> u32 {
     let readouts = run.readouts();
-
     if !run.exited_successfully {
-        report
-            .failures
-            .push("QEMU did not exit with status 0 (panic, fault or hang)".into());
+        failures.push("QEMU did not exit with status 0 (panic, fault or hang)".into());
     }
     for line in &run.lines {
         let lower = line.to_ascii_lowercase();
         if lower.contains("panic") || lower.contains("hardfault") {
-            report.failures.push(format!("fault in the log: {line}"));
+            failures.push(format!("fault in the log: {line}"));
         }
     }
     let scene_samples = Scene::change_sample(scene.end_s);
     match run.end() {
         Some((samples, _)) if samples >= scene_samples => {}
-        Some((samples, _)) => report.failures.push(format!(
+        Some((samples, _)) => failures.push(format!(
             "the run ended after {samples} samples, the scene has {scene_samples}"
         )),
-        None => report
-            .failures
-            .push("no `end` line: the firmware did not finish the scene".into()),
+        None => failures.push("no `end` line: the firmware did not finish the scene".into()),
     }
     if readouts.len() < scene.expected_lines() {
-        report.failures.push(format!(
+        failures.push(format!(
             "{} readout lines, a complete run prints {}",
             readouts.len(),
             scene.expected_lines()
@@ -251,24 +249,31 @@ pub fn check(scene: &Scene, run: &RunLog) -> Report {
     let step = (SAMPLE_RATE_HZ / READOUT_HZ) as u32;
     for pair in readouts.windows(2) {
         if pair[1].sample != pair[0].sample + step {
-            report.failures.push(format!(
+            failures.push(format!(
                 "readout lines missing between samples {} and {}",
                 pair[0].sample, pair[1].sample
             ));
         }
     }
 
-    report.dropped = readouts
+    let dropped = readouts
         .iter()
         .map(|line| line.dropped)
         .chain(run.end().map(|(_, dropped)| dropped))
         .max()
         .unwrap_or(0);
-    if report.dropped != 0 {
-        report
-            .failures
-            .push(format!("{} samples dropped (must be 0)", report.dropped));
+    if dropped != 0 {
+        failures.push(format!("{dropped} samples dropped (must be 0)"));
     }
+    dropped
+}
+
+/// Judge a run against a scene with the criteria.
+pub fn check(scene: &Scene, run: &RunLog) -> Report {
+    let mut report = Report::default();
+    let readouts = run.readouts();
+    report.dropped = check_run_health(scene, run, &mut report.failures);
+    let scene_samples = Scene::change_sample(scene.end_s);
 
     for (index, &(start_s, mass_g)) in scene.loads.iter().enumerate() {
         let first = Scene::change_sample(start_s);

@@ -1,5 +1,6 @@
 //! Cross-crate and on-target tests of the weighing firmware and its estimators.
 
+pub mod commands;
 pub mod core_check;
 pub mod e2e;
 pub mod qemu;

@@ -1,7 +1,9 @@
 //! The weighing firmware on QEMU `mps2-an386`: a 4 kHz CMSDK timer interrupt takes samples
-//! from the simulated load cell, the estimator task runs the weighing core, and a readout
-//! task logs 20 lines a second over semihosting (defmt). After the 4 s demo scene it exits
-//! QEMU with status 0; a panic or fault exits with status 1.
+//! from the simulated load cell, the estimator task runs the weighing core, a readout task
+//! logs 20 lines a second over semihosting (defmt), and a command task takes the operator's
+//! bytes from UART 0 (`t` tare, `u` clear tare, `c` calibrate with 200 g, `x` cancel). After
+//! the scene (the demo, or the command scene when QEMU's semihosting command line names it)
+//! it exits QEMU with status 0; a panic or fault exits with status 1.
 #![no_std]
 #![no_main]
 
@@ -9,12 +11,12 @@ use defmt_semihosting as _;
 
 #[rtic::app(device = firmware::mps2_an386, peripherals = false)]
 mod app {
-    use estimator_core::Scale;
-    use firmware::mps2_an386::{CmsdkTimer, Interrupt, SYSTEM_CLOCK_HZ};
+    use estimator_core::{Command, Scale};
+    use firmware::mps2_an386::{CmsdkTimer, CmsdkUart, Interrupt, SYSTEM_CLOCK_HZ};
     use firmware::pipeline::{
         self, Pipeline, Readout, SampleMessage, SampleQueue, QUEUE_CAPACITY, SAMPLE_RATE_HZ,
     };
-    use firmware::qemu::{self, load_cell, RamCalibrationStore, SimulatedConverter};
+    use firmware::qemu::{self, load_cell, RamCalibrationStore, Scene, SimulatedConverter};
     use heapless::spsc::{Consumer, Producer};
 
     #[cfg(feature = "bench")]
@@ -22,17 +24,18 @@ mod app {
 
     type LoadCell = load_cell::LoadCell;
 
-    /// The load cell of the demo scene.
-    fn new_load_cell() -> LoadCell {
-        load_cell::demo_scene()
-    }
-
-    /// The demo scene lasts 4.0 s.
-    const SCENE_SAMPLES: u32 = 4 * SAMPLE_RATE_HZ;
+    /// The reference mass of `c` (calibrate): the factory's known mass.
+    const REFERENCE_MASS_G: f32 = load_cell::CALIBRATION_MASS_G as f32;
+    /// The console's baud rate (QEMU ignores it; real CMSDK silicon would not).
+    const CONSOLE_BAUD: u32 = 115_200;
+    /// Bytes taken per receive interrupt: the UART holds one, and one more may land while
+    /// the first is decided.
+    const BYTES_PER_INTERRUPT: usize = 4;
 
     #[shared]
     struct Shared {
         latest: Option<Readout>,
+        pipeline: Pipeline,
     }
 
     #[local]
@@ -41,8 +44,10 @@ mod app {
         converter: SimulatedConverter<LoadCell>,
         producer: Producer<'static, SampleMessage>,
         consumer: Consumer<'static, SampleMessage>,
-        pipeline: Pipeline,
         sequence: u32,
+        uart: CmsdkUart,
+        store: RamCalibrationStore,
+        scene_samples: u32,
     }
 
     #[init(local = [queue: SampleQueue = SampleQueue::new()])]
@@ -87,21 +92,45 @@ mod app {
         #[cfg(not(feature = "bench"))]
         let _ = cx.core;
 
+        let scene = match Scene::from_command_line() {
+            Ok(scene) => scene,
+            Err(error) => {
+                defmt::error!("{} on the semihosting command line", error);
+                qemu::exit(false)
+            }
+        };
+        let load_cell = scene.load_cell();
+        let scene_samples = (load_cell.script().end_s() * SAMPLE_RATE_HZ as f64) as u32;
+        defmt::println!(
+            "scene {} samples={=u32} commands: t tare, u clear tare, c calibrate with {=f32} g, x cancel",
+            scene,
+            scene_samples,
+            REFERENCE_MASS_G
+        );
+
         let (producer, consumer) = cx.local.queue.split();
-        let converter = SimulatedConverter::new(new_load_cell());
+        let converter = SimulatedConverter::new(load_cell);
+        // Safety: the only CmsdkUart for UART 0; it moves into the command task.
+        let mut uart = unsafe { CmsdkUart::uart0() };
+        uart.start_receiver(CONSOLE_BAUD);
         // Safety: the only CmsdkTimer for timer 0; it moves into the hand-off task.
         let mut timer = unsafe { CmsdkTimer::timer0() };
         timer.start_periodic(SYSTEM_CLOCK_HZ / SAMPLE_RATE_HZ);
 
         (
-            Shared { latest: None },
+            Shared {
+                latest: None,
+                pipeline: Pipeline::new(scale),
+            },
             Local {
                 timer,
                 converter,
                 producer,
                 consumer,
-                pipeline: Pipeline::new(scale),
                 sequence: 0,
+                uart,
+                store,
+                scene_samples,
             },
         )
     }
@@ -112,33 +141,80 @@ mod app {
     fn sample_handoff(cx: sample_handoff::Context) {
         cx.local.timer.clear_interrupt();
         pipeline::hand_off(cx.local.converter, cx.local.producer, cx.local.sequence);
-        rtic::pend(Interrupt::Uart0Rx);
+        rtic::pend(Interrupt::Uart3Rx);
         // The simulated analogue hardware produces the next conversion (not the hand-off).
         cx.local.converter.convert();
     }
 
     /// The estimator task: drains the queue (bounded by its capacity) into the weighing core.
-    #[task(binds = Uart0Rx, priority = 2, local = [consumer, pipeline], shared = [latest])]
-    fn estimate(mut cx: estimate::Context) {
-        for _ in 0..QUEUE_CAPACITY {
-            let Some(message) = cx.local.consumer.dequeue() else {
-                break;
-            };
-            if let Some(readout) = cx.local.pipeline.accept(message) {
-                cx.shared.latest.lock(|latest| *latest = Some(readout));
-                rtic::pend(Interrupt::Uart1Rx);
+    /// Bound to UART 3's receive vector, which nothing else raises (QEMU gives UART 3 no
+    /// backend): a spare vector, pended by the hand-off.
+    #[task(binds = Uart3Rx, priority = 2, local = [consumer], shared = [latest, pipeline])]
+    fn estimate(cx: estimate::Context) {
+        let estimate::SharedResources {
+            mut latest,
+            mut pipeline,
+            ..
+        } = cx.shared;
+        let consumer = cx.local.consumer;
+        // The command and readout tasks run below this priority: the lock costs nothing here.
+        pipeline.lock(|pipeline| {
+            for _ in 0..QUEUE_CAPACITY {
+                let Some(message) = consumer.dequeue() else {
+                    break;
+                };
+                if let Some(readout) = pipeline.accept(message) {
+                    latest.lock(|latest| *latest = Some(readout));
+                    rtic::pend(Interrupt::Uart1Rx);
+                }
             }
+        });
+    }
+
+    /// The command task: the operator's bytes from UART 0, below the estimator's priority.
+    /// Each byte is decided against the reading at that moment and the outcome logged.
+    #[task(binds = Uart0Rx, priority = 1, local = [uart], shared = [pipeline])]
+    fn command(mut cx: command::Context) {
+        for _ in 0..BYTES_PER_INTERRUPT {
+            let byte = match cx.local.uart.take_byte() {
+                Ok(Some(byte)) => byte,
+                Ok(None) => break,
+                Err(error) => {
+                    defmt::println!("command uart={} (bytes lost)", error);
+                    continue;
+                }
+            };
+            if byte.is_ascii_whitespace() {
+                continue;
+            }
+            let Some(command) = Command::from_byte(byte, REFERENCE_MASS_G) else {
+                defmt::println!("command byte={=u8:#04x} unknown (t, u, c, x)", byte);
+                continue;
+            };
+            let (sample, result) = cx
+                .shared
+                .pipeline
+                .lock(|pipeline| (pipeline.samples(), pipeline.command(command)));
+            pipeline::log_command(sample, command, &result);
         }
     }
 
-    /// The readout task: 20 lines a second, then the end-of-scene summary and exit.
-    #[task(binds = Uart1Rx, priority = 1, shared = [latest])]
+    /// The readout task: 20 lines a second; the commands' regular work after each (a fresh
+    /// tare refined, a calibration in progress carried on: stored, read back and applied
+    /// once the known mass has settled); the end-of-scene summary and exit.
+    #[task(binds = Uart1Rx, priority = 1, local = [store, scene_samples], shared = [latest, pipeline])]
     fn readout(mut cx: readout::Context) {
         let Some(readout) = cx.shared.latest.lock(|latest| latest.take()) else {
             return;
         };
         pipeline::log_readout(&readout);
-        if readout.sample >= SCENE_SAMPLES {
+        if let Some(result) = cx.shared.pipeline.lock(|pipeline| pipeline.poll_commands()) {
+            let shared_pipeline = &mut cx.shared.pipeline;
+            pipeline::finish_calibration(result, cx.local.store, |work| {
+                shared_pipeline.lock(|pipeline| work(pipeline))
+            });
+        }
+        if readout.sample >= *cx.local.scene_samples {
             defmt::println!(
                 "end samples={=u32} dropped={=u32}",
                 readout.sample,
@@ -176,7 +252,7 @@ mod app {
         cortex_m::peripheral::NVIC::unpend(Interrupt::Uart2Rx);
         defmt::println!("bench handoff ticks={=u64} events={=u32}", ticks, events);
 
-        let mut converter = SimulatedConverter::new(new_load_cell());
+        let mut converter = SimulatedConverter::new(load_cell::demo_scene());
         let mut chunk = [SampleMessage {
             sequence: 0,
             sample: RawSample::Lost,
@@ -184,7 +260,7 @@ mod app {
         let mut sequence = 0u32;
         let mut ticks = 0u64;
         let mut model_ticks = 0u64;
-        for _ in 0..SCENE_SAMPLES as usize / chunk.len() {
+        for _ in 0..(4 * SAMPLE_RATE_HZ) as usize / chunk.len() {
             let model_start = bench::now();
             for message in chunk.iter_mut() {
                 let sample = match converter.read() {

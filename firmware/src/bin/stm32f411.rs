@@ -1,6 +1,9 @@
 //! The weighing firmware on an STM32F411: TIM2 triggers ADC1 at 4 kHz, DMA2 stream 0
 //! double-buffers the conversions, the hand-off moves each finished buffer into the queue,
 //! the estimator task runs the weighing core, and the readout goes out over RTT (defmt).
+//! The KEY button (PA0) gives the operator's commands: a short press tares, a long press
+//! (2 s or more) calibrates with the reference mass, a short press during a calibration
+//! cancels it; the record goes to flash sector 7.
 #![no_std]
 #![no_main]
 
@@ -8,11 +11,15 @@ use defmt_rtt as _;
 
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
 mod app {
-    use estimator_core::{RawSample, Scale};
+    use cortex_m::peripheral::DWT;
+    use estimator_core::{Command, KeyDebouncer, KeyPress, RawSample, Scale};
     use firmware::pipeline::{
         self, Pipeline, Readout, SampleMessage, SampleQueue, QUEUE_CAPACITY, SAMPLE_RATE_HZ,
     };
-    use firmware::stm32f411::{self as board, DMA_BLOCK};
+    use firmware::stm32f411::{
+        FlashCalibrationStore, DMA_BLOCK, KEY_DEBOUNCE_MS, KEY_LONG_PRESS_MS, KEY_POLL_HZ,
+        REFERENCE_MASS_G, SYSCLK_HZ,
+    };
     use heapless::spsc::{Consumer, Producer};
     use stm32f4xx_hal::{
         adc::{
@@ -22,10 +29,11 @@ mod app {
             Adc,
         },
         dma::{config::DmaConfig, DMAError, PeripheralToMemory, Stream0, StreamsTuple, Transfer},
-        pac::{self, ADC1, DMA2},
+        gpio::{gpioa::PA0, Edge, Input},
+        pac::{self, ADC1, DMA2, EXTI},
         prelude::*,
         rcc::Config,
-        timer::CounterHz,
+        timer::{CounterHz, Event, Flag},
     };
 
     type AdcTransfer =
@@ -34,9 +42,20 @@ mod app {
     /// The 12-bit converter's rails.
     const MAX_CODE: u16 = 4095;
 
+    /// The KEY button and what debounces it: EXTI0 wakes on the first falling edge, then
+    /// TIM3 polls the level at `KEY_POLL_HZ` until the button is released and settled.
+    pub struct Key {
+        pin: PA0<Input>,
+        exti: EXTI,
+        poll_timer: CounterHz<pac::TIM3>,
+        debouncer: KeyDebouncer,
+    }
+
     #[shared]
     struct Shared {
         latest: Option<Readout>,
+        pipeline: Pipeline,
+        key: Key,
     }
 
     #[local]
@@ -45,8 +64,8 @@ mod app {
         spare: Option<&'static mut [u16; DMA_BLOCK]>,
         producer: Producer<'static, SampleMessage>,
         consumer: Consumer<'static, SampleMessage>,
-        pipeline: Pipeline,
         sequence: u32,
+        store: FlashCalibrationStore,
         _trigger: CounterHz<pac::TIM2>,
     }
 
@@ -57,12 +76,17 @@ mod app {
         third: [u16; DMA_BLOCK] = [0; DMA_BLOCK],
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
-        let device = cx.device;
+        let mut device = cx.device;
+        let mut core = cx.core;
         let mut rcc = device
             .RCC
-            .freeze(Config::hse(25.MHz()).sysclk(84.MHz()).pclk2(84.MHz()));
+            .freeze(Config::hse(25.MHz()).sysclk(SYSCLK_HZ.Hz()).pclk2(84.MHz()));
+        // The cycle counter times a calibration's flash write (see `readout`).
+        core.DCB.enable_trace();
+        core.DWT.enable_cycle_counter();
 
-        let (calibration, source) = board::load_calibration();
+        let store = FlashCalibrationStore::new(device.FLASH);
+        let (calibration, source) = store.load();
         defmt::println!(
             "calibration counts_per_gram={=f32} zero_counts={=f32} source={}",
             calibration.counts_per_gram,
@@ -75,9 +99,10 @@ mod app {
             Err(error) => defmt::panic!("scale configuration refused: {}", error),
         };
 
-        // INA114 output on PA0 (ADC1_IN0), converted on every TIM2 update.
+        // INA114 output on PA1 (ADC1_IN1), converted on every TIM2 update. (PA0 is the
+        // Black Pill's KEY button.)
         let gpioa = device.GPIOA.split(&mut rcc);
-        let load_cell = gpioa.pa0.into_analog();
+        let load_cell = gpioa.pa1.into_analog();
         let adc_config = AdcConfig::default()
             .resolution(Resolution::Twelve)
             .external_trigger(TriggerMode::RisingEdge, ExternalTrigger::Tim_2_trgo)
@@ -109,16 +134,40 @@ mod app {
         // update), a field the HAL's counter does not use.
         unsafe { (*pac::TIM2::ptr()).cr2().modify(|_, w| w.mms().update()) };
 
+        // KEY: PA0 to GND when pressed (active low, internal pull-up), falling edge on
+        // EXTI0; TIM3 interrupts only while the key is being polled.
+        let mut syscfg = device.SYSCFG.constrain(&mut rcc);
+        let mut pin = gpioa.pa0.into_pull_up_input();
+        pin.make_interrupt_source(&mut syscfg);
+        pin.trigger_on_edge(&mut device.EXTI, Edge::Falling);
+        pin.enable_interrupt(&mut device.EXTI);
+        let mut poll_timer = device.TIM3.counter_hz(&mut rcc);
+        poll_timer.listen(Event::Update);
+        defmt::println!(
+            "KEY: short press tare (or cancel a calibration), long press (>= {=u32} ms) calibrate with {=f32} g",
+            KEY_LONG_PRESS_MS,
+            REFERENCE_MASS_G
+        );
+
         let (producer, consumer) = cx.local.queue.split();
         (
-            Shared { latest: None },
+            Shared {
+                latest: None,
+                pipeline: Pipeline::new(scale),
+                key: Key {
+                    pin,
+                    exti: device.EXTI,
+                    poll_timer,
+                    debouncer: KeyDebouncer::new(KEY_POLL_HZ, KEY_DEBOUNCE_MS, KEY_LONG_PRESS_MS),
+                },
+            },
             Local {
                 transfer,
                 spare: Some(cx.local.third),
                 producer,
                 consumer,
-                pipeline: Pipeline::new(scale),
                 sequence: 0,
+                store,
                 _trigger: trigger,
             },
         )
@@ -160,24 +209,114 @@ mod app {
     }
 
     /// The estimator task: drains the queue (bounded by its capacity) into the weighing core.
-    #[task(binds = EXTI1, priority = 2, local = [consumer, pipeline], shared = [latest])]
-    fn estimate(mut cx: estimate::Context) {
-        for _ in 0..QUEUE_CAPACITY {
-            let Some(message) = cx.local.consumer.dequeue() else {
-                break;
-            };
-            if let Some(readout) = cx.local.pipeline.accept(message) {
-                cx.shared.latest.lock(|latest| *latest = Some(readout));
-                rtic::pend(pac::Interrupt::EXTI2);
+    #[task(binds = EXTI1, priority = 2, local = [consumer], shared = [latest, pipeline])]
+    fn estimate(cx: estimate::Context) {
+        let estimate::SharedResources {
+            mut latest,
+            mut pipeline,
+            ..
+        } = cx.shared;
+        let consumer = cx.local.consumer;
+        // The key and readout tasks run below this priority: the lock costs nothing here.
+        pipeline.lock(|pipeline| {
+            for _ in 0..QUEUE_CAPACITY {
+                let Some(message) = consumer.dequeue() else {
+                    break;
+                };
+                if let Some(readout) = pipeline.accept(message) {
+                    latest.lock(|latest| *latest = Some(readout));
+                    rtic::pend(pac::Interrupt::EXTI2);
+                }
             }
-        }
+        });
     }
 
-    /// The readout task: 20 lines a second over RTT.
-    #[task(binds = EXTI2, priority = 1, shared = [latest])]
+    /// The readout task: 20 lines a second over RTT; after each, the commands' regular
+    /// work (a fresh tare refined, a calibration in progress carried on). A finished
+    /// calibration is written to flash, read back and applied; the erase stalls the CPU for
+    /// seconds, and the samples the converter took meanwhile are counted as dropped.
+    #[task(binds = EXTI2, priority = 1, local = [store], shared = [latest, pipeline])]
     fn readout(mut cx: readout::Context) {
         if let Some(readout) = cx.shared.latest.lock(|latest| latest.take()) {
             pipeline::log_readout(&readout);
         }
+        let Some(result) = cx.shared.pipeline.lock(|pipeline| pipeline.poll_commands()) else {
+            return;
+        };
+        let shared_pipeline = &mut cx.shared.pipeline;
+        let accepted_before = shared_pipeline.lock(|pipeline| pipeline.samples());
+        let started = DWT::cycle_count();
+        pipeline::finish_calibration(result, cx.local.store, |work| {
+            shared_pipeline.lock(|pipeline| work(pipeline))
+        });
+        let elapsed_cycles = DWT::cycle_count().wrapping_sub(started);
+        let converted = elapsed_cycles / (SYSCLK_HZ / SAMPLE_RATE_HZ);
+        shared_pipeline.lock(|pipeline| {
+            // What the converter took minus what reached the estimator (within the queue's
+            // depth, which may still hold some): the samples the stall lost.
+            let accepted = pipeline.samples().wrapping_sub(accepted_before);
+            let lost = converted.saturating_sub(accepted + QUEUE_CAPACITY as u32);
+            if lost > 0 {
+                defmt::println!(
+                    "command flash write stalled the CPU for {=u32} ms: {=u32} samples lost",
+                    elapsed_cycles / (SYSCLK_HZ / 1000),
+                    lost
+                );
+                pipeline.samples_lost(lost);
+            }
+        });
+    }
+
+    /// The KEY's first falling edge: stop listening to edges (contact bounce would make
+    /// many) and poll the level instead until the press is over.
+    #[task(binds = EXTI0, priority = 1, shared = [key])]
+    fn key_edge(mut cx: key_edge::Context) {
+        cx.shared.key.lock(|key| {
+            key.pin.clear_interrupt_pending_bit();
+            key.pin.disable_interrupt(&mut key.exti);
+            if key.poll_timer.start(KEY_POLL_HZ.Hz()).is_err() {
+                // TIM3 cannot run at the poll rate: listen to edges again rather than
+                // leave the key deaf.
+                key.pin.enable_interrupt(&mut key.exti);
+            }
+        });
+    }
+
+    /// One poll of the KEY (TIM3): debounce; a finished press becomes a command, decided
+    /// against the reading of that moment and logged; once the key is released and
+    /// settled, polling stops and the edge interrupt is back.
+    #[task(binds = TIM3, priority = 1, shared = [key, pipeline])]
+    fn key_poll(mut cx: key_poll::Context) {
+        let press = cx.shared.key.lock(|key| {
+            key.poll_timer.clear_flags(Flag::Update);
+            let press = key.debouncer.poll(key.pin.is_low());
+            if key.debouncer.is_idle() {
+                let _ = key.poll_timer.cancel();
+                key.pin.clear_interrupt_pending_bit();
+                key.pin.enable_interrupt(&mut key.exti);
+                // Pressed again between the last poll and now: its edge may have come
+                // before the pending bit was cleared, so keep polling instead.
+                if key.pin.is_low() {
+                    key.pin.disable_interrupt(&mut key.exti);
+                    let _ = key.poll_timer.start(KEY_POLL_HZ.Hz());
+                }
+            }
+            press
+        });
+        let Some(press) = press else {
+            return;
+        };
+        let (sample, command, result) = cx.shared.pipeline.lock(|pipeline| {
+            let command = match press {
+                KeyPress::Short if pipeline.is_calibrating() => Command::CancelCalibration,
+                KeyPress::Short => Command::Tare,
+                KeyPress::Long => Command::Calibrate {
+                    known_mass_g: REFERENCE_MASS_G,
+                },
+            };
+            (pipeline.samples(), command, pipeline.command(command))
+        });
+        defmt::println!("key press={}", press);
+        pipeline::log_command(sample, command, &result);
     }
 }

@@ -1,9 +1,12 @@
 //! The firmware's xtask entry points: `demo` (the QEMU firmware on the demo scene, live
-//! readout and summary), `e2e_test` (the same run judged by `tests::e2e`) and `bench`
-//! (instruction counts under `-icount shift=0`, image sizes of both boards).
+//! readout and summary), `e2e_test` (the same run judged by `tests::e2e`, then the command
+//! scene with the harness typing commands on UART 0, judged by `tests::commands`) and
+//! `bench` (instruction counts under `-icount shift=0`, image sizes of both boards).
 //!
 //! The firmware logs defmt frames over semihosting to QEMU's stdout; they are decoded here
-//! with `defmt-decoder` against the ELF's table, so nothing extra needs installing.
+//! with `defmt-decoder` against the ELF's table, so nothing extra needs installing. For the
+//! command scene QEMU's `-serial stdio` connects UART 0 to the harness's pipe: a byte
+//! written to QEMU's stdin arrives in the UART's receive buffer.
 
 use std::io::{Read, Write as _};
 use std::path::{Path, PathBuf};
@@ -13,6 +16,7 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
+use tests::commands::{self, CommandScript};
 use tests::e2e::{self, RunLog, Scene};
 use tests::qemu::{MACHINE_ARGS, QEMU};
 
@@ -40,7 +44,7 @@ const RUN_TIMEOUT: Duration = Duration::from_secs(120);
 pub fn demo() -> Result<()> {
     let elf = build(Board::Qemu, false)?;
     println!("==> running {} on QEMU mps2-an386 (scene: empty 0.3 s, 138.32 g, removed at 2.0 s, 250 g at 2.5 s, end 4.0 s, 50 dB)", elf.display());
-    let run = run_firmware(&elf, &ICOUNT_REAL_TIME, true)?;
+    let run = run_firmware(&elf, &ICOUNT_REAL_TIME, true, None)?;
     let report = e2e::check(&Scene::demo(), &run);
     println!("\n==> summary");
     print!("{}", report.summary());
@@ -56,8 +60,9 @@ pub fn demo() -> Result<()> {
 }
 
 /// The firmware checks of `cargo xtask test`: the STM32F411 image builds and leaves at least
-/// half the chip's flash free (issue 4), and the demo scene in QEMU meets the readout
-/// criteria of `tests::e2e::check`.
+/// half the chip's flash free (issue 4), the demo scene in QEMU meets the readout criteria
+/// of `tests::e2e::check`, and the command scene (tare, refused tare, calibration typed on
+/// UART 0) meets those of `tests::commands::check`.
 pub fn e2e_test() -> Result<()> {
     let stm32_elf = build(Board::Stm32f411, false)?;
     let stm32_size = image_size(&stm32_elf)?;
@@ -75,7 +80,7 @@ pub fn e2e_test() -> Result<()> {
         );
     }
     let elf = build(Board::Qemu, false)?;
-    let run = run_firmware(&elf, &ICOUNT_FAST, false)?;
+    let run = run_firmware(&elf, &ICOUNT_FAST, false, None)?;
     let report = e2e::check(&Scene::demo(), &run);
     print!("{}", report.summary());
     if !report.passed() {
@@ -85,6 +90,25 @@ pub fn e2e_test() -> Result<()> {
         );
     }
     println!("firmware end-to-end: all criteria met");
+
+    println!(
+        "command scene: the harness types t (stable), t (sliding load), c (empty pan) on UART 0"
+    );
+    let mut script = CommandScript::new();
+    let run = run_firmware(&elf, &ICOUNT_FAST, false, Some(&mut script))?;
+    for line in run.lines.iter().filter(|line| line.starts_with("command ")) {
+        println!("  {line}");
+    }
+    let report = commands::check(&run);
+    print!("{}", report.summary());
+    if !report.passed() {
+        bail!(
+            "the command path fails its criteria ({} of 3 commands typed):\n  - {}",
+            script.sent(),
+            report.failures.join("\n  - ")
+        );
+    }
+    println!("firmware command path end-to-end: all criteria met");
     Ok(())
 }
 
@@ -96,7 +120,7 @@ pub fn bench() -> Result<()> {
     let stm32_elf = build(Board::Stm32f411, false)?;
     let stm32_size = image_size(&stm32_elf)?;
     let bench_elf = build(Board::Qemu, true)?;
-    let run = run_firmware(&bench_elf, &ICOUNT_FAST, false)?;
+    let run = run_firmware(&bench_elf, &ICOUNT_FAST, false, None)?;
     if !run.exited_successfully {
         bail!(
             "the bench firmware did not finish:\n{}",
@@ -203,26 +227,52 @@ fn build(board: Board, bench: bool) -> Result<PathBuf> {
 }
 
 /// Run the QEMU image, decode its defmt log as it arrives (printing it when `live`), and
-/// return the decoded lines with how QEMU ended.
-fn run_firmware(elf: &Path, icount: &[&str], live: bool) -> Result<RunLog> {
+/// return the decoded lines with how QEMU ended. With a `script`, QEMU plays the command
+/// scene and the bytes the script asks for after a readout line are written to QEMU's
+/// stdin, which `-serial stdio` connects to UART 0.
+fn run_firmware(
+    elf: &Path,
+    icount: &[&str],
+    live: bool,
+    mut script: Option<&mut CommandScript>,
+) -> Result<RunLog> {
     let elf_bytes = std::fs::read(elf).with_context(|| format!("reading {}", elf.display()))?;
     let table = defmt_decoder::Table::parse(&elf_bytes)
         .context("reading the defmt table")?
         .ok_or_else(|| anyhow!("{} has no defmt data", elf.display()))?;
     let mut decoder = table.new_stream_decoder();
 
-    let mut child = Command::new(QEMU)
+    let mut command = Command::new(QEMU);
+    command
         .args(MACHINE_ARGS)
-        .args(["-nographic", "-monitor", "none", "-serial", "none"])
-        .args(["-semihosting-config", "enable=on,target=native"])
+        .args(["-nographic", "-monitor", "none"]);
+    if script.is_some() {
+        let semihosting = format!(
+            "enable=on,target=native,arg={QEMU_BIN},arg={}",
+            commands::SCENE_NAME
+        );
+        command
+            .args(["-serial", "stdio", "-semihosting-config", &semihosting])
+            .stdin(Stdio::piped());
+    } else {
+        command
+            .args([
+                "-serial",
+                "none",
+                "-semihosting-config",
+                "enable=on,target=native",
+            ])
+            .stdin(Stdio::null());
+    }
+    let mut child = command
         .args(icount)
         .arg("-kernel")
         .arg(elf)
-        .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .with_context(|| format!("cannot start {QEMU} (cargo xtask install)"))?;
+    let mut console = child.stdin.take();
     let mut stdout = child
         .stdout
         .take()
@@ -265,6 +315,15 @@ fn run_firmware(elf: &Path, icount: &[&str], live: bool) -> Result<RunLog> {
                                 println!("{}", pretty(&line));
                                 let _ = std::io::stdout().flush();
                             }
+                            let typed =
+                                match (script.as_deref_mut(), e2e::ReadoutLine::parse(&line)) {
+                                    (Some(script), Some(readout)) => script.respond(&readout),
+                                    _ => None,
+                                };
+                            if let (Some(byte), Some(console)) = (typed, console.as_mut()) {
+                                // A broken pipe means QEMU is gone; how it ended is reported below.
+                                let _ = console.write_all(&[byte]).and_then(|()| console.flush());
+                            }
                             lines.push(line);
                         }
                         Err(defmt_decoder::DecodeError::UnexpectedEof) => break,
@@ -286,6 +345,7 @@ fn run_firmware(elf: &Path, icount: &[&str], live: bool) -> Result<RunLog> {
             break;
         }
     }
+    drop(console);
     let status = child.wait().context("waiting for QEMU")?;
     let _ = reader.join();
     let qemu_stderr = stderr_reader.join().unwrap_or_default();

@@ -1,0 +1,1051 @@
+//! Operator commands around a [`Scale`]: tare, clear tare, calibration with a known mass,
+//! the calibration store both boards implement, and the debouncer of the hardware board's
+//! KEY button.
+//!
+//! The boards only move bytes and button levels here: a UART byte becomes a [`Command`]
+//! (QEMU), a debounced [`KeyPress`] becomes one (STM32F411), and [`Commands::handle`]
+//! decides against the scale's current reading, with a typed [`CommandRefusal`] when it says
+//! no. A tare is taken from the estimate when the reading is stable, which can be as early
+//! as 50 ms into a load; while that load stays on, [`Commands::poll`] re-takes it from the
+//! estimator's longer average, within the stability band around the first value, so the
+//! early estimate's error does not stay in every net reading (it freezes at the next load
+//! change, and the band bounds what a slow, undetected change could pull into it).
+//! Calibration takes two settled readings in ADC counts: the empty pan when the command
+//! arrives, then the known mass once it is on and settled ([`Commands::poll`]); the result
+//! goes through [`store_calibration`] (encode, write, read back through the CRC decoder) and
+//! only what the store gives back is applied ([`Scale::recalibrate`]), so the calibration
+//! in use is always the one the board would load after a reset.
+//!
+//! What it must never do: take a tare or a calibration point from a reading that is not
+//! settled, accept a calibration that makes no physical sense (no span, a gain far from the
+//! one in use), apply a record the store cannot give back intact, or block: every function
+//! returns at once, so a board may call it from any task.
+
+use crate::calibration::{self, Calibration, CalibrationError, CalibrationSource, RECORD_LEN};
+use crate::scale::{Scale, ScaleFault, ScaleReading, ScaleState};
+
+/// What the operator asked for.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Command {
+    /// Take the current gross mass as tare.
+    Tare,
+    /// Remove the tare.
+    ClearTare,
+    /// Start a calibration: the empty pan now, then `known_mass_g` put on.
+    Calibrate {
+        /// The reference mass the operator will put on, in grams.
+        known_mass_g: f32,
+    },
+    /// Abandon a calibration in progress (the calibration in use stays).
+    CancelCalibration,
+}
+
+impl Command {
+    /// The command a console byte stands for: `t` tare, `u` clear tare (untare), `c`
+    /// calibrate with `known_mass_g`, `x` cancel a calibration (either case). `None` for any
+    /// other byte; the board decides whether to report it.
+    pub fn from_byte(byte: u8, known_mass_g: f32) -> Option<Self> {
+        match byte.to_ascii_lowercase() {
+            b't' => Some(Self::Tare),
+            b'u' => Some(Self::ClearTare),
+            b'c' => Some(Self::Calibrate { known_mass_g }),
+            b'x' => Some(Self::CancelCalibration),
+            _ => None,
+        }
+    }
+}
+
+/// What an accepted command did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CommandOutcome {
+    /// The tare is now `tare_g` grams: the display reads net of it.
+    Tared {
+        /// The gross mass taken as tare.
+        tare_g: f32,
+    },
+    /// The tare is zero again.
+    TareCleared,
+    /// The empty-pan zero is taken; the calibration completes once `known_mass_g` is on
+    /// the pan and settled (see [`Commands::poll`]).
+    CalibrationStarted {
+        /// The empty pan in ADC counts.
+        zero_counts: f32,
+        /// The mass the operator must put on.
+        known_mass_g: f32,
+    },
+    /// The calibration in progress was abandoned.
+    CalibrationCancelled,
+}
+
+/// Why a command was refused. Nothing changed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CommandRefusal {
+    /// The reading is not settled (still estimating, or not stable for long enough).
+    Unstable,
+    /// The scale shows no mass, and why.
+    Invalid(ScaleFault),
+    /// A calibration zero needs an empty pan, and the pan holds a good part of the known
+    /// mass already.
+    NotEmpty,
+    /// A calibration is in progress: only cancelling it is accepted.
+    CalibrationInProgress,
+    /// There is no calibration in progress to cancel.
+    NotCalibrating,
+    /// The known mass is not a positive, finite number of grams.
+    BadKnownMass,
+}
+
+/// Why a calibration in progress ended without a result. The calibration in use stays.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CalibrationFailure {
+    /// The known mass made no positive change in counts.
+    NoSpan,
+    /// The new gain differs from the one in use by more than the allowed ratio: the wrong
+    /// reference mass, or a fault in the analogue chain.
+    GainImplausible,
+    /// No settled known mass within the timeout.
+    TimedOut,
+}
+
+/// Tuning of the command decisions. Durations in raw samples.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct CommandConfig {
+    /// A calibration point (the zero, then the known mass) is taken only from a reading
+    /// that is stable (or empty) and this long after the last load change.
+    pub calibration_settle_samples: u32,
+    /// The calibration zero is refused (`NotEmpty`) when the pan reads more than this
+    /// fraction of the known mass with the calibration in use.
+    pub zero_limit_fraction: f32,
+    /// The new gain must be within this ratio of the gain in use, either way.
+    pub max_gain_ratio: f32,
+    /// A calibration waiting this long for the known mass gives up (`TimedOut`).
+    pub calibration_timeout_samples: u32,
+}
+
+impl CommandConfig {
+    /// Defaults for the weighing firmware.
+    ///
+    /// Why these numbers:
+    /// - settle 0.5 s: the estimate of a settled load is within 0.1 % 100 ms after the
+    ///   change and then only gains averaging (growing window); 0.5 s keeps a hand that
+    ///   just let go of the pan or the button out of the calibration;
+    /// - zero limit 10 % of the known mass: far above any zero offset of a working chain
+    ///   (the board's REF pin tolerance is about a gram), far below the known mass itself;
+    /// - gain ratio 1.5: a load cell's rated output is specified within a few per cent,
+    ///   so a gain 50 % off the one in use means the wrong mass or a fault;
+    /// - timeout 60 s: time to fetch the reference mass, not so long that a forgotten
+    ///   calibration waits forever.
+    pub fn weighing_default(sample_rate_hz: f32) -> Self {
+        Self {
+            calibration_settle_samples: (0.5 * sample_rate_hz) as u32,
+            zero_limit_fraction: 0.1,
+            max_gain_ratio: 1.5,
+            calibration_timeout_samples: (60.0 * sample_rate_hz) as u32,
+        }
+    }
+}
+
+/// Where a calibration stands.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Phase {
+    Idle,
+    AwaitingMass {
+        known_mass_g: f32,
+        zero_counts: f32,
+        changes_at_zero: u32,
+        started_sample: u32,
+    },
+}
+
+/// A tare being refined: the gross mass when it was taken, and the load-change count then.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct TareRefinement {
+    tare_g: f32,
+    load_changes: u32,
+}
+
+/// The command state machine: decides each command against a scale, refines a fresh tare
+/// and carries a calibration from its zero to its known mass.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Commands {
+    config: CommandConfig,
+    phase: Phase,
+    refining: Option<TareRefinement>,
+}
+
+impl Commands {
+    /// No calibration in progress.
+    pub fn new(config: CommandConfig) -> Self {
+        Self {
+            config,
+            phase: Phase::Idle,
+            refining: None,
+        }
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &CommandConfig {
+        &self.config
+    }
+
+    /// True while a calibration waits for its known mass.
+    pub fn is_calibrating(&self) -> bool {
+        matches!(self.phase, Phase::AwaitingMass { .. })
+    }
+
+    /// Decide `command` against the scale's current reading. `now_sample` is the board's
+    /// sample count (wrapping), used for the calibration timeout only.
+    pub fn handle<const N: usize>(
+        &mut self,
+        command: Command,
+        scale: &mut Scale<N>,
+        now_sample: u32,
+    ) -> Result<CommandOutcome, CommandRefusal> {
+        if self.is_calibrating() && command != Command::CancelCalibration {
+            return Err(CommandRefusal::CalibrationInProgress);
+        }
+        match command {
+            Command::Tare => {
+                let reading = scale.reading();
+                settled(&reading, 0)?;
+                scale.tare().map_err(|_| CommandRefusal::Unstable)?;
+                self.refining = Some(TareRefinement {
+                    tare_g: scale.tare_g(),
+                    load_changes: reading.load_changes,
+                });
+                Ok(CommandOutcome::Tared {
+                    tare_g: scale.tare_g(),
+                })
+            }
+            Command::ClearTare => {
+                scale.clear_tare();
+                self.refining = None;
+                Ok(CommandOutcome::TareCleared)
+            }
+            Command::Calibrate { known_mass_g } => {
+                if !(known_mass_g.is_finite() && known_mass_g > 0.0) {
+                    return Err(CommandRefusal::BadKnownMass);
+                }
+                let reading = scale.reading();
+                settled(&reading, self.config.calibration_settle_samples)?;
+                let zero_counts = scale.gross_counts().ok_or(CommandRefusal::Unstable)?;
+                let in_use = scale.counts_scale();
+                let gross_g = (zero_counts - in_use.zero_counts) / in_use.counts_per_gram;
+                if !(gross_g.abs() <= self.config.zero_limit_fraction * known_mass_g) {
+                    return Err(CommandRefusal::NotEmpty);
+                }
+                // The calibration ends in a new scale without a tare; stop refining this one.
+                self.refining = None;
+                self.phase = Phase::AwaitingMass {
+                    known_mass_g,
+                    zero_counts,
+                    changes_at_zero: reading.load_changes,
+                    started_sample: now_sample,
+                };
+                Ok(CommandOutcome::CalibrationStarted {
+                    zero_counts,
+                    known_mass_g,
+                })
+            }
+            Command::CancelCalibration => {
+                if self.is_calibrating() {
+                    self.phase = Phase::Idle;
+                    Ok(CommandOutcome::CalibrationCancelled)
+                } else {
+                    Err(CommandRefusal::NotCalibrating)
+                }
+            }
+        }
+    }
+
+    /// Refine a fresh tare and advance a calibration in progress; call it regularly (each
+    /// readout). `Some` when a calibration ends: the measured calibration, which the board
+    /// stores with [`store_calibration`] and applies with [`Scale::recalibrate`], or why it
+    /// failed. The known mass counts once a load change happened after the zero and the
+    /// reading has been stable for `calibration_settle_samples` since that change; an empty
+    /// pan after a bump does not.
+    pub fn poll<const N: usize>(
+        &mut self,
+        scale: &mut Scale<N>,
+        now_sample: u32,
+    ) -> Option<Result<Calibration, CalibrationFailure>> {
+        self.refine_tare(scale);
+        let Phase::AwaitingMass {
+            known_mass_g,
+            zero_counts,
+            changes_at_zero,
+            started_sample,
+        } = self.phase
+        else {
+            return None;
+        };
+        if now_sample.wrapping_sub(started_sample) > self.config.calibration_timeout_samples {
+            self.phase = Phase::Idle;
+            return Some(Err(CalibrationFailure::TimedOut));
+        }
+        let reading = scale.reading();
+        let loaded = reading.load_changes != changes_at_zero
+            && reading.state == ScaleState::Stable
+            && reading.samples_since_change >= self.config.calibration_settle_samples;
+        if !loaded {
+            return None;
+        }
+        let loaded_counts = scale.gross_counts()?;
+        self.phase = Phase::Idle;
+        let measured = match Calibration::from_known_mass(zero_counts, loaded_counts, known_mass_g)
+        {
+            Ok(measured) => measured,
+            Err(_) => return Some(Err(CalibrationFailure::NoSpan)),
+        };
+        let ratio = measured.counts_per_gram / scale.counts_scale().counts_per_gram;
+        let limit = self.config.max_gain_ratio;
+        if ratio <= limit && ratio >= 1.0 / limit {
+            Some(Ok(measured))
+        } else {
+            Some(Err(CalibrationFailure::GainImplausible))
+        }
+    }
+}
+
+impl Commands {
+    /// Re-take the tare from the current estimate while the tared load is still on (no load
+    /// change since), the reading is stable, and the estimate is within the stability band
+    /// of the tare first taken; stop refining otherwise, keeping the last value.
+    fn refine_tare<const N: usize>(&mut self, scale: &mut Scale<N>) {
+        let Some(refinement) = self.refining else {
+            return;
+        };
+        let reading = scale.reading();
+        if reading.load_changes != refinement.load_changes {
+            self.refining = None;
+            return;
+        }
+        if settled(&reading, 0).is_err() {
+            // Momentarily unstable (or invalid): keep the tare, try again next time.
+            return;
+        }
+        let config = scale.config();
+        let band = config.stable_band_g + config.stable_band_relative * refinement.tare_g.abs();
+        let gross_g = reading.mass_g.map(|net| net + scale.tare_g());
+        match gross_g {
+            Some(gross_g) if (gross_g - refinement.tare_g).abs() <= band => {
+                // `tare` accepts a stable or empty reading, which `settled` just checked.
+                let _ = scale.tare();
+            }
+            _ => self.refining = None,
+        }
+    }
+}
+
+/// Stable (or empty) and at least `min_samples` after the last load change.
+fn settled(reading: &ScaleReading, min_samples: u32) -> Result<(), CommandRefusal> {
+    match reading.state {
+        ScaleState::Invalid(fault) => Err(CommandRefusal::Invalid(fault)),
+        ScaleState::Stable | ScaleState::Empty if reading.samples_since_change >= min_samples => {
+            Ok(())
+        }
+        _ => Err(CommandRefusal::Unstable),
+    }
+}
+
+/// Where a board keeps its calibration record: flash on hardware, RAM under QEMU.
+pub trait CalibrationStore {
+    /// Why a write failed.
+    type Error;
+    /// Replace the stored record.
+    fn write_record(&mut self, record: &[u8; RECORD_LEN]) -> Result<(), Self::Error>;
+    /// The stored bytes, `None` when the store has no room for a record at all.
+    fn read_record(&self) -> Option<[u8; RECORD_LEN]>;
+}
+
+/// Why a calibration was not stored. The calibration in use stays.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StoreFailure<E> {
+    /// The store refused the write.
+    Write(E),
+    /// What the store gave back is not a valid record.
+    ReadBack(CalibrationError),
+    /// The store gave back a valid record, but not the one written.
+    Mismatch,
+}
+
+/// Write `calibration` as a record, read it back through the CRC decoder, and return what
+/// the store really holds; only that may be applied.
+pub fn store_calibration<S: CalibrationStore>(
+    store: &mut S,
+    calibration: &Calibration,
+) -> Result<Calibration, StoreFailure<S::Error>> {
+    store
+        .write_record(&calibration.encode())
+        .map_err(StoreFailure::Write)?;
+    let stored = store
+        .read_record()
+        .ok_or(StoreFailure::ReadBack(CalibrationError::Missing))?;
+    let read_back = Calibration::decode(&stored).map_err(StoreFailure::ReadBack)?;
+    // Bit-exact: the record holds the very f32 values written.
+    let same = read_back.counts_per_gram.to_bits() == calibration.counts_per_gram.to_bits()
+        && read_back.zero_counts.to_bits() == calibration.zero_counts.to_bits();
+    if same {
+        Ok(read_back)
+    } else {
+        Err(StoreFailure::Mismatch)
+    }
+}
+
+/// The calibration to use at boot: the stored record if valid, else `defaults` and why.
+pub fn load_calibration<S: CalibrationStore>(
+    store: &S,
+    defaults: Calibration,
+) -> (Calibration, CalibrationSource) {
+    let stored = store.read_record();
+    calibration::load_or_default(stored.as_ref().map(|record| &record[..]), defaults)
+}
+
+/// A debounced press of a push button.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum KeyPress {
+    /// Released before the long-press time.
+    Short,
+    /// Held at least the long-press time.
+    Long,
+}
+
+/// A push-button debouncer polled at a fixed rate (Ganssle's integrator): the raw level
+/// moves a counter between 0 and `settle_polls`, and the debounced state only flips at the
+/// ends, so contact bounce and glitches shorter than the settle time never make a press.
+/// The press is reported on release, as short or long by how long it was held. Polling
+/// only while the button is active is the board's business ([`KeyDebouncer::is_idle`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct KeyDebouncer {
+    settle_polls: u16,
+    long_press_polls: u32,
+    integrator: u16,
+    pressed: bool,
+    held_polls: u32,
+}
+
+impl KeyDebouncer {
+    /// A debouncer polled at `poll_hz`; the level must hold for `debounce_ms` to count, a
+    /// press held `long_press_ms` or longer is long. At least one poll each.
+    pub fn new(poll_hz: u32, debounce_ms: u32, long_press_ms: u32) -> Self {
+        let polls = |ms: u32| ((ms as u64 * poll_hz as u64).div_ceil(1000)).max(1);
+        Self {
+            settle_polls: polls(debounce_ms).min(u16::MAX as u64) as u16,
+            long_press_polls: polls(long_press_ms).min(u32::MAX as u64) as u32,
+            integrator: 0,
+            pressed: false,
+            held_polls: 0,
+        }
+    }
+
+    /// One poll of the raw level (`true` = pressed). `Some` when a press ends.
+    pub fn poll(&mut self, raw_pressed: bool) -> Option<KeyPress> {
+        if raw_pressed {
+            self.integrator = (self.integrator + 1).min(self.settle_polls);
+        } else {
+            self.integrator = self.integrator.saturating_sub(1);
+        }
+        if self.pressed {
+            self.held_polls = self.held_polls.saturating_add(1);
+            if self.integrator == 0 {
+                self.pressed = false;
+                return Some(if self.held_polls >= self.long_press_polls {
+                    KeyPress::Long
+                } else {
+                    KeyPress::Short
+                });
+            }
+        } else if self.integrator == self.settle_polls {
+            self.pressed = true;
+            self.held_polls = 0;
+        }
+        None
+    }
+
+    /// True when the button is released and settled: nothing to poll for until it moves.
+    pub fn is_idle(&self) -> bool {
+        !self.pressed && self.integrator == 0
+    }
+
+    /// True while a debounced press is held.
+    pub fn is_pressed(&self) -> bool {
+        self.pressed
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use crate::scale::{CountsScale, RawSample, ScaleConfig};
+
+    const FS: f32 = 4000.0;
+    /// The calibration the scale starts with.
+    const CPG: f32 = 50.0;
+    const ZERO: f32 = 30_000.0;
+    const KNOWN_MASS_G: f32 = 200.0;
+
+    /// A second-order cell (25 Hz, ζ = 0.03) with deterministic near-Gaussian noise whose
+    /// true gain is `gain_factor` times the scale's calibration: a replaced cell.
+    struct Cell {
+        position_g: f64,
+        velocity: f64,
+        load_g: f64,
+        noise_state: u64,
+        noise_g: f64,
+        gain_factor: f64,
+    }
+
+    impl Cell {
+        fn new(noise_g: f64, gain_factor: f64) -> Self {
+            Self {
+                position_g: 0.0,
+                velocity: 0.0,
+                load_g: 0.0,
+                noise_state: 0x2545_F491_4F6C_DD1D,
+                noise_g,
+                gain_factor,
+            }
+        }
+
+        fn noise(&mut self) -> f64 {
+            let mut sum = 0.0;
+            for _ in 0..4 {
+                self.noise_state = self
+                    .noise_state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                sum += (self.noise_state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+            }
+            sum * 3.0f64.sqrt()
+        }
+
+        fn sample(&mut self) -> RawSample {
+            let omega = 2.0 * std::f64::consts::PI * 25.0;
+            let dt = 1.0 / FS as f64 / 4.0;
+            for _ in 0..4 {
+                let accel = omega * omega * (self.load_g - self.position_g)
+                    - 2.0 * 0.03 * omega * self.velocity;
+                self.velocity += accel * dt;
+                self.position_g += self.velocity * dt;
+            }
+            let grams = self.position_g + self.noise_g * self.noise();
+            let counts = ZERO as f64 + grams * self.gain_factor * CPG as f64;
+            RawSample::Counts(counts.round() as i32)
+        }
+    }
+
+    /// A scale, its cell, the command machine and a sample clock.
+    struct Bench {
+        scale: Scale<8>,
+        cell: Cell,
+        commands: Commands,
+        now: u32,
+    }
+
+    impl Bench {
+        fn new(gain_factor: f64) -> Self {
+            let calibration = CountsScale {
+                counts_per_gram: CPG,
+                zero_counts: ZERO,
+            };
+            Self {
+                scale: Scale::new(ScaleConfig::weighing_default(FS), calibration).unwrap(),
+                cell: Cell::new(0.2, gain_factor),
+                commands: Commands::new(CommandConfig::weighing_default(FS)),
+                now: 0,
+            }
+        }
+
+        fn run_s(&mut self, seconds: f32) -> ScaleReading {
+            let mut last = self.scale.reading();
+            for _ in 0..(seconds * FS) as u32 {
+                last = self.scale.push(self.cell.sample());
+                self.now = self.now.wrapping_add(1);
+            }
+            last
+        }
+
+        fn command(&mut self, command: Command) -> Result<CommandOutcome, CommandRefusal> {
+            self.commands.handle(command, &mut self.scale, self.now)
+        }
+
+        /// Run, polling at the readout cadence (every 200 samples), until the calibration
+        /// ends or `seconds` pass.
+        fn poll_for_s(&mut self, seconds: f32) -> Option<Result<Calibration, CalibrationFailure>> {
+            for _ in 0..(seconds * 20.0) as u32 {
+                self.run_s(0.05);
+                if let Some(result) = self.commands.poll(&mut self.scale, self.now) {
+                    return Some(result);
+                }
+            }
+            None
+        }
+    }
+
+    /// A RAM store, with switchable faults.
+    #[derive(Default)]
+    struct RamStore {
+        record: Option<[u8; RECORD_LEN]>,
+        refuse_writes: bool,
+        flip_bit: Option<usize>,
+        replace_with: Option<Calibration>,
+    }
+
+    impl CalibrationStore for RamStore {
+        type Error = &'static str;
+        fn write_record(&mut self, record: &[u8; RECORD_LEN]) -> Result<(), Self::Error> {
+            if self.refuse_writes {
+                return Err("write protected");
+            }
+            let mut stored = *record;
+            if let Some(bit) = self.flip_bit {
+                stored[bit / 8] ^= 1 << (bit % 8);
+            }
+            if let Some(other) = self.replace_with {
+                stored = other.encode();
+            }
+            self.record = Some(stored);
+            Ok(())
+        }
+        fn read_record(&self) -> Option<[u8; RECORD_LEN]> {
+            self.record
+        }
+    }
+
+    #[test]
+    fn console_bytes_map_to_commands() {
+        assert_eq!(Command::from_byte(b't', 200.0), Some(Command::Tare));
+        assert_eq!(Command::from_byte(b'T', 200.0), Some(Command::Tare));
+        assert_eq!(Command::from_byte(b'u', 200.0), Some(Command::ClearTare));
+        assert_eq!(
+            Command::from_byte(b'c', 200.0),
+            Some(Command::Calibrate {
+                known_mass_g: 200.0
+            })
+        );
+        assert_eq!(
+            Command::from_byte(b'x', 200.0),
+            Some(Command::CancelCalibration)
+        );
+        for byte in [b'\n', b'\r', b' ', b'q', 0, 0xFF] {
+            assert_eq!(Command::from_byte(byte, 200.0), None, "byte {byte:#04x}");
+        }
+    }
+
+    #[test]
+    fn tare_is_refused_while_the_reading_moves_and_taken_once_stable() {
+        let mut bench = Bench::new(1.0);
+        bench.run_s(0.5);
+        bench.cell.load_g = 138.32;
+        // Until the drop is detected the pan still reads empty (and a tare then takes the
+        // empty pan); once it is, the cell rings and the estimate is not stable.
+        let mut ringing = bench.scale.reading();
+        for _ in 0..(0.1 * FS) as u32 {
+            ringing = bench.scale.push(bench.cell.sample());
+            if ringing.load_changes == 1 {
+                break;
+            }
+        }
+        assert_eq!(ringing.state, ScaleState::Estimating, "{ringing:?}");
+        assert_eq!(bench.command(Command::Tare), Err(CommandRefusal::Unstable));
+        assert_eq!(bench.scale.tare_g(), 0.0, "a refused tare changes nothing");
+
+        let settled = bench.run_s(1.0);
+        assert_eq!(settled.state, ScaleState::Stable, "{settled:?}");
+        let Ok(CommandOutcome::Tared { tare_g }) = bench.command(Command::Tare) else {
+            panic!("tare refused on a stable reading");
+        };
+        // The 0.1 % at the readout; the tare is the gross estimate itself.
+        assert!((tare_g - 138.32).abs() < 0.1383, "tare {tare_g}");
+        let net = bench.run_s(0.5).mass_g.unwrap();
+        // The empty-pan criterion applies to a tared reading too.
+        assert!(net.abs() <= 0.05, "net {net}");
+
+        assert_eq!(
+            bench.command(Command::ClearTare),
+            Ok(CommandOutcome::TareCleared)
+        );
+        let gross = bench.run_s(0.05).mass_g.unwrap();
+        assert!((gross - 138.32).abs() < 0.1383, "gross {gross}");
+    }
+
+    /// Drop `mass_g`, push until the reading is first stable, and tare there.
+    fn tare_at_first_stability(bench: &mut Bench, mass_g: f64) -> f32 {
+        bench.run_s(0.5);
+        bench.cell.load_g = mass_g;
+        for _ in 0..(0.5 * FS) as u32 {
+            bench.now += 1;
+            if bench.scale.push(bench.cell.sample()).state == ScaleState::Stable {
+                break;
+            }
+        }
+        match bench.command(Command::Tare) {
+            Ok(CommandOutcome::Tared { tare_g }) => tare_g,
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_fresh_tare_follows_the_estimate_within_the_stability_band_until_a_change() {
+        let mut bench = Bench::new(1.0);
+        let first_g = tare_at_first_stability(&mut bench, 138.32);
+        assert_eq!(bench.poll_for_s(2.0), None);
+        let config = *bench.scale.config();
+        let band = config.stable_band_g + config.stable_band_relative * first_g;
+        let refined_g = bench.scale.tare_g();
+        assert!(
+            (refined_g - first_g).abs() <= band,
+            "{first_g} → {refined_g}"
+        );
+        // The refined tare is the estimate of at most one readout period (50 ms) ago: the
+        // net reading is what the estimator moved since, far inside the 0.05 g criterion.
+        let net = bench.scale.reading().mass_g.unwrap();
+        assert!(net.abs() < 0.01, "net {net}");
+
+        // A second load: the tare freezes, the net reading is the new load.
+        bench.cell.load_g += 20.0;
+        bench.poll_for_s(1.0);
+        let frozen_g = bench.scale.tare_g();
+        bench.poll_for_s(1.0);
+        assert_eq!(bench.scale.tare_g(), frozen_g);
+        let net = bench.scale.reading().mass_g.unwrap();
+        assert!((net - 20.0).abs() < 0.02 + 0.05, "net {net}");
+    }
+
+    #[test]
+    fn a_slow_undetected_change_cannot_pull_the_tare_beyond_the_band() {
+        let mut bench = Bench::new(1.0);
+        let first_g = tare_at_first_stability(&mut bench, 100.0);
+        bench.poll_for_s(0.2);
+        // 0.5 g crept on over 1 s, polled at the readout cadence: ten times the band.
+        for _ in 0..20 {
+            bench.cell.load_g += 0.5 / 20.0;
+            bench.run_s(0.05);
+            let _ = bench.commands.poll(&mut bench.scale, bench.now);
+        }
+        let config = *bench.scale.config();
+        let band = config.stable_band_g + config.stable_band_relative * first_g;
+        let tare_g = bench.scale.tare_g();
+        assert!((tare_g - first_g).abs() <= band, "{first_g} → {tare_g}");
+        // Nor later, whether the scale catches the creep as a change or not.
+        bench.poll_for_s(2.0);
+        let tare_g = bench.scale.tare_g();
+        assert!((tare_g - first_g).abs() <= band, "{first_g} → {tare_g}");
+    }
+
+    #[test]
+    fn tare_of_an_empty_pan_is_accepted_and_an_invalid_reading_gives_its_fault() {
+        let mut bench = Bench::new(1.0);
+        let empty = bench.run_s(1.0);
+        assert_eq!(empty.state, ScaleState::Empty);
+        assert!(matches!(
+            bench.command(Command::Tare),
+            Ok(CommandOutcome::Tared { .. })
+        ));
+        bench.scale.push(RawSample::Saturated);
+        assert_eq!(
+            bench.command(Command::Tare),
+            Err(CommandRefusal::Invalid(ScaleFault::Saturated))
+        );
+    }
+
+    /// The whole procedure on a cell 2 % more sensitive than the calibration in use: the
+    /// known mass reads 2 % high before, within the 0.1 % after the new record is
+    /// stored, read back and applied; a different mass then reads right too.
+    #[test]
+    fn calibration_with_a_known_mass_corrects_the_gain() {
+        let mut bench = Bench::new(1.02);
+        bench.run_s(1.0);
+        let Ok(CommandOutcome::CalibrationStarted { zero_counts, .. }) =
+            bench.command(Command::Calibrate {
+                known_mass_g: KNOWN_MASS_G,
+            })
+        else {
+            panic!("calibration refused on an empty, settled pan");
+        };
+        // The zero is the empty pan: within the empty band of the true zero.
+        assert!(
+            (zero_counts - ZERO).abs() < 0.25 * CPG,
+            "zero {zero_counts}"
+        );
+        assert!(bench.commands.is_calibrating());
+        // Nothing happens until the mass is on.
+        assert_eq!(bench.poll_for_s(1.0), None);
+
+        bench.cell.load_g = KNOWN_MASS_G as f64;
+        let before = bench.run_s(0.2).mass_g.unwrap();
+        assert!((before / KNOWN_MASS_G - 1.02).abs() < 0.001, "{before}");
+        let measured = bench.poll_for_s(2.0).expect("no result").expect("failed");
+        assert!(!bench.commands.is_calibrating());
+        let true_gain = 1.02 * CPG;
+        assert!(
+            (measured.counts_per_gram / true_gain - 1.0).abs() < 0.001,
+            "{measured:?}"
+        );
+
+        let mut store = RamStore::default();
+        let stored = store_calibration(&mut store, &measured).unwrap();
+        assert_eq!(stored, measured);
+        assert_eq!(
+            load_calibration(
+                &store,
+                Calibration {
+                    counts_per_gram: CPG,
+                    zero_counts: ZERO
+                }
+            ),
+            (measured, CalibrationSource::Stored)
+        );
+        let changes = bench.scale.reading().load_changes;
+        bench.scale.recalibrate(stored.counts_scale()).unwrap();
+        assert_eq!(bench.scale.reading().load_changes, changes + 1);
+        let after = bench.run_s(0.2).mass_g.unwrap();
+        assert!(
+            (after - KNOWN_MASS_G).abs() < 0.001 * KNOWN_MASS_G,
+            "{after}"
+        );
+
+        bench.cell.load_g = 83.0;
+        let other = bench.run_s(0.5).mass_g.unwrap();
+        assert!((other - 83.0).abs() < 0.083, "{other}");
+    }
+
+    #[test]
+    fn gross_counts_ignore_the_tare_and_an_impossible_recalibration_is_a_fault() {
+        let mut bench = Bench::new(1.0);
+        bench.cell.load_g = 100.0;
+        bench.run_s(1.0);
+        let gross = bench.scale.gross_counts().unwrap();
+        assert!(bench.command(Command::Tare).is_ok());
+        bench.run_s(0.01);
+        let tared = bench.scale.gross_counts().unwrap();
+        // The same load: the estimate moves by noise only (well under 0.1 g = 5 counts).
+        assert!((tared - gross).abs() < 5.0, "{gross} vs {tared}");
+        assert!((gross - (ZERO + 100.0 * CPG)).abs() < 5.0, "{gross}");
+
+        let impossible = CountsScale {
+            counts_per_gram: f32::NAN,
+            zero_counts: ZERO,
+        };
+        bench.scale.recalibrate(impossible).unwrap();
+        let reading = bench.run_s(0.01);
+        assert_eq!(reading.state, ScaleState::Invalid(ScaleFault::Uncalibrated));
+        assert_eq!(reading.mass_g, None);
+        assert_eq!(bench.scale.gross_counts(), None);
+        assert_eq!(
+            bench.command(Command::Tare),
+            Err(CommandRefusal::Invalid(ScaleFault::Uncalibrated))
+        );
+    }
+
+    #[test]
+    fn calibration_is_refused_unless_empty_and_settled() {
+        let mut bench = Bench::new(1.0);
+        let calibrate = Command::Calibrate {
+            known_mass_g: KNOWN_MASS_G,
+        };
+        bench.run_s(1.0);
+        for known_mass_g in [0.0, -200.0, f32::NAN, f32::INFINITY] {
+            assert_eq!(
+                bench.command(Command::Calibrate { known_mass_g }),
+                Err(CommandRefusal::BadKnownMass)
+            );
+        }
+        bench.cell.load_g = 138.32;
+        bench.run_s(0.3);
+        // Stable, but settled for less than the 0.5 s a calibration point needs.
+        assert_eq!(bench.command(calibrate), Err(CommandRefusal::Unstable));
+        bench.run_s(1.0);
+        // Settled, but the pan holds 69 % of the known mass.
+        assert_eq!(bench.command(calibrate), Err(CommandRefusal::NotEmpty));
+        assert!(!bench.commands.is_calibrating());
+        assert_eq!(
+            bench.command(Command::CancelCalibration),
+            Err(CommandRefusal::NotCalibrating)
+        );
+    }
+
+    #[test]
+    fn a_calibration_in_progress_blocks_other_commands_until_cancelled() {
+        let mut bench = Bench::new(1.0);
+        let calibrate = Command::Calibrate {
+            known_mass_g: KNOWN_MASS_G,
+        };
+        bench.run_s(1.0);
+        assert!(bench.command(calibrate).is_ok());
+        assert_eq!(
+            bench.command(Command::Tare),
+            Err(CommandRefusal::CalibrationInProgress)
+        );
+        assert_eq!(
+            bench.command(calibrate),
+            Err(CommandRefusal::CalibrationInProgress)
+        );
+        assert_eq!(
+            bench.command(Command::CancelCalibration),
+            Ok(CommandOutcome::CalibrationCancelled)
+        );
+        bench.cell.load_g = KNOWN_MASS_G as f64;
+        assert_eq!(bench.poll_for_s(1.5), None, "a cancelled calibration ends");
+        assert!(matches!(
+            bench.command(Command::Tare),
+            Ok(CommandOutcome::Tared { .. })
+        ));
+    }
+
+    #[test]
+    fn the_wrong_reference_mass_is_implausible_not_a_calibration() {
+        let mut bench = Bench::new(1.0);
+        bench.run_s(1.0);
+        assert!(bench
+            .command(Command::Calibrate {
+                known_mass_g: KNOWN_MASS_G
+            })
+            .is_ok());
+        // 100 g on the pan where 200 g was promised: a gain half the one in use.
+        bench.cell.load_g = 100.0;
+        assert_eq!(
+            bench.poll_for_s(2.0),
+            Some(Err(CalibrationFailure::GainImplausible))
+        );
+        assert!(!bench.commands.is_calibrating());
+    }
+
+    #[test]
+    fn a_bump_is_not_the_known_mass_and_the_wait_times_out() {
+        let mut bench = Bench::new(1.0);
+        bench.commands.config.calibration_timeout_samples = (3.0 * FS) as u32;
+        bench.run_s(1.0);
+        assert!(bench
+            .command(Command::Calibrate {
+                known_mass_g: KNOWN_MASS_G
+            })
+            .is_ok());
+        let changes = bench.scale.reading().load_changes;
+        // A hand rests 50 g on the pan for 40 ms and lets go: a load change, then empty.
+        bench.cell.load_g = 50.0;
+        bench.run_s(0.04);
+        bench.cell.load_g = 0.0;
+        assert_eq!(bench.poll_for_s(1.5), None);
+        assert!(
+            bench.scale.reading().load_changes > changes,
+            "the bump was seen"
+        );
+        assert_eq!(
+            bench.poll_for_s(2.0),
+            Some(Err(CalibrationFailure::TimedOut))
+        );
+    }
+
+    #[test]
+    fn only_what_the_store_gives_back_intact_is_returned() {
+        let measured = Calibration {
+            counts_per_gram: 51.234,
+            zero_counts: 30_012.5,
+        };
+        let mut refusing = RamStore {
+            refuse_writes: true,
+            ..RamStore::default()
+        };
+        assert_eq!(
+            store_calibration(&mut refusing, &measured),
+            Err(StoreFailure::Write("write protected"))
+        );
+        for bit in [0, 77, 159] {
+            let mut corrupting = RamStore {
+                flip_bit: Some(bit),
+                ..RamStore::default()
+            };
+            assert!(
+                matches!(
+                    store_calibration(&mut corrupting, &measured),
+                    Err(StoreFailure::ReadBack(_))
+                ),
+                "bit {bit}"
+            );
+        }
+        let mut foreign = RamStore {
+            replace_with: Some(Calibration {
+                counts_per_gram: 50.0,
+                zero_counts: 30_000.0,
+            }),
+            ..RamStore::default()
+        };
+        assert_eq!(
+            store_calibration(&mut foreign, &measured),
+            Err(StoreFailure::Mismatch)
+        );
+        let defaults = Calibration {
+            counts_per_gram: 50.0,
+            zero_counts: 32_768.0,
+        };
+        assert_eq!(
+            load_calibration(&RamStore::default(), defaults),
+            (
+                defaults,
+                CalibrationSource::Defaults(CalibrationError::Missing)
+            )
+        );
+    }
+
+    /// Polls at 100 Hz, 30 ms debounce, 2 s long press.
+    fn debouncer() -> KeyDebouncer {
+        KeyDebouncer::new(100, 30, 2000)
+    }
+
+    fn feed(key: &mut KeyDebouncer, levels: &[bool]) -> std::vec::Vec<KeyPress> {
+        levels.iter().filter_map(|&level| key.poll(level)).collect()
+    }
+
+    #[test]
+    fn a_bouncing_short_press_is_one_short_press() {
+        let mut key = debouncer();
+        assert!(key.is_idle());
+        let mut levels = std::vec![true, false, true, false, true];
+        levels.extend([true; 30]);
+        levels.extend([false, true, false]);
+        levels.extend([false; 10]);
+        assert_eq!(feed(&mut key, &levels), [KeyPress::Short]);
+        assert!(key.is_idle());
+    }
+
+    #[test]
+    fn a_glitch_shorter_than_the_debounce_time_is_no_press() {
+        let mut key = debouncer();
+        assert!(feed(&mut key, &[true, true, false, false, false, false]).is_empty());
+        assert!(key.is_idle());
+        assert!(!key.is_pressed());
+    }
+
+    #[test]
+    fn long_press_starts_at_two_seconds_of_holding() {
+        // Press and release are both debounced by 3 polls, so the held time counted from
+        // one to the other is the raw press: 199 polls (1.99 s) short, 200 long.
+        let mut key = debouncer();
+        let mut just_short = std::vec![true; 199];
+        just_short.extend([false; 3]);
+        assert_eq!(feed(&mut key, &just_short), [KeyPress::Short]);
+        let mut long = std::vec![true; 200];
+        long.extend([false; 3]);
+        assert_eq!(feed(&mut key, &long), [KeyPress::Long]);
+        assert!(key.is_idle());
+    }
+
+    #[test]
+    fn debounce_times_round_up_to_at_least_one_poll() {
+        let key = KeyDebouncer::new(100, 0, 0);
+        assert_eq!(key.settle_polls, 1);
+        assert_eq!(key.long_press_polls, 1);
+        let key = KeyDebouncer::new(100, 25, 2001);
+        assert_eq!(key.settle_polls, 3);
+        assert_eq!(key.long_press_polls, 201);
+    }
+}

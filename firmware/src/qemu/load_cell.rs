@@ -1,0 +1,162 @@
+//! The QEMU board's simulated load cell: host-sim's `no_std` model of the reference chain
+//! (load cell, INA114, 3rd-order Butterworth, 16-bit ADC), the same code the host studies
+//! run, and the scenes it plays.
+//!
+//! Only `estimator_core` and `host_sim` are used here, so the host tests compile this very
+//! file (`tests::commands` includes it by path) and replay exactly what QEMU runs. It must
+//! never depend on the board.
+
+use estimator_core::{AdcSource, Calibration, CalibrationError};
+use host_sim::{white_noise_for_snr, Disturbances, LoadEvent, Script, SensorChain, SimulatedAdc};
+
+/// The simulated cell with room for sixteen scripted load changes (the command scene
+/// pours a load on in portions).
+pub type LoadCell = SimulatedAdc<16>;
+
+/// Noise seed of the demo scene (fixed, so a run is reproducible; not chosen by result).
+pub const DEMO_SEED: u64 = 1;
+/// Noise seed of the factory calibration run (a different cell session).
+pub const CALIBRATION_SEED: u64 = 0x00ca_1b7a;
+/// The known mass of the factory calibration.
+pub const CALIBRATION_MASS_G: f64 = 200.0;
+
+/// The command scene's cell is this much more sensitive than the factory-calibrated one: a
+/// replacement cell, fitted after the factory calibration, so every mass reads 1 % high
+/// (and the empty pan about 1.2 g, the platform's dead load through the more sensitive
+/// cell) until the operator calibrates. Makes the calibration's effect visible.
+pub const COMMAND_SCENE_GAIN_ERROR: f64 = 0.01;
+/// The first mass of the command scene, dropped at 0.3 s (tare it once stable).
+pub const COMMAND_SCENE_FIRST_MASS_G: f64 = 138.32;
+/// From 1.2 s, 50 g is poured on in ten 5 g portions 80 ms apart (a tare then is
+/// refused): each portion is a load change before the estimate can be stable for 50 ms.
+/// Portions rather than a ramp, because the simulated chain re-discretises its model at
+/// every change of load, which a ramp would make every sample: far too slow for QEMU.
+pub const COMMAND_SCENE_POUR_START_S: f64 = 1.2;
+/// Portions poured.
+pub const COMMAND_SCENE_POUR_PORTIONS: usize = 10;
+/// Mass of one portion.
+pub const COMMAND_SCENE_POUR_PORTION_G: f64 = 5.0;
+/// Time between portions.
+pub const COMMAND_SCENE_POUR_INTERVAL_S: f64 = 0.08;
+/// Everything is lifted off at 2.6 s (calibrate: the empty-pan zero).
+pub const COMMAND_SCENE_REMOVAL_S: f64 = 2.6;
+/// The 200 g reference mass is dropped at 4.0 s.
+pub const COMMAND_SCENE_KNOWN_MASS_S: f64 = 4.0;
+/// The command scene ends at 5.5 s: 1.5 s of the reference mass, of which the calibration
+/// needs its 0.5 s settling and the rest shows the calibrated readout.
+pub const COMMAND_SCENE_END_S: f64 = 5.5;
+
+/// The command scene's load changes, in time order.
+pub const COMMAND_SCENE_EVENTS: [LoadEvent; COMMAND_SCENE_POUR_PORTIONS + 3] = {
+    let mut events =
+        [LoadEvent::step(0.3, COMMAND_SCENE_FIRST_MASS_G); COMMAND_SCENE_POUR_PORTIONS + 3];
+    let mut portion = 0;
+    while portion < COMMAND_SCENE_POUR_PORTIONS {
+        let poured = (portion + 1) as f64;
+        events[portion + 1] = LoadEvent::step(
+            COMMAND_SCENE_POUR_START_S + portion as f64 * COMMAND_SCENE_POUR_INTERVAL_S,
+            COMMAND_SCENE_FIRST_MASS_G + poured * COMMAND_SCENE_POUR_PORTION_G,
+        );
+        portion += 1;
+    }
+    events[COMMAND_SCENE_POUR_PORTIONS + 1] = LoadEvent::step(COMMAND_SCENE_REMOVAL_S, 0.0);
+    events[COMMAND_SCENE_POUR_PORTIONS + 2] =
+        LoadEvent::step(COMMAND_SCENE_KNOWN_MASS_S, CALIBRATION_MASS_G);
+    events
+};
+
+/// White noise at the demo's 50 dB SNR (thesis eq. 4.39, on the reference chain and its
+/// 138.32 g step) plus the INA114's own noise, as `SimulatedAdc::reference_demo` has them.
+fn reference_disturbances() -> Disturbances {
+    let mut disturbances = Disturbances::white(white_noise_for_snr(
+        &SensorChain::reference(),
+        host_sim::simulated::REFERENCE_STEP_G,
+        host_sim::simulated::REFERENCE_SNR_DB,
+        host_sim::simulated::SNR_WINDOW_SAMPLES,
+    ));
+    disturbances.amplifier_noise = true;
+    disturbances
+}
+
+/// The command scene (QEMU end-to-end test of the command path): the reference chain with
+/// a cell [`COMMAND_SCENE_GAIN_ERROR`] more sensitive, 50 dB SNR as the demo, the demo's
+/// noise seed.
+pub fn command_scene() -> LoadCell {
+    command_scene_with_seed(DEMO_SEED)
+}
+
+/// The command scene with another noise seed (host replays over many seeds).
+pub fn command_scene_with_seed(seed: u64) -> LoadCell {
+    let mut chain = SensorChain::reference();
+    chain.cell.rated_output_mv_per_v *= 1.0 + COMMAND_SCENE_GAIN_ERROR;
+    let mut script = Script::new(COMMAND_SCENE_END_S);
+    for event in COMMAND_SCENE_EVENTS {
+        // Thirteen events in time order within the scene fit in sixteen slots.
+        let _ = script.push(event);
+    }
+    SimulatedAdc::new(chain, script, reference_disturbances(), seed)
+}
+
+/// Issue 4's demo scene: empty 0.3 s, 138.32 g, removed at 2.0 s, 250 g at 2.5 s, end
+/// at 4.0 s, 50 dB SNR. Built as `SimulatedAdc::reference_demo` builds it, in the larger
+/// script (`tests::commands` checks that the codes are the same).
+pub fn demo_scene() -> LoadCell {
+    let mut script = Script::new(host_sim::simulated::REFERENCE_DEMO_END_S);
+    for event in host_sim::simulated::REFERENCE_DEMO_EVENTS {
+        // Three events in time order within the scene fit in sixteen slots.
+        let _ = script.push(event);
+    }
+    SimulatedAdc::new(
+        SensorChain::reference(),
+        script,
+        reference_disturbances(),
+        DEMO_SEED,
+    )
+}
+
+/// The chain's nominal gain and zero: the fallback if the stored record is unusable.
+pub fn nominal_calibration() -> Calibration {
+    let chain = SensorChain::reference();
+    Calibration {
+        counts_per_gram: chain.counts_per_gram() as f32,
+        zero_counts: chain.zero_code() as f32,
+    }
+}
+
+/// The factory procedure on a simulated cell with the demo's noise: the mean code of
+/// the empty pan over 0.5–2.0 s, then the mean with the known mass over 4.0–6.0 s (the
+/// cell has settled far below the noise by then), and `Calibration::from_known_mass`.
+pub fn factory_calibration() -> Result<Calibration, CalibrationError> {
+    const RATE: u32 = 4000;
+    let chain = SensorChain::reference();
+    let mut script = Script::<8>::new(6.0);
+    script
+        .push(LoadEvent::step(2.0, CALIBRATION_MASS_G))
+        .map_err(|_| CalibrationError::NoSpan)?;
+    let mut disturbances = Disturbances::white(white_noise_for_snr(
+        &chain,
+        host_sim::simulated::REFERENCE_STEP_G,
+        host_sim::simulated::REFERENCE_SNR_DB,
+        host_sim::simulated::SNR_WINDOW_SAMPLES,
+    ));
+    disturbances.amplifier_noise = true;
+    let mut cell = SimulatedAdc::new(chain, script, disturbances, CALIBRATION_SEED);
+    let (mut empty_sum, mut empty_count) = (0u64, 0u32);
+    let (mut loaded_sum, mut loaded_count) = (0u64, 0u32);
+    for sample in 0..6 * RATE {
+        let code = match cell.read() {
+            Ok(code) if !cell.is_saturated(code) => code as u64,
+            _ => return Err(CalibrationError::NoSpan),
+        };
+        if (RATE / 2..2 * RATE).contains(&sample) {
+            empty_sum += code;
+            empty_count += 1;
+        } else if sample >= 4 * RATE {
+            loaded_sum += code;
+            loaded_count += 1;
+        }
+    }
+    let empty = empty_sum as f64 / empty_count as f64;
+    let loaded = loaded_sum as f64 / loaded_count as f64;
+    Calibration::from_known_mass(empty as f32, loaded as f32, CALIBRATION_MASS_G as f32)
+}
