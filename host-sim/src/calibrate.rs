@@ -21,7 +21,7 @@ use std::time::Instant;
 use anyhow::{anyhow, bail, Context, Result};
 use estimator_core::tuning::{
     self, Calibrated, CalibrationError, CalibrationSettings, CandidateGrid, CandidateScore,
-    DropError, Prediction, RunSlot, WeighingConfig, WeighingEstimator, WeighingMethod,
+    DropError, OnsetConfig, Prediction, RunSlot, WeighingConfig, WeighingEstimator, WeighingMethod,
 };
 use estimator_core::{IdentifyError, LoadCellModel, Real};
 use serde::Deserialize;
@@ -435,6 +435,7 @@ struct ConfigFile {
     scale: ScaleFile,
     model: ModelFile,
     target: TargetFile,
+    onset: OnsetFile,
     measured: MeasuredFile,
 }
 
@@ -461,8 +462,19 @@ struct ScaleFile {
     zero_counts: f64,
     noise_variance_counts2: f64,
     raw_noise_variance_counts2: f64,
-    rail_low_counts: f64,
-    rail_high_counts: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct OnsetFile {
+    min_empty_samples: usize,
+    drift_sigma: f64,
+    threshold_sigma: f64,
+    guard_samples: usize,
+    min_step_sigma: f64,
+    min_noise_rms: f64,
+    rail_low: f64,
+    rail_high: f64,
 }
 
 #[derive(Debug, Deserialize)]
@@ -496,6 +508,7 @@ struct MeasuredFile {
     p95_g: f64,
     p95_upper_g: f64,
     recorded_drops: u32,
+    detection_lag_samples: f64,
     recorded_worst_error_g: f64,
 }
 
@@ -707,12 +720,30 @@ fn write_toml(
         "raw_noise_variance_counts2 = {}",
         number(config.raw_noise_variance_counts2)
     );
+
+    let o = &config.onset;
+    let _ = writeln!(w, "\n[onset]");
     let _ = writeln!(
         w,
-        "# The converter's rails: a code at or beyond either is saturated."
+        "# How the scale must find the landing (estimator-core tuning::onset): two-sided CUSUM on"
     );
-    let _ = writeln!(w, "rail_low_counts = {}", number(config.rail_low_counts));
-    let _ = writeln!(w, "rail_high_counts = {}", number(config.rail_high_counts));
+    let _ = writeln!(w, "# the deviation from the zero in noise standard deviations, backed off to the start of the");
+    let _ = writeln!(
+        w,
+        "# excursion. The method was scored started there AND at the landing itself: start it"
+    );
+    let _ = writeln!(
+        w,
+        "# anywhere in between (not before the landing). A code at or beyond a rail is saturated."
+    );
+    let _ = writeln!(w, "min_empty_samples = {}", o.min_empty_samples);
+    let _ = writeln!(w, "drift_sigma = {}", number(o.drift_sigma));
+    let _ = writeln!(w, "threshold_sigma = {}", number(o.threshold_sigma));
+    let _ = writeln!(w, "guard_samples = {}", o.guard_samples);
+    let _ = writeln!(w, "min_step_sigma = {}", number(o.min_step_sigma));
+    let _ = writeln!(w, "min_noise_rms = {}", number(o.min_noise_rms));
+    let _ = writeln!(w, "rail_low = {}", number(o.rail_low));
+    let _ = writeln!(w, "rail_high = {}", number(o.rail_high));
 
     let _ = writeln!(w, "\n[model]");
     let _ = writeln!(w, "# Identified from the drops (estimator-core identify): the mechanical mode with the load on,");
@@ -802,11 +833,20 @@ fn write_toml(
                 .collect();
             let _ = writeln!(
                 w,
-                "# Confirmed on the recorded drops (from each detected onset): {}.",
+                "# Confirmed on the recorded drops (the larger error of the two starts): {}.",
                 each.join(", ")
             );
         }
     }
+    let _ = writeln!(
+        w,
+        "# Mean lag of the detected onset behind the landing in the synthetic drops, samples."
+    );
+    let _ = writeln!(
+        w,
+        "detection_lag_samples = {}",
+        number(config.detection_lag_samples)
+    );
     let _ = writeln!(w, "recorded_drops = {}", config.recorded_drops);
     let _ = writeln!(
         w,
@@ -880,8 +920,17 @@ pub fn parse_config(path: &Path, text: &str) -> Result<(WeighingConfig, Precisio
         zero_counts: file.scale.zero_counts,
         noise_variance_counts2: file.scale.noise_variance_counts2,
         raw_noise_variance_counts2: file.scale.raw_noise_variance_counts2,
-        rail_low_counts: file.scale.rail_low_counts,
-        rail_high_counts: file.scale.rail_high_counts,
+        onset: OnsetConfig {
+            min_empty_samples: file.onset.min_empty_samples,
+            drift_sigma: file.onset.drift_sigma,
+            threshold_sigma: file.onset.threshold_sigma,
+            guard_samples: file.onset.guard_samples,
+            min_step_sigma: file.onset.min_step_sigma,
+            min_noise_rms: file.onset.min_noise_rms,
+            rail_low: file.onset.rail_low,
+            rail_high: file.onset.rail_high,
+        },
+        detection_lag_samples: file.measured.detection_lag_samples,
         model: LoadCellModel {
             natural_frequency_hz: file.model.natural_frequency_hz,
             damping_ratio: file.model.damping_ratio,
@@ -977,13 +1026,20 @@ pub fn rust_const(config: &WeighingConfig) -> String {
     let m = &config.model;
     let p = &config.prediction;
     format!(
-        "pub const WEIGHING: WeighingConfig = WeighingConfig {{\n    method: {method},\n    counts_per_gram: {},\n    zero_counts: {},\n    noise_variance_counts2: {},\n    raw_noise_variance_counts2: {},\n    rail_low_counts: {},\n    rail_high_counts: {},\n    model: LoadCellModel {{ natural_frequency_hz: {}, damping_ratio: {}, filter_order: {}, filter_cutoff_hz: {}, counts_per_gram: {}, sample_rate_hz: {} }},\n    identified_counts_per_gram: {},\n    calibration_mass_g: {},\n    readout_s: {},\n    target_relative: {},\n    prediction: Prediction {{ runs: {}, planned_runs: {}, valid_runs: {}, within_target_runs: {}, detection_failures: {}, bias_g: {}, rms_g: {}, p95_g: {}, p95_upper_g: {} }},\n    recorded_drops: {},\n    recorded_worst_error_g: {},\n}};\n",
+        "pub const WEIGHING: WeighingConfig = WeighingConfig {{\n    method: {method},\n    counts_per_gram: {},\n    zero_counts: {},\n    noise_variance_counts2: {},\n    raw_noise_variance_counts2: {},\n    onset: OnsetConfig {{ min_empty_samples: {}, drift_sigma: {}, threshold_sigma: {}, guard_samples: {}, min_step_sigma: {}, min_noise_rms: {}, rail_low: {}, rail_high: {} }},\n    detection_lag_samples: {},\n    model: LoadCellModel {{ natural_frequency_hz: {}, damping_ratio: {}, filter_order: {}, filter_cutoff_hz: {}, counts_per_gram: {}, sample_rate_hz: {} }},\n    identified_counts_per_gram: {},\n    calibration_mass_g: {},\n    readout_s: {},\n    target_relative: {},\n    prediction: Prediction {{ runs: {}, planned_runs: {}, valid_runs: {}, within_target_runs: {}, detection_failures: {}, bias_g: {}, rms_g: {}, p95_g: {}, p95_upper_g: {} }},\n    recorded_drops: {},\n    recorded_worst_error_g: {},\n}};\n",
         f(config.counts_per_gram),
         f(config.zero_counts),
         f(config.noise_variance_counts2),
         f(config.raw_noise_variance_counts2),
-        f(config.rail_low_counts),
-        f(config.rail_high_counts),
+        config.onset.min_empty_samples,
+        f(config.onset.drift_sigma),
+        f(config.onset.threshold_sigma),
+        config.onset.guard_samples,
+        f(config.onset.min_step_sigma),
+        f(config.onset.min_noise_rms),
+        f(config.onset.rail_low),
+        f(config.onset.rail_high),
+        f(config.detection_lag_samples),
         f(m.natural_frequency_hz),
         f(m.damping_ratio),
         m.filter_order,

@@ -15,6 +15,7 @@ use crate::real::Real;
 use crate::step::{StepConfig, StepEstimator};
 
 use super::candidates::WeighingMethod;
+use super::onset::OnsetConfig;
 
 /// What the Monte Carlo of calibration predicts for a method at the readout time.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -60,10 +61,12 @@ pub struct WeighingConfig {
     pub noise_variance_counts2: f64,
     /// The same at `D = 1`, counts² (what the Monte Carlo's white noise is set from).
     pub raw_noise_variance_counts2: f64,
-    /// The converter's rails, counts: a code at or beyond either is saturated.
-    pub rail_low_counts: f64,
-    /// See `rail_low_counts`.
-    pub rail_high_counts: f64,
+    /// How the scale must find the landing of a load: the scores hold for the method started
+    /// anywhere from the landing itself to the onset this detection finds (both ends were
+    /// scored). Its rails are the converter's: a code at or beyond either is saturated.
+    pub onset: OnsetConfig,
+    /// Mean lag of that detected onset behind the landing in the synthetic drops, samples.
+    pub detection_lag_samples: f64,
     /// The load-cell model identified from the drops, with `counts_per_gram` set to the gain
     /// above (the model bank runs on it).
     pub model: LoadCellModel,
@@ -125,7 +128,7 @@ pub enum WeighingEstimator<T: Real, const N: usize, const S: usize, const K: usi
 
 impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<T, N, S, K> {
     /// The configured method for samples `code − zero_counts`; codes at or beyond the
-    /// config's rails are flagged `OutOfRange`.
+    /// config's rails (`onset.rail_low`, `onset.rail_high`) are flagged `OutOfRange`.
     pub fn new(config: &WeighingConfig, zero_counts: f64) -> Result<Self, ConfigError> {
         Self::with_method(config, &config.method, zero_counts)
     }
@@ -141,8 +144,8 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
         }
         // Integer codes: a code strictly between the rails is at least half a code inside.
         let (low, high) = (
-            T::from_f64(config.rail_low_counts + 0.5 - zero_counts),
-            T::from_f64(config.rail_high_counts - 0.5 - zero_counts),
+            T::from_f64(config.onset.rail_low + 0.5 - zero_counts),
+            T::from_f64(config.onset.rail_high - 0.5 - zero_counts),
         );
         let gain = T::from_f64(config.counts_per_gram);
         let step = |order: usize, decimation: u16, forgetting: f64| {
@@ -236,8 +239,8 @@ mod tests {
             zero_counts: 16_764.0,
             noise_variance_counts2: 1_060.0,
             raw_noise_variance_counts2: 1_050.0,
-            rail_low_counts: 0.0,
-            rail_high_counts: 65_535.0,
+            onset: OnsetConfig::new(4000.0).with_rails(0.0, 65_535.0),
+            detection_lag_samples: 10.0,
             model: LoadCellModel {
                 natural_frequency_hz: 25.0,
                 damping_ratio: 0.03,

@@ -197,7 +197,11 @@ pub(crate) struct Scoring {
 }
 
 /// Run `estimator` (reset before each run) over the prepared runs and summarise its errors
-/// at the readout. The slots come back sorted by run.
+/// at the readout. Each run is estimated twice, from the detected onset and from the landing
+/// itself (the two ends of where a scale may start it), and keeps the larger |error|: a
+/// model of too low an order can meet a target from one start and miss it by far from the
+/// other (host-sim's README: `n = 2, D = 32` on the reference cell). The slots come back
+/// sorted by run.
 pub(crate) fn score<T: Real, E: Estimator<T>, const S: usize>(
     estimator: &mut E,
     synthetic: &Synthetic<S>,
@@ -222,21 +226,33 @@ pub(crate) fn score<T: Real, E: Estimator<T>, const S: usize>(
             outside += 1;
             continue;
         }
-        estimator.reset();
-        let onset = slot.onset as usize;
-        let mut last = None;
-        if onset <= readout_index {
-            let key = run_key(seed, u64::from(slot.run));
-            let samples = synthetic
-                .samples(key, onset)
-                .take(readout_index + 1 - onset);
-            for y in samples {
-                last = estimator.push(T::from_f64(y - slot.zero)).estimate;
+        let key = run_key(seed, u64::from(slot.run));
+        let mut worst = Some(0.0f64);
+        for start in [slot.onset as usize, synthetic.empty] {
+            estimator.reset();
+            let mut last = None;
+            if start <= readout_index {
+                let samples = synthetic
+                    .samples(key, start)
+                    .take(readout_index + 1 - start);
+                for y in samples {
+                    last = estimator.push(T::from_f64(y - slot.zero)).estimate;
+                }
             }
+            worst = match (worst, last) {
+                (Some(error), Some(estimate)) if estimate.is_finite() => {
+                    let this = estimate.to_f64() - synthetic.mass_g;
+                    Some(if libm::fabs(this) > libm::fabs(error) {
+                        this
+                    } else {
+                        error
+                    })
+                }
+                _ => None,
+            };
         }
-        match last {
-            Some(estimate) if estimate.is_finite() => {
-                let error = estimate.to_f64() - synthetic.mass_g;
+        match worst {
+            Some(error) => {
                 slot.error_g = error;
                 valid += 1;
                 sum += error;
@@ -245,7 +261,7 @@ pub(crate) fn score<T: Real, E: Estimator<T>, const S: usize>(
                     outside += 1;
                 }
             }
-            _ => outside += 1,
+            None => outside += 1,
         }
     }
     let used = &mut slots[..done];
