@@ -11,7 +11,9 @@
 //! The core method is [`StepEstimator`], the data-driven estimator of Markovsky (2015) as
 //! analysed by Quintana-Carapia (2020), solved recursively in square-root information form.
 //! The model-based alternative is [`ModelEstimator`] / [`ModelBank`] on a [`LoadCellModel`]
-//! identified at calibration by [`identify()`](crate::identify::identify).
+//! identified at calibration by [`identify()`](crate::identify::identify). [`tuning`] turns a
+//! few recorded drops of a reference mass into the smallest configuration that meets an
+//! accuracy target ([`tuning::calibrate`], [`tuning::WeighingConfig`]).
 #![no_std]
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
@@ -40,6 +42,7 @@ mod real;
 pub mod scale;
 mod square;
 mod step;
+pub mod tuning;
 
 pub use adc::{AdcError, AdcSource};
 pub use baseline::{Baseline, BaselineConfig, BaselineMode};

@@ -7,7 +7,7 @@ use std::io::{BufRead, Write};
 use anyhow::{bail, Context, Result};
 use estimator_core::{InvalidReason, State};
 
-use crate::method::{BuildContext, Method};
+use crate::method::{BoxedEstimator, BuildContext, Method};
 
 /// How a reading's state is written in the CSV.
 pub fn state_name(state: State) -> &'static str {
@@ -34,7 +34,17 @@ pub fn estimate_csv(
     zero: f64,
     out: &mut impl Write,
 ) -> Result<()> {
-    let mut estimator = method.build(context)?;
+    estimate_with(method.build(context)?, input, name, zero, out)
+}
+
+/// [`estimate_csv`] with an estimator already built (e.g. a weighing configuration's).
+pub fn estimate_with(
+    mut estimator: BoxedEstimator,
+    input: impl BufRead,
+    name: &str,
+    zero: f64,
+    out: &mut impl Write,
+) -> Result<()> {
     let mut lines = input.lines();
     let header = match lines.next() {
         Some(line) => line.with_context(|| format!("{name}: cannot read the header"))?,

@@ -49,6 +49,8 @@ pub use simulated::{
 };
 
 #[cfg(feature = "std")]
+pub mod calibrate;
+#[cfg(feature = "std")]
 pub mod chart;
 #[cfg(feature = "std")]
 pub mod crlb;

@@ -8,6 +8,9 @@
 //! settled[:block=80][,K=10][,band_g=0.5][,precision=..]          wait until stable, then average
 //! moving[:block=80][,K=10][,band_g=0.5][,precision=..]           boxcar mean while stable
 //! ramp:n=5,D=16[,lambda=..][,lag_s=0][,precision=..]            affine-input estimator
+//! iv:n=7,D=12[,lambda=..][,precision=..]                         instrumental variables (delay n+1)
+//! bc:n=7,D=12[,lambda=..][,noise_var=..][,precision=..]          bias-compensated least squares
+//! model:D=8,K=33,span=0.68-1.3,fn_hz=25.0,zeta=0.03[,filter_hz=100]  bank on an identified model
 //! ```
 //!
 //! A spec is checked when it is parsed: an unknown method, key or value is an error that
@@ -28,15 +31,29 @@
 //! identified from calibration drops. The default calibration mass is 200 g, the known mass
 //! the firmware's factory calibration uses, so on the reference scene (138.32 g) the bank
 //! has to find a resonance 11% below the calibrated one.
+//!
+//! ## The `model` method on an identified model
+//! With `fn_hz` and `zeta` (what calibration identified, [`estimator_core::identify()`]), the
+//! candidates are the core's [`LoadCellModel`] (the mechanical mode in series with the known
+//! 3rd-order Butterworth at `filter_hz`, default the chain's) built by the physical law over
+//! `span` ([`LoadCellModel::bank_configs`]), initial state estimated: exactly the bank the
+//! firmware runs from a weighing config. `cal_g` does not apply (the identified model is
+//! already the one at the calibration mass).
+//!
+//! ## `bc` and its noise variance
+//! `noise_var` is the white-noise variance of one raw sample in raw units² as measured at
+//! tare ([`estimator_core::NoiseMeter`] at the method's D); without it the build context's
+//! `tare_noise_variance` is used, and without that the spec is refused.
 
 use std::fmt;
 use std::str::FromStr;
 
 use anyhow::{anyhow, bail, Result};
 use estimator_core::{
-    Baseline, BaselineConfig, BaselineMode, CovarianceStepEstimator, Estimator, ModelBank,
-    ModelConfig, RampConfig, RampEstimator, Reading, Real, SensorModel, StepConfig, StepEstimator,
-    MAX_DECIMATION,
+    Baseline, BaselineConfig, BaselineMode, BiasCompensatedConfig, BiasCompensatedStepEstimator,
+    CovarianceStepEstimator, Estimator, InitialState, IvConfig, IvStepEstimator, LoadCellModel,
+    ModelBank, ModelConfig, RampConfig, RampEstimator, Reading, Real, SensorModel, StepConfig,
+    StepEstimator, MAX_DECIMATION,
 };
 
 use crate::montecarlo::{Precision, Setup, CAPACITY};
@@ -64,6 +81,20 @@ pub struct ModelSpec {
     pub calibration_g: f64,
     /// Arithmetic.
     pub precision: Precision,
+    /// The model identified at calibration; `None`: the true model (host-sim's own chain).
+    pub identified: Option<IdentifiedModel>,
+}
+
+/// The identified mechanical mode a `model` bank is built from (the spec's `fn_hz`, `zeta`,
+/// `filter_hz`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IdentifiedModel {
+    /// Natural frequency with the calibration mass on, Hz.
+    pub natural_frequency_hz: f64,
+    /// Damping ratio with the calibration mass on.
+    pub damping_ratio: f64,
+    /// Cut-off of the known 3rd-order Butterworth, Hz.
+    pub filter_cutoff_hz: f64,
 }
 
 impl Default for ModelSpec {
@@ -76,6 +107,7 @@ impl Default for ModelSpec {
             span: (0.7, 1.3),
             calibration_g: 200.0,
             precision: Precision::F64,
+            identified: None,
         }
     }
 }
@@ -160,6 +192,15 @@ pub enum Method {
     Moving(BaselineSpec),
     /// `RampEstimator`.
     Ramp(RampSpec),
+    /// `IvStepEstimator`: instrumental variables, delay n + 1, the default floor.
+    InstrumentalVariable(Setup),
+    /// `BiasCompensatedStepEstimator`.
+    BiasCompensated {
+        /// Order, decimation, forgetting and precision.
+        setup: Setup,
+        /// Raw-sample noise variance, raw units²; `None`: the build context's.
+        noise_variance: Option<f64>,
+    },
 }
 
 /// What building a method needs to know about the data.
@@ -189,7 +230,10 @@ impl Method {
     /// The arithmetic the method computes in.
     pub fn precision(&self) -> Precision {
         match self {
-            Method::Step(setup) | Method::Covariance { setup, .. } => setup.precision,
+            Method::Step(setup)
+            | Method::Covariance { setup, .. }
+            | Method::InstrumentalVariable(setup)
+            | Method::BiasCompensated { setup, .. } => setup.precision,
             Method::Ramp(spec) => spec.setup.precision,
             Method::Model(spec) => spec.precision,
             Method::Settled(spec) | Method::Moving(spec) => spec.precision,
@@ -250,8 +294,50 @@ impl Method {
                 })
                 .map_err(core)?,
             ),
+            Method::InstrumentalVariable(setup) => Box::new(
+                IvStepEstimator::<T, CAPACITY>::new(IvConfig::new(step_config(setup, gain)))
+                    .map_err(core)?,
+            ),
+            Method::BiasCompensated {
+                setup,
+                noise_variance,
+            } => {
+                let Some(variance) = noise_variance.or(context.tare_noise_variance) else {
+                    bail!("no noise variance: give `noise_var` (raw units², measured at tare)");
+                };
+                Box::new(
+                    BiasCompensatedStepEstimator::<T, CAPACITY>::new(BiasCompensatedConfig::new(
+                        step_config(setup, gain),
+                        T::from_f64(variance),
+                    ))
+                    .map_err(core)?,
+                )
+            }
             Method::Settled(spec) => baseline::<T>(spec, BaselineMode::SettledAverage, gain)?,
             Method::Moving(spec) => baseline::<T>(spec, BaselineMode::MovingAverage, gain)?,
+            Method::Model(ModelSpec {
+                identified: Some(identified),
+                ..
+            }) => {
+                let ModelSpec {
+                    decimation,
+                    candidates,
+                    span,
+                    ..
+                } = match self {
+                    Method::Model(spec) => *spec,
+                    _ => unreachable!("matched above"),
+                };
+                let model = LoadCellModel {
+                    natural_frequency_hz: identified.natural_frequency_hz,
+                    damping_ratio: identified.damping_ratio,
+                    filter_order: (STATES - 2) as u8,
+                    filter_cutoff_hz: identified.filter_cutoff_hz,
+                    counts_per_gram: context.gain,
+                    sample_rate_hz: context.chain.sample_rate_hz,
+                };
+                identified_bank::<T>(&model, candidates, span, decimation)?
+            }
             Method::Model(spec) => {
                 let configs: Vec<ModelConfig<T, STATES>> =
                     model_candidates(&context.chain, context.gain, spec)?
@@ -320,6 +406,27 @@ fn model_bank<T: Real + Send + 'static>(
     ))
 }
 
+/// The core's physical bank of `candidates` models over `span` from an identified model.
+fn identified_bank<T: Real + Send + 'static>(
+    model: &LoadCellModel,
+    candidates: usize,
+    span: (f64, f64),
+    decimation: u16,
+) -> Result<Box<dyn Estimator<T> + Send>> {
+    let core = |e: estimator_core::ConfigError| anyhow!("{e}");
+    Ok(dispatch_const!(
+        candidates,
+        [1, 3, 5, 9, 17, 33, 65],
+        "candidate count K",
+        |K| {
+            let configs = model
+                .bank_configs::<T, STATES, K>(span.0, span.1, decimation, InitialState::Unknown)
+                .map_err(core)?;
+            Box::new(ModelBank::<T, STATES, K>::new(configs).map_err(core)?)
+        }
+    ))
+}
+
 fn convert_model<T: Real>(model: &SensorModel<f64, STATES>) -> SensorModel<T, STATES> {
     SensorModel {
         a: model.a.map(|row| row.map(T::from_f64)),
@@ -370,7 +477,7 @@ pub fn model_candidates(
 
 /// A core estimator computing in `f32` behind the `f64` interface: the sample is rounded to
 /// `f32` (after the caller removed the tare in `f64`), the reading widened exactly.
-struct InF32(Box<dyn Estimator<f32> + Send>);
+pub(crate) struct InF32(pub(crate) Box<dyn Estimator<f32> + Send>);
 
 fn widen(reading: Reading<f32>) -> Reading<f64> {
     Reading {
@@ -397,7 +504,7 @@ impl Estimator<f64> for InF32 {
 // The text form.
 
 /// Method names, for error messages.
-const METHODS: &str = "step, covariance, model, settled, moving, ramp";
+const METHODS: &str = "step, covariance, model, settled, moving, ramp, iv, bc";
 
 /// Every key any method knows, parsed and range-checked; a family then refuses the keys it
 /// does not take.
@@ -414,6 +521,10 @@ struct Fields {
     calibration_g: Option<f64>,
     block: Option<u16>,
     band_g: Option<f64>,
+    noise_variance: Option<f64>,
+    natural_frequency_hz: Option<f64>,
+    damping_ratio: Option<f64>,
+    filter_cutoff_hz: Option<f64>,
     /// Canonical names of the keys given, in order.
     given: Vec<&'static str>,
 }
@@ -528,6 +639,41 @@ impl Fields {
                     fields.band_g = Some(band);
                     "band_g"
                 }
+                "noise_var" => {
+                    let expected =
+                        "the raw-sample noise variance in raw units², finite and not negative";
+                    let variance: f64 = value.parse().map_err(|_| bad(expected))?;
+                    if !(variance.is_finite() && variance >= 0.0) {
+                        return Err(bad(expected));
+                    }
+                    fields.noise_variance = Some(variance);
+                    "noise_var"
+                }
+                "fn_hz" | "zeta" | "filter_hz" => {
+                    let expected = match key {
+                        "fn_hz" => "the identified natural frequency in Hz, positive",
+                        "zeta" => "the identified damping ratio, positive",
+                        _ => "the filter cut-off in Hz, positive",
+                    };
+                    let number: f64 = value.parse().map_err(|_| bad(expected))?;
+                    if !positive_finite(number) {
+                        return Err(bad(expected));
+                    }
+                    match key {
+                        "fn_hz" => {
+                            fields.natural_frequency_hz = Some(number);
+                            "fn_hz"
+                        }
+                        "zeta" => {
+                            fields.damping_ratio = Some(number);
+                            "zeta"
+                        }
+                        _ => {
+                            fields.filter_cutoff_hz = Some(number);
+                            "filter_hz"
+                        }
+                    }
+                }
                 other => bail!("method `{spec}`: unknown key `{other}`"),
             };
             if fields.given.contains(&canonical) {
@@ -589,7 +735,18 @@ impl FromStr for Method {
             None if !spec.contains('=') => (spec, ""),
             None => ("step", spec),
         };
-        if !["step", "covariance", "model", "settled", "moving", "ramp"].contains(&family) {
+        if ![
+            "step",
+            "covariance",
+            "model",
+            "settled",
+            "moving",
+            "ramp",
+            "iv",
+            "bc",
+        ]
+        .contains(&family)
+        {
             bail!("method `{spec}`: unknown method `{family}` (expected one of {METHODS})");
         }
         let fields = Fields::parse(spec, params)?;
@@ -613,19 +770,64 @@ impl FromStr for Method {
                     lag_s: fields.lag_s.unwrap_or(0.0),
                 })
             }
+            "iv" => {
+                fields.only(spec, family, &step_keys)?;
+                Method::InstrumentalVariable(fields.setup(spec, family)?)
+            }
+            "bc" => {
+                fields.only(
+                    spec,
+                    family,
+                    &["n", "D", "lambda", "precision", "noise_var"],
+                )?;
+                Method::BiasCompensated {
+                    setup: fields.setup(spec, family)?,
+                    noise_variance: fields.noise_variance,
+                }
+            }
             "model" => {
-                fields.only(spec, family, &["D", "K", "span", "cal_g", "precision"])?;
+                fields.only(
+                    spec,
+                    family,
+                    &[
+                        "D",
+                        "K",
+                        "span",
+                        "cal_g",
+                        "precision",
+                        "fn_hz",
+                        "zeta",
+                        "filter_hz",
+                    ],
+                )?;
                 let default = ModelSpec::default();
                 let candidates = fields.count.unwrap_or(default.candidates);
                 if !MODEL_CANDIDATES.contains(&candidates) {
                     bail!("method `{spec}`: key `K`: expected one of {MODEL_CANDIDATES:?} (candidate models), found `{candidates}`");
                 }
+                let identified = match (fields.natural_frequency_hz, fields.damping_ratio) {
+                    (Some(natural_frequency_hz), Some(damping_ratio)) => {
+                        if fields.calibration_g.is_some() {
+                            bail!("method `{spec}`: key `cal_g` does not apply to an identified model (fn_hz, zeta): it is the true model's calibration mass");
+                        }
+                        Some(IdentifiedModel {
+                            natural_frequency_hz,
+                            damping_ratio,
+                            filter_cutoff_hz: fields
+                                .filter_cutoff_hz
+                                .unwrap_or(crate::sensor::SensorChain::reference().filter_cutoff_hz),
+                        })
+                    }
+                    (None, None) if fields.filter_cutoff_hz.is_none() => None,
+                    _ => bail!("method `{spec}`: keys `fn_hz` and `zeta` go together (the identified model; `filter_hz` only with them)"),
+                };
                 Method::Model(ModelSpec {
                     decimation: fields.decimation.unwrap_or(default.decimation),
                     candidates,
                     span: fields.span.unwrap_or(default.span),
                     calibration_g: fields.calibration_g.unwrap_or(default.calibration_g),
                     precision: fields.precision.unwrap_or(default.precision),
+                    identified,
                 })
             }
             "settled" => Method::Settled(fields.baseline(spec, family)?),
@@ -681,10 +883,40 @@ impl fmt::Display for Method {
             Method::Model(spec) => {
                 write!(
                     f,
-                    "model:D={},K={},span={}-{},cal_g={}",
-                    spec.decimation, spec.candidates, spec.span.0, spec.span.1, spec.calibration_g
+                    "model:D={},K={},span={}-{}",
+                    spec.decimation, spec.candidates, spec.span.0, spec.span.1
                 )?;
+                match spec.identified {
+                    Some(identified) => {
+                        write!(
+                            f,
+                            ",fn_hz={},zeta={}",
+                            identified.natural_frequency_hz, identified.damping_ratio
+                        )?;
+                        if identified.filter_cutoff_hz
+                            != crate::sensor::SensorChain::reference().filter_cutoff_hz
+                        {
+                            write!(f, ",filter_hz={}", identified.filter_cutoff_hz)?;
+                        }
+                    }
+                    None => write!(f, ",cal_g={}", spec.calibration_g)?,
+                }
                 write_precision(f, spec.precision)
+            }
+            Method::InstrumentalVariable(setup) => {
+                f.write_str("iv:")?;
+                write_setup(f, setup)
+            }
+            Method::BiasCompensated {
+                setup,
+                noise_variance,
+            } => {
+                f.write_str("bc:")?;
+                write_setup(f, setup)?;
+                if let Some(variance) = noise_variance {
+                    write!(f, ",noise_var={variance}")?;
+                }
+                Ok(())
             }
             Method::Settled(spec) | Method::Moving(spec) => {
                 let family = if matches!(self, Method::Settled(_)) {
@@ -737,6 +969,11 @@ mod tests {
             "settled:block=80,K=10,band_g=0.2",
             "moving:block=40,K=20,band_g=0.05,precision=f32",
             "ramp:n=5,D=16,lag_s=0.0125",
+            "iv:n=4,D=12,precision=f32",
+            "bc:n=3,D=16,noise_var=1049.25",
+            "bc:n=3,D=16,lambda=0.99",
+            "model:D=8,K=33,span=0.68-1.3,fn_hz=25.00031,zeta=0.030001",
+            "model:D=4,K=9,span=0.9-1.1,fn_hz=20,zeta=0.05,filter_hz=50,precision=f32",
         ] {
             let method = parse(spec);
             assert_eq!(method.to_string(), spec);
@@ -784,6 +1021,17 @@ mod tests {
             ("step:n=7,n=5", ["`n`", "twice"]),
             ("step:n=7,foo=1", ["`foo`", "unknown key"]),
             ("step:n=7,D", ["key=value", "`D`"]),
+            ("model:fn_hz=25", ["`fn_hz` and `zeta`", "go together"]),
+            (
+                "model:fn_hz=25,zeta=0.03,cal_g=200",
+                ["`cal_g`", "does not apply"],
+            ),
+            ("model:fn_hz=-1,zeta=0.03", ["`fn_hz`", "positive"]),
+            ("bc:n=3,noise_var=-1", ["`noise_var`", "not negative"]),
+            (
+                "iv:n=3,noise_var=1",
+                ["`noise_var`", "expected n, D, lambda, precision"],
+            ),
         ];
         for (spec, needles) in cases {
             let message = error(spec);

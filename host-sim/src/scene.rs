@@ -448,6 +448,7 @@ mod tests {
             "two-items",
             "conveyor-ramp",
             "vibration",
+            "calibration-drop",
         ] {
             let scene = Scene::load(name).unwrap_or_else(|e| panic!("{name}: {e:#}"));
             assert!(scene.samples() > 0, "{name}");

@@ -8,8 +8,9 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use estimator_core::AdcSource;
+use host_sim::calibrate;
 use host_sim::chart;
-use host_sim::estimate::estimate_csv;
+use host_sim::estimate::{estimate_csv, estimate_with};
 use host_sim::method::{BuildContext, Method};
 use host_sim::montecarlo::{self, Precision, Setup, Study};
 use host_sim::scene::Scene;
@@ -35,6 +36,10 @@ enum Command {
         seed: u64,
         #[arg(long)]
         out: PathBuf,
+        /// White noise at this SNR instead of the scene's (dB, thesis eq. 4.39, relative to
+        /// the scene's SNR step).
+        #[arg(long)]
+        snr_db: Option<f64>,
     },
     /// Run one of the core's estimators over a CSV with a header and a column `y`; writes
     /// `k,estimate,state` to stdout (estimate empty while not valid). Give `--method SPEC`
@@ -43,28 +48,84 @@ enum Command {
     Estimate {
         #[arg(long)]
         input: PathBuf,
-        /// The estimator: step, covariance, model, settled, moving or ramp with its keys (see
-        /// host-sim/README.md).
+        /// A weighing configuration written by `calibrate`: runs exactly the configured
+        /// method as the firmware builds it, with its gain and zero (--zero overrides the zero).
+        #[arg(long, conflicts_with_all = ["method", "order", "forgetting", "decimation", "precision", "gain"])]
+        config: Option<PathBuf>,
+        /// The estimator: step, covariance, model, settled, moving, ramp, iv or bc with its
+        /// keys (see host-sim/README.md).
         #[arg(long, conflicts_with_all = ["order", "forgetting", "decimation", "precision"])]
         method: Option<Method>,
         /// Shorthand for `--method step:n=N,...`: model order n.
-        #[arg(long, required_unless_present = "method")]
+        #[arg(long, required_unless_present_any = ["method", "config"])]
         order: Option<usize>,
         /// Static gain: raw units of `y` per unit of the estimate (e.g. counts per gram).
-        #[arg(long)]
-        gain: f64,
+        #[arg(long, required_unless_present = "config")]
+        gain: Option<f64>,
         #[arg(long)]
         forgetting: Option<f64>,
         #[arg(long)]
         decimation: Option<u16>,
         #[arg(long)]
         precision: Option<Precision>,
-        /// Subtracted from every sample before the estimator (the tare, in raw units).
-        #[arg(long, default_value_t = 0.0)]
-        zero: f64,
+        /// Subtracted from every sample before the estimator (the tare, in raw units; default
+        /// 0, or the config's zero).
+        #[arg(long)]
+        zero: Option<f64>,
         /// The scene whose sensor chain the `model` method takes its dynamics from.
         #[arg(long, default_value = "reference-step")]
         scene: String,
+    },
+    /// Calibration as one command: from recorded drops of a known mass (CSVs with a column
+    /// `y`: an empty-pan stretch, then the drop), choose the smallest method that meets the
+    /// target at the readout time and write the weighing configuration (TOML). Each scored
+    /// candidate is logged on stderr; the choice and its figures on stdout.
+    Calibrate {
+        /// A recorded drop (repeat for each; 3 is typical).
+        #[arg(long = "drop", required = true)]
+        drops: Vec<PathBuf>,
+        /// The known mass dropped, g.
+        #[arg(long)]
+        mass_g: f64,
+        /// Readout time after the mass lands, ms.
+        #[arg(long, default_value_t = 100.0)]
+        readout_ms: f64,
+        /// Accuracy target at the readout, % of the mass (95th percentile of |error|).
+        #[arg(long, default_value_t = 0.1)]
+        target_pct: f64,
+        /// Static gain to use; default: derived from the drops (the identified model's fitted
+        /// step over the known mass).
+        #[arg(long)]
+        counts_per_gram: Option<f64>,
+        /// Where the configuration goes.
+        #[arg(long)]
+        out: PathBuf,
+        /// Sample rate of the recordings, Hz.
+        #[arg(long, default_value_t = 4000.0)]
+        sample_rate_hz: f64,
+        /// Cut-off of the known 3rd-order Butterworth anti-alias filter, Hz.
+        #[arg(long, default_value_t = 100.0)]
+        filter_hz: f64,
+        /// Converter resolution (codes at 0 or 2^bits − 1 are saturated).
+        #[arg(long, default_value_t = 16)]
+        adc_bits: u32,
+        /// Synthetic drops per candidate (at least 59).
+        #[arg(long, default_value_t = 400)]
+        runs: usize,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Arithmetic the candidates are scored in (the firmware runs f32).
+        #[arg(long, default_value = "f32")]
+        precision: Precision,
+        /// Largest model order n tried.
+        #[arg(long, default_value_t = 8)]
+        max_order: usize,
+        /// Score every candidate, not only up to the first that meets the target.
+        #[arg(long)]
+        all: bool,
+        /// Also print the configuration as a Rust constant (for a firmware build script).
+        #[arg(long)]
+        rust: bool,
     },
     /// Monte Carlo of the core on a scene: CSV per SNR, configuration and sample index.
     Montecarlo {
@@ -184,8 +245,16 @@ fn create(path: &PathBuf) -> Result<BufWriter<File>> {
 
 fn main() -> Result<()> {
     match Cli::parse().command {
-        Command::Simulate { scene, seed, out } => {
-            let scene = Scene::load(&scene)?;
+        Command::Simulate {
+            scene,
+            seed,
+            out,
+            snr_db,
+        } => {
+            let mut scene = Scene::load(&scene)?;
+            if let Some(snr_db) = snr_db {
+                scene = scene.with_snr_db(snr_db);
+            }
             let mut adc = scene.adc(seed);
             let mut file = create(&out)?;
             writeln!(file, "t,y,truth")?;
@@ -208,6 +277,29 @@ fn main() -> Result<()> {
         }
         Command::Estimate {
             input,
+            config: Some(config),
+            zero,
+            ..
+        } => {
+            let (config, precision) = calibrate::load_config(&config)?;
+            let zero = zero.unwrap_or(config.zero_counts);
+            let estimator = calibrate::configured_estimator(&config, precision, zero)?;
+            let file =
+                File::open(&input).with_context(|| format!("cannot open {}", input.display()))?;
+            let stdout = std::io::stdout();
+            let mut out = BufWriter::new(stdout.lock());
+            estimate_with(
+                estimator,
+                BufReader::new(file),
+                &input.display().to_string(),
+                zero,
+                &mut out,
+            )?;
+            out.flush()?;
+        }
+        Command::Estimate {
+            input,
+            config: None,
             method,
             order,
             gain,
@@ -227,6 +319,8 @@ fn main() -> Result<()> {
                 }),
                 (None, None) => anyhow::bail!("give --method SPEC or --order N"),
             };
+            let gain = gain.context("give --gain (or --config)")?;
+            let zero = zero.unwrap_or(0.0);
             let context = BuildContext::new(Scene::load(&scene)?.chain, gain);
             let file =
                 File::open(&input).with_context(|| format!("cannot open {}", input.display()))?;
@@ -241,6 +335,56 @@ fn main() -> Result<()> {
                 &mut out,
             )?;
             out.flush()?;
+        }
+        Command::Calibrate {
+            drops,
+            mass_g,
+            readout_ms,
+            target_pct,
+            counts_per_gram,
+            out,
+            sample_rate_hz,
+            filter_hz,
+            adc_bits,
+            runs,
+            seed,
+            precision,
+            max_order,
+            all,
+            rust,
+        } => {
+            let options = calibrate::Options {
+                readout_s: readout_ms * 1e-3,
+                target_relative: target_pct * 1e-2,
+                counts_per_gram,
+                sample_rate_hz,
+                filter_cutoff_hz: filter_hz,
+                adc_bits,
+                runs,
+                seed,
+                precision,
+                evaluate_all: all,
+                max_order,
+                ..calibrate::Options::new(drops.clone(), mass_g)
+            };
+            let names: Vec<String> = drops.iter().map(|p| p.display().to_string()).collect();
+            eprintln!(
+                "calibrate: {} drops of {mass_g} g, target {target_pct}% at {readout_ms} ms, {runs} synthetic drops per candidate, {precision:?}",
+                drops.len()
+            );
+            let outcome = calibrate::calibrate_files(&options, |score| {
+                eprintln!(
+                    "{}",
+                    calibrate::score_line(score, mass_g, options.target_relative)
+                );
+            })?;
+            let command: Vec<String> = std::env::args().collect();
+            let text = calibrate::to_toml(&outcome, &names, &command.join(" "));
+            calibrate::write_file(&out, &text)?;
+            print_calibration(&outcome, &options, &out);
+            if rust {
+                println!("{}", calibrate::rust_const(&outcome.calibrated.config));
+            }
         }
         Command::Montecarlo {
             scene,
@@ -369,6 +513,65 @@ fn main() -> Result<()> {
         }
     }
     Ok(())
+}
+
+fn print_calibration(
+    outcome: &calibrate::Outcome,
+    options: &calibrate::Options,
+    out: &std::path::Path,
+) {
+    let c = &outcome.calibrated;
+    let config = &c.config;
+    let mass = options.mass_g;
+    let p = &config.prediction;
+    let model = &c.identified.model;
+    println!(
+        "identified: f_n {:.4} Hz, zeta {:.5}, gain {:.5} counts/g (fit residual {:.2} counts); noise sigma {:.3} counts ({:.4} g)",
+        model.natural_frequency_hz,
+        model.damping_ratio,
+        config.identified_counts_per_gram,
+        c.identified.noise_rms,
+        config.raw_noise_variance_counts2.sqrt(),
+        config.raw_noise_variance_counts2.sqrt() / config.counts_per_gram
+    );
+    for (index, summary) in c.drops.iter().flatten().enumerate() {
+        println!(
+            "  drop {index}: onset at sample {} ({:.4} s), zero {:.3} counts, noise sigma {:.3} counts",
+            summary.onset,
+            summary.onset as f64 / options.sample_rate_hz,
+            summary.zero,
+            summary.noise_variance.sqrt()
+        );
+    }
+    println!(
+        "chosen: {} (candidate {} of the ordered list; {} scored)",
+        config.method, c.chosen.index, c.evaluated
+    );
+    println!(
+        "  predicted at {} ms over {} synthetic drops: RMS {:.4} g ({:.4}%), 95th percentile {:.4} g ({:.4}%), upper bound {:.4} g ({:.4}%) <= target {:.4} g ({}%)",
+        options.readout_s * 1e3,
+        p.runs,
+        p.rms_g,
+        p.rms_g / mass * 100.0,
+        p.p95_g,
+        p.p95_g / mass * 100.0,
+        p.p95_upper_g,
+        p.p95_upper_g / mass * 100.0,
+        options.target_relative * mass,
+        options.target_relative * 100.0
+    );
+    if let Some(check) = &c.chosen.recorded {
+        let errors: Vec<String> = check.errors_g[..check.drops as usize]
+            .iter()
+            .map(|e| format!("{e:+.4} g"))
+            .collect();
+        println!("  recorded drops: {}", errors.join(", "));
+    }
+    println!(
+        "wrote {} (calibration took {:.2} s)",
+        out.display(),
+        outcome.elapsed_s
+    );
 }
 
 fn table(runs: usize, seed: u64, snr_db: f64, readout_s: f64) -> Result<()> {

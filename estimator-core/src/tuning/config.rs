@@ -1,0 +1,387 @@
+//! What calibration writes and the scale runs: [`WeighingConfig`] (the chosen method, the
+//! scale's constants, the identified model and what calibration measured) and
+//! [`WeighingEstimator`] (the configured method as one [`Estimator`]).
+//!
+//! The config is a plain `no_std` struct of numbers and enums, so a build script can turn
+//! host-sim's TOML into a `const WeighingConfig` and the firmware build
+//! `WeighingEstimator::<f32, N, 5, K>::new(&CONFIG, zero)` from it: no parsing on target.
+
+use crate::bias_compensated::{BiasCompensatedConfig, BiasCompensatedStepEstimator};
+use crate::iv::{IvConfig, IvStepEstimator};
+use crate::loadcell::LoadCellModel;
+use crate::model::{InitialState, ModelBank};
+use crate::reading::{ConfigError, Estimator, Reading};
+use crate::real::Real;
+use crate::step::{StepConfig, StepEstimator};
+
+use super::candidates::WeighingMethod;
+use super::onset::OnsetConfig;
+
+/// What the Monte Carlo of calibration predicts for a method at the readout time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Prediction {
+    /// Synthetic drops run (fewer than planned when the method was stopped early).
+    pub runs: u32,
+    /// Synthetic drops planned.
+    pub planned_runs: u32,
+    /// Runs with a valid reading at the readout.
+    pub valid_runs: u32,
+    /// Runs whose reading was valid and within the target.
+    pub within_target_runs: u32,
+    /// Runs in which the onset detection failed (counted as outside the target).
+    pub detection_failures: u32,
+    /// Mean error over the valid runs, g.
+    pub bias_g: f64,
+    /// RMS error over the valid runs, g.
+    pub rms_g: f64,
+    /// The 95th percentile of |error| over the runs (an invalid reading counts as an
+    /// infinite error), g.
+    pub p95_g: f64,
+    /// A distribution-free upper 95% confidence bound on that percentile (an order
+    /// statistic; see [`super::synthetic::upper_order_statistic`]); infinite when the
+    /// method was stopped early.
+    pub p95_upper_g: f64,
+}
+
+/// The weighing configuration calibration writes and the scale reads.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct WeighingConfig {
+    /// The method the scale runs.
+    pub method: WeighingMethod,
+    /// Static gain used by the method, counts per gram (given, or the identified one).
+    pub counts_per_gram: f64,
+    /// Empty-pan code at calibration (mean over the drops' empty stretches), counts. The
+    /// scale re-tares; this is the value to start from.
+    pub zero_counts: f64,
+    /// White noise of one raw sample measured on the empty stretches with block means of the
+    /// method's `D` ([`crate::NoiseMeter`]: the raw-rate variance the block means see),
+    /// counts². The bias-compensated method uses it.
+    pub noise_variance_counts2: f64,
+    /// The same at `D = 1`, counts² (what the Monte Carlo's white noise is set from).
+    pub raw_noise_variance_counts2: f64,
+    /// How the scale must find the landing of a load: the scores hold for the method started
+    /// anywhere from the landing itself to the onset this detection finds (both ends were
+    /// scored). Its rails are the converter's: a code at or beyond either is saturated.
+    pub onset: OnsetConfig,
+    /// Mean lag of that detected onset behind the landing in the synthetic drops, samples.
+    pub detection_lag_samples: f64,
+    /// The load-cell model identified from the drops, with `counts_per_gram` set to the gain
+    /// above (the model bank runs on it).
+    pub model: LoadCellModel,
+    /// The static gain the drops themselves showed (the identified model's fitted step over
+    /// the known mass), counts per gram.
+    pub identified_counts_per_gram: f64,
+    /// The known mass of the calibration drops, g.
+    pub calibration_mass_g: f64,
+    /// Readout time after the landing of the mass, s.
+    pub readout_s: f64,
+    /// Accuracy target at the readout, relative (0.001 = 0.1%).
+    pub target_relative: f64,
+    /// The Monte Carlo's prediction for the method at the readout.
+    pub prediction: Prediction,
+    /// Recorded drops the method was confirmed on.
+    pub recorded_drops: u32,
+    /// The largest |error| at the readout over the recorded drops, g.
+    pub recorded_worst_error_g: f64,
+}
+
+impl WeighingConfig {
+    /// The sample rate of the method, Hz (that of the identified model).
+    pub fn sample_rate_hz(&self) -> f64 {
+        self.model.sample_rate_hz
+    }
+
+    /// The readout as a sample index after the onset: `round(readout_s · f_s)`.
+    pub fn readout_samples(&self) -> usize {
+        readout_samples(self.readout_s, self.model.sample_rate_hz)
+    }
+}
+
+/// `round(readout_s · f_s)`, zero when not finite or negative.
+pub(crate) fn readout_samples(readout_s: f64, sample_rate_hz: f64) -> usize {
+    let samples = libm::round(readout_s * sample_rate_hz);
+    if samples.is_finite() && samples > 0.0 {
+        samples as usize
+    } else {
+        0
+    }
+}
+
+/// The configured method as one estimator over samples with the zero removed, answering in
+/// grams. Capacity `N` for the data-driven methods, `S` states and `K` candidates for the
+/// bank (`K` must equal the configured candidate count).
+#[derive(Clone, Debug)]
+// One per scale, built once: the bank variant's size is the point of choosing a smaller one.
+#[allow(clippy::large_enum_variant)]
+pub enum WeighingEstimator<T: Real, const N: usize, const S: usize, const K: usize> {
+    /// [`WeighingMethod::Step`].
+    Step(StepEstimator<T, N>),
+    /// [`WeighingMethod::BiasCompensated`].
+    BiasCompensated(BiasCompensatedStepEstimator<T, N>),
+    /// [`WeighingMethod::InstrumentalVariable`].
+    InstrumentalVariable(IvStepEstimator<T, N>),
+    /// [`WeighingMethod::ModelBank`].
+    ModelBank(ModelBank<T, S, K>),
+}
+
+impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<T, N, S, K> {
+    /// The configured method for samples `code − zero_counts`; codes at or beyond the
+    /// config's rails (`onset.rail_low`, `onset.rail_high`) are flagged `OutOfRange`.
+    pub fn new(config: &WeighingConfig, zero_counts: f64) -> Result<Self, ConfigError> {
+        Self::with_method(config, &config.method, zero_counts)
+    }
+
+    /// Any method with the constants of `config` (calibration uses it to try candidates).
+    pub fn with_method(
+        config: &WeighingConfig,
+        method: &WeighingMethod,
+        zero_counts: f64,
+    ) -> Result<Self, ConfigError> {
+        if !zero_counts.is_finite() {
+            return Err(ConfigError::Range);
+        }
+        // Integer codes: a code strictly between the rails is at least half a code inside.
+        let (low, high) = (
+            T::from_f64(config.onset.rail_low + 0.5 - zero_counts),
+            T::from_f64(config.onset.rail_high - 0.5 - zero_counts),
+        );
+        let gain = T::from_f64(config.counts_per_gram);
+        let step = |order: usize, decimation: u16, forgetting: f64| {
+            StepConfig::new(order, gain)
+                .with_decimation(decimation)
+                .with_forgetting(T::from_f64(forgetting))
+                .with_valid_range(low, high)
+        };
+        Ok(match *method {
+            WeighingMethod::Step {
+                order,
+                decimation,
+                forgetting,
+            } => Self::Step(StepEstimator::new(step(order, decimation, forgetting))?),
+            WeighingMethod::BiasCompensated { order, decimation } => Self::BiasCompensated(
+                BiasCompensatedStepEstimator::new(BiasCompensatedConfig::new(
+                    step(order, decimation, 1.0),
+                    T::from_f64(config.noise_variance_counts2),
+                ))?,
+            ),
+            WeighingMethod::InstrumentalVariable { order, decimation } => {
+                Self::InstrumentalVariable(IvStepEstimator::new(IvConfig::new(step(
+                    order, decimation, 1.0,
+                )))?)
+            }
+            WeighingMethod::ModelBank {
+                decimation,
+                candidates,
+                ratio_min,
+                ratio_max,
+            } => {
+                if candidates != K {
+                    return Err(ConfigError::Model);
+                }
+                let mut model = config.model;
+                model.counts_per_gram = config.counts_per_gram;
+                let configs = model
+                    .bank_configs::<T, S, K>(
+                        ratio_min,
+                        ratio_max,
+                        decimation,
+                        InitialState::Unknown,
+                    )?
+                    .map(|c| c.with_valid_range(low, high));
+                Self::ModelBank(ModelBank::new(configs)?)
+            }
+        })
+    }
+}
+
+impl<T: Real, const N: usize, const S: usize, const K: usize> Estimator<T>
+    for WeighingEstimator<T, N, S, K>
+{
+    fn push(&mut self, sample: T) -> Reading<T> {
+        match self {
+            Self::Step(e) => e.push(sample),
+            Self::BiasCompensated(e) => e.push(sample),
+            Self::InstrumentalVariable(e) => e.push(sample),
+            Self::ModelBank(e) => e.push(sample),
+        }
+    }
+
+    fn push_missing(&mut self) -> Reading<T> {
+        match self {
+            Self::Step(e) => e.push_missing(),
+            Self::BiasCompensated(e) => e.push_missing(),
+            Self::InstrumentalVariable(e) => e.push_missing(),
+            Self::ModelBank(e) => e.push_missing(),
+        }
+    }
+
+    fn reset(&mut self) {
+        match self {
+            Self::Step(e) => e.reset(),
+            Self::BiasCompensated(e) => e.reset(),
+            Self::InstrumentalVariable(e) => e.reset(),
+            Self::ModelBank(e) => e.reset(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::reading::{InvalidReason, State};
+
+    fn config(method: WeighingMethod) -> WeighingConfig {
+        WeighingConfig {
+            method,
+            counts_per_gram: 73.25,
+            zero_counts: 16_764.0,
+            noise_variance_counts2: 1_060.0,
+            raw_noise_variance_counts2: 1_050.0,
+            onset: OnsetConfig::new(4000.0).with_rails(0.0, 65_535.0),
+            detection_lag_samples: 10.0,
+            model: LoadCellModel {
+                natural_frequency_hz: 25.0,
+                damping_ratio: 0.03,
+                filter_order: 3,
+                filter_cutoff_hz: 100.0,
+                counts_per_gram: 73.25,
+                sample_rate_hz: 4000.0,
+            },
+            identified_counts_per_gram: 73.25,
+            calibration_mass_g: 138.32,
+            readout_s: 0.1,
+            target_relative: 0.001,
+            prediction: Prediction {
+                runs: 0,
+                planned_runs: 0,
+                valid_runs: 0,
+                within_target_runs: 0,
+                detection_failures: 0,
+                bias_g: 0.0,
+                rms_g: 0.0,
+                p95_g: 0.0,
+                p95_upper_g: 0.0,
+            },
+            recorded_drops: 0,
+            recorded_worst_error_g: 0.0,
+        }
+    }
+
+    /// Counts (zero removed) of a noisy drop of the reference cell.
+    fn samples() -> [f64; 600] {
+        let model = config(WeighingMethod::Step {
+            order: 1,
+            decimation: 1,
+            forgetting: 1.0,
+        })
+        .model
+        .sensor_model::<f64, 5>()
+        .unwrap();
+        let synthetic = super::super::synthetic::Synthetic {
+            model,
+            mass_g: 138.32,
+            sigma: 32.6,
+            empty: 0,
+            length: 600,
+        };
+        let mut out = [0.0; 600];
+        for (slot, y) in out.iter_mut().zip(synthetic.samples(5, 0)) {
+            *slot = y;
+        }
+        out
+    }
+
+    fn same<A: Estimator<f32>, B: Estimator<f32>>(mut a: A, mut b: B) {
+        for &y in samples().iter() {
+            assert_eq!(a.push(y as f32), b.push(y as f32));
+        }
+    }
+
+    #[test]
+    fn each_method_is_the_core_type_with_the_configured_settings() {
+        let zero = 16_764.0;
+        let (low, high) = (0.5 - zero, 65_534.5 - zero);
+        let step = |order, decimation, forgetting: f32| {
+            StepConfig::new(order, 73.25f32)
+                .with_decimation(decimation)
+                .with_forgetting(forgetting)
+                .with_valid_range(low as f32, high as f32)
+        };
+        let method = WeighingMethod::Step {
+            order: 2,
+            decimation: 32,
+            forgetting: 0.9,
+        };
+        same(
+            WeighingEstimator::<f32, 8, 5, 3>::new(&config(method), zero).unwrap(),
+            StepEstimator::<f32, 8>::new(step(2, 32, 0.9)).unwrap(),
+        );
+        let method = WeighingMethod::BiasCompensated {
+            order: 3,
+            decimation: 16,
+        };
+        same(
+            WeighingEstimator::<f32, 8, 5, 3>::new(&config(method), zero).unwrap(),
+            BiasCompensatedStepEstimator::<f32, 8>::new(BiasCompensatedConfig::new(
+                step(3, 16, 1.0),
+                1_060.0,
+            ))
+            .unwrap(),
+        );
+        let method = WeighingMethod::InstrumentalVariable {
+            order: 2,
+            decimation: 24,
+        };
+        same(
+            WeighingEstimator::<f32, 8, 5, 3>::new(&config(method), zero).unwrap(),
+            IvStepEstimator::<f32, 8>::new(IvConfig::new(step(2, 24, 1.0))).unwrap(),
+        );
+        let method = WeighingMethod::ModelBank {
+            decimation: 8,
+            candidates: 3,
+            ratio_min: 0.9,
+            ratio_max: 1.1,
+        };
+        let configs = config(method)
+            .model
+            .bank_configs::<f32, 5, 3>(0.9, 1.1, 8, InitialState::Unknown)
+            .unwrap()
+            .map(|c| c.with_valid_range(low as f32, high as f32));
+        same(
+            WeighingEstimator::<f32, 8, 5, 3>::new(&config(method), zero).unwrap(),
+            ModelBank::new(configs).unwrap(),
+        );
+        // A bank of another size than the type's is refused, not truncated.
+        assert_eq!(
+            WeighingEstimator::<f32, 8, 5, 5>::new(&config(method), zero).err(),
+            Some(ConfigError::Model)
+        );
+        assert_eq!(
+            WeighingEstimator::<f32, 8, 5, 3>::new(&config(method), f64::NAN).err(),
+            Some(ConfigError::Range)
+        );
+    }
+
+    #[test]
+    fn a_code_at_a_rail_is_flagged() {
+        let method = WeighingMethod::Step {
+            order: 2,
+            decimation: 1,
+            forgetting: 1.0,
+        };
+        let zero = 16_764.0;
+        let mut estimator = WeighingEstimator::<f64, 8, 5, 1>::new(&config(method), zero).unwrap();
+        assert_eq!(estimator.push(65_534.0 - zero).state, State::WarmingUp);
+        assert_eq!(
+            estimator.push(65_535.0 - zero).state,
+            State::Invalid(InvalidReason::OutOfRange)
+        );
+        estimator.reset();
+        assert_eq!(
+            estimator.push(0.0 - zero).state,
+            State::Invalid(InvalidReason::OutOfRange)
+        );
+    }
+}
