@@ -8,6 +8,8 @@
 //! settled[:block=80][,K=10][,band_g=0.5][,precision=..]          wait until stable, then average
 //! moving[:block=80][,K=10][,band_g=0.5][,precision=..]           boxcar mean while stable
 //! ramp:n=5,D=16[,lambda=..][,lag_s=0][,precision=..]            affine-input estimator
+//! iv:n=7,D=16[,delay=n+1][,lambda=..][,precision=..]            instrumental variables
+//! bc:n=7,D=16[,lambda=..][,precision=..]      bias-compensated LS, σ² from the tare
 //! ```
 //!
 //! A spec is checked when it is parsed: an unknown method, key or value is an error that
@@ -34,9 +36,10 @@ use std::str::FromStr;
 
 use anyhow::{anyhow, bail, Result};
 use estimator_core::{
-    Baseline, BaselineConfig, BaselineMode, CovarianceStepEstimator, Estimator, ModelBank,
-    ModelConfig, RampConfig, RampEstimator, Reading, Real, SensorModel, StepConfig, StepEstimator,
-    MAX_DECIMATION,
+    max_instrument_delay, Baseline, BaselineConfig, BaselineMode, BiasCompensatedConfig,
+    BiasCompensatedStepEstimator, CovarianceStepEstimator, Estimator, IvConfig, IvStepEstimator,
+    ModelBank, ModelConfig, NoiseMeter, RampConfig, RampEstimator, Reading, Real, SensorModel,
+    StepConfig, StepEstimator, MAX_DECIMATION,
 };
 
 use crate::montecarlo::{Precision, Setup, CAPACITY};
@@ -160,6 +163,16 @@ pub enum Method {
     Moving(BaselineSpec),
     /// `RampEstimator`.
     Ramp(RampSpec),
+    /// `IvStepEstimator`: instrumental variables, instruments delayed by `delay` decimated
+    /// rows (`None`: the core's default, `n + 1`).
+    Iv {
+        /// Order, decimation, forgetting and precision.
+        setup: Setup,
+        /// Instrument delay in decimated rows.
+        delay: Option<usize>,
+    },
+    /// `BiasCompensatedStepEstimator`, σ² from [`BuildContext::tare_noise_variance`].
+    Bc(Setup),
 }
 
 /// What building a method needs to know about the data.
@@ -190,6 +203,7 @@ impl Method {
     pub fn precision(&self) -> Precision {
         match self {
             Method::Step(setup) | Method::Covariance { setup, .. } => setup.precision,
+            Method::Iv { setup, .. } | Method::Bc(setup) => setup.precision,
             Method::Ramp(spec) => spec.setup.precision,
             Method::Model(spec) => spec.precision,
             Method::Settled(spec) | Method::Moving(spec) => spec.precision,
@@ -200,6 +214,16 @@ impl Method {
     pub fn step_setup(&self) -> Option<&Setup> {
         match self {
             Method::Step(setup) => Some(setup),
+            _ => None,
+        }
+    }
+
+    /// The block length a tare measurement must be metered at for this method (the
+    /// bias-compensated estimator's `D`; see `estimator_core::NoiseMeter`), `None` for the
+    /// methods that take no tare noise.
+    pub fn tare_decimation(&self) -> Option<u16> {
+        match self {
+            Method::Bc(setup) => Some(setup.decimation),
             _ => None,
         }
     }
@@ -250,6 +274,25 @@ impl Method {
                 })
                 .map_err(core)?,
             ),
+            Method::Iv { setup, delay } => {
+                let mut config = IvConfig::new(step_config(setup, gain));
+                if let Some(delay) = delay {
+                    config = config.with_instrument_delay(*delay);
+                }
+                Box::new(IvStepEstimator::<T, CAPACITY>::new(config).map_err(core)?)
+            }
+            Method::Bc(setup) => {
+                let Some(variance) = context.tare_noise_variance else {
+                    bail!("needs the noise variance measured at tare (raw units²), and none was given (`estimate --tare-variance V`)");
+                };
+                Box::new(
+                    BiasCompensatedStepEstimator::<T, CAPACITY>::new(BiasCompensatedConfig::new(
+                        step_config(setup, gain),
+                        T::from_f64(variance),
+                    ))
+                    .map_err(core)?,
+                )
+            }
             Method::Settled(spec) => baseline::<T>(spec, BaselineMode::SettledAverage, gain)?,
             Method::Moving(spec) => baseline::<T>(spec, BaselineMode::MovingAverage, gain)?,
             Method::Model(spec) => {
@@ -269,7 +312,18 @@ impl Method {
     }
 }
 
-fn step_config<T: Real>(setup: &Setup, gain: T) -> StepConfig<T> {
+/// The raw-rate noise variance (raw units²) that `NoiseMeter` measures over an empty-pan
+/// `record` (tare removed or not) at block length `decimation`, as the firmware meters it
+/// before a weighing; `None` when the record is too short for two differences.
+pub fn measured_tare_variance(record: &[f64], decimation: u16) -> Option<f64> {
+    let mut meter = NoiseMeter::<f64>::new(decimation).ok()?;
+    for &sample in record {
+        meter.push(sample).ok()?;
+    }
+    meter.noise_variance()
+}
+
+pub(crate) fn step_config<T: Real>(setup: &Setup, gain: T) -> StepConfig<T> {
     StepConfig::new(setup.order, gain)
         .with_forgetting(T::from_f64(setup.forgetting))
         .with_decimation(setup.decimation)
@@ -400,7 +454,7 @@ impl Estimator<f64> for InF32 {
 // The text form.
 
 /// Method names, for error messages.
-const METHODS: &str = "step, covariance, model, settled, moving, ramp";
+const METHODS: &str = "step, covariance, model, settled, moving, ramp, iv, bc";
 
 /// Every key any method knows, parsed and range-checked; a family then refuses the keys it
 /// does not take.
@@ -417,6 +471,7 @@ struct Fields {
     calibration_g: Option<f64>,
     block: Option<u16>,
     band_g: Option<f64>,
+    delay: Option<usize>,
     /// Canonical names of the keys given, in order.
     given: Vec<&'static str>,
 }
@@ -531,6 +586,11 @@ impl Fields {
                     fields.band_g = Some(band);
                     "band_g"
                 }
+                "delay" => {
+                    let expected = "an instrument delay in decimated rows, at least n + 1";
+                    fields.delay = Some(value.parse().map_err(|_| bad(expected))?);
+                    "delay"
+                }
                 other => bail!("method `{spec}`: unknown key `{other}`"),
             };
             if fields.given.contains(&canonical) {
@@ -592,7 +652,18 @@ impl FromStr for Method {
             None if !spec.contains('=') => (spec, ""),
             None => ("step", spec),
         };
-        if !["step", "covariance", "model", "settled", "moving", "ramp"].contains(&family) {
+        if ![
+            "step",
+            "covariance",
+            "model",
+            "settled",
+            "moving",
+            "ramp",
+            "iv",
+            "bc",
+        ]
+        .contains(&family)
+        {
             bail!("method `{spec}`: unknown method `{family}` (expected one of {METHODS})");
         }
         let fields = Fields::parse(spec, params)?;
@@ -630,6 +701,27 @@ impl FromStr for Method {
                     calibration_g: fields.calibration_g.unwrap_or(default.calibration_g),
                     precision: fields.precision.unwrap_or(default.precision),
                 })
+            }
+            "iv" => {
+                fields.only(spec, family, &["n", "D", "lambda", "precision", "delay"])?;
+                let setup = fields.setup(spec, family)?;
+                if let Some(delay) = fields.delay {
+                    // The core's range (iv.rs): no shared noise sample from n + 1 rows on; the
+                    // history ring bounds it above.
+                    let (low, high) =
+                        (setup.order + 1, max_instrument_delay(CAPACITY, setup.order));
+                    if !(low..=high).contains(&delay) {
+                        bail!("method `{spec}`: key `delay`: expected an instrument delay from {low} (n + 1) to {high} decimated rows, found `{delay}`");
+                    }
+                }
+                Method::Iv {
+                    setup,
+                    delay: fields.delay,
+                }
+            }
+            "bc" => {
+                fields.only(spec, family, &step_keys)?;
+                Method::Bc(fields.setup(spec, family)?)
             }
             "settled" => Method::Settled(fields.baseline(spec, family)?),
             "moving" => Method::Moving(fields.baseline(spec, family)?),
@@ -680,6 +772,18 @@ impl fmt::Display for Method {
                     write!(f, ",lag_s={}", spec.lag_s)?;
                 }
                 Ok(())
+            }
+            Method::Iv { setup, delay } => {
+                f.write_str("iv:")?;
+                write_setup(f, setup)?;
+                if let Some(delay) = delay {
+                    write!(f, ",delay={delay}")?;
+                }
+                Ok(())
+            }
+            Method::Bc(setup) => {
+                f.write_str("bc:")?;
+                write_setup(f, setup)
             }
             Method::Model(spec) => {
                 write!(
@@ -740,6 +844,9 @@ mod tests {
             "settled:block=80,K=10,band_g=0.2",
             "moving:block=40,K=20,band_g=0.05,precision=f32",
             "ramp:n=5,D=16,lag_s=0.0125",
+            "iv:n=7,D=16",
+            "iv:n=5,D=1,lambda=0.999,precision=f32,delay=11",
+            "bc:n=7,D=12,precision=f32",
         ] {
             let method = parse(spec);
             assert_eq!(method.to_string(), spec);
@@ -787,6 +894,13 @@ mod tests {
             ("step:n=7,n=5", ["`n`", "twice"]),
             ("step:n=7,foo=1", ["`foo`", "unknown key"]),
             ("step:n=7,D", ["key=value", "`D`"]),
+            ("iv:n=7,D=16,delay=7", ["`delay`", "from 8 (n + 1) to 153"]),
+            ("iv:n=7,delay=x", ["`delay`", "at least n + 1"]),
+            (
+                "bc:n=7,delay=9",
+                ["`delay`", "expected n, D, lambda, precision"],
+            ),
+            ("iv:D=16", ["`n` is required", "order from 1 to 40"]),
         ];
         for (spec, needles) in cases {
             let message = error(spec);
@@ -825,6 +939,35 @@ mod tests {
             message.contains("step:n=3,D=1") && message.contains("gain"),
             "{message}"
         );
+    }
+
+    #[test]
+    fn bc_needs_the_tare_variance_and_iv_takes_its_delay() {
+        let mut context = BuildContext::new(SensorChain::reference(), 73.25);
+        let message = parse("bc:n=7,D=16")
+            .build(&context)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            message.contains("bc:n=7,D=16") && message.contains("tare"),
+            "{message}"
+        );
+        context.tare_noise_variance = Some(1000.0);
+        for spec in [
+            "bc:n=7,D=16",
+            "bc:n=40,D=1,precision=f32",
+            "iv:n=7,D=16",
+            "iv:n=7,D=1,delay=153",
+        ] {
+            let built = parse(spec).build(&context);
+            assert!(built.is_ok(), "{spec}: {:?}", built.err());
+        }
+        // The core refuses a negative variance; the error names the method.
+        context.tare_noise_variance = Some(-1.0);
+        assert!(parse("bc:n=7").build(&context).is_err());
+        assert_eq!(parse("bc:n=7").tare_decimation(), Some(1));
+        assert_eq!(parse("iv:n=7,D=16").tare_decimation(), None);
     }
 
     #[test]

@@ -43,8 +43,8 @@ enum Command {
     Estimate {
         #[arg(long)]
         input: PathBuf,
-        /// The estimator: step, covariance, model, settled, moving or ramp with its keys (see
-        /// host-sim/README.md).
+        /// The estimator: step, covariance, model, settled, moving, ramp, iv or bc with its
+        /// keys (see host-sim/README.md).
         #[arg(long, conflicts_with_all = ["order", "forgetting", "decimation", "precision"])]
         method: Option<Method>,
         /// Shorthand for `--method step:n=N,...`: model order n.
@@ -65,6 +65,9 @@ enum Command {
         /// The scene whose sensor chain the `model` method takes its dynamics from.
         #[arg(long, default_value = "reference-step")]
         scene: String,
+        /// Noise variance of one raw sample measured at tare, raw units² (for `bc`).
+        #[arg(long)]
+        tare_variance: Option<f64>,
     },
     /// Monte Carlo of the core on a scene: CSV per SNR, configuration and sample index.
     Montecarlo {
@@ -213,6 +216,7 @@ fn main() -> Result<()> {
             precision,
             zero,
             scene,
+            tare_variance,
         } => {
             let method = match (method, order) {
                 (Some(method), _) => method,
@@ -224,7 +228,10 @@ fn main() -> Result<()> {
                 }),
                 (None, None) => anyhow::bail!("give --method SPEC or --order N"),
             };
-            let context = BuildContext::new(Scene::load(&scene)?.chain, gain);
+            let context = BuildContext {
+                tare_noise_variance: tare_variance,
+                ..BuildContext::new(Scene::load(&scene)?.chain, gain)
+            };
             let file =
                 File::open(&input).with_context(|| format!("cannot open {}", input.display()))?;
             let stdout = std::io::stdout();
