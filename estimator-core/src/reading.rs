@@ -15,6 +15,14 @@ pub enum InvalidReason {
     NonFiniteUpdate,
     /// A sample was reported missing by the caller; the Hankel structure is broken.
     MissingSample,
+    /// The covariance form's inverse information matrix Ψ is no longer positive definite
+    /// (single-precision rounding on ill-conditioned data): its gain and estimate are no
+    /// longer those of any least-squares problem. Found by the stability map.
+    LostDefiniteness,
+    /// The model bank's best-fitting candidate sits at the edge of its grid: the sensor's
+    /// dynamics with this load (its resonance) may lie outside the candidates' span, where
+    /// every candidate is biased. Found by the stability map.
+    OutsideModelSpan,
 }
 
 /// The state a reading is in.
@@ -25,9 +33,9 @@ pub enum State {
     WarmingUp,
     /// The estimate is the least-squares solution of the data so far.
     Estimating,
-    /// The reading cannot be trusted. Faults of the data stream or of the state (all reasons
-    /// but [`InvalidReason::IllConditioned`]) latch until `reset()`; ill-conditioning is a
-    /// property of the data so far and clears when more data make the step identifiable.
+    /// The reading cannot be trusted. Faults of the data stream or of the state latch until
+    /// `reset()`; [`InvalidReason::IllConditioned`] and [`InvalidReason::OutsideModelSpan`]
+    /// are properties of the data so far and clear when more data settle them.
     Invalid(InvalidReason),
 }
 

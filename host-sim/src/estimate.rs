@@ -19,6 +19,8 @@ pub fn state_name(state: State) -> &'static str {
         State::Invalid(InvalidReason::IllConditioned) => "invalid_ill_conditioned",
         State::Invalid(InvalidReason::NonFiniteUpdate) => "invalid_non_finite_update",
         State::Invalid(InvalidReason::MissingSample) => "invalid_missing_sample",
+        State::Invalid(InvalidReason::LostDefiniteness) => "invalid_lost_definiteness",
+        State::Invalid(InvalidReason::OutsideModelSpan) => "invalid_outside_model_span",
     }
 }
 
