@@ -14,7 +14,7 @@ use crate::montecarlo::{StudyResult, TOLERANCES};
 
 static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 
-fn register_font() -> Result<()> {
+pub(crate) fn register_font() -> Result<()> {
     plotters::style::register_font("sans-serif", FontStyle::Normal, FONT)
         .map_err(|_| anyhow!("the shipped DejaVu Sans font does not parse"))
 }

@@ -59,4 +59,6 @@ pub mod montecarlo;
 #[cfg(feature = "std")]
 pub mod scene;
 #[cfg(feature = "std")]
+pub mod stability;
+#[cfg(feature = "std")]
 pub mod study;

@@ -185,6 +185,10 @@ pub struct BuildContext {
     /// Noise variance of one raw sample as measured at tare, raw units² (for
     /// bias-compensated methods; `None` when no tare was measured).
     pub tare_noise_variance: Option<f64>,
+    /// Samples (tare removed) outside this range are refused as `OutOfRange`: the ADC's
+    /// rails, where a drop's overshoot clips (`None`: no range, e.g. recorded data of
+    /// unknown origin). The baselines take no range.
+    pub valid_range: Option<(f64, f64)>,
 }
 
 impl BuildContext {
@@ -194,6 +198,17 @@ impl BuildContext {
             gain,
             chain,
             tare_noise_variance: None,
+            valid_range: None,
+        }
+    }
+
+    /// The same with the chain's ADC rails as the valid range, for samples with the tare
+    /// `zero` (raw units) removed: a code at 0 or at the full-scale code is clipped.
+    pub fn with_adc_rails(self, zero: f64) -> Self {
+        let top = f64::from(self.chain.adc.max_code());
+        Self {
+            valid_range: Some((0.5 - zero, top - 0.5 - zero)),
+            ..self
         }
     }
 }
@@ -252,6 +267,10 @@ impl Method {
     ) -> Result<Box<dyn Estimator<T> + Send>> {
         let gain = T::from_f64(context.gain);
         let core = |e: estimator_core::ConfigError| anyhow!("{e}");
+        let step_config = |setup: &Setup, gain: T| ranged(step_config(setup, gain), context);
+        let (valid_min, valid_max) = context
+            .valid_range
+            .unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
         Ok(match self {
             Method::Step(setup) => {
                 Box::new(StepEstimator::<T, CAPACITY>::new(step_config(setup, gain)).map_err(core)?)
@@ -302,8 +321,8 @@ impl Method {
                         .map(|model| ModelConfig {
                             model: convert_model(model),
                             decimation: spec.decimation,
-                            valid_min: T::from_f64(f64::NEG_INFINITY),
-                            valid_max: T::from_f64(f64::INFINITY),
+                            valid_min: T::from_f64(valid_min),
+                            valid_max: T::from_f64(valid_max),
                         })
                         .collect();
                 model_bank::<T>(&configs)?
@@ -321,6 +340,14 @@ pub fn measured_tare_variance(record: &[f64], decimation: u16) -> Option<f64> {
         meter.push(sample).ok()?;
     }
     meter.noise_variance()
+}
+
+/// `config` with the context's valid range, if it has one.
+pub(crate) fn ranged<T: Real>(config: StepConfig<T>, context: &BuildContext) -> StepConfig<T> {
+    match context.valid_range {
+        Some((low, high)) => config.with_valid_range(T::from_f64(low), T::from_f64(high)),
+        None => config,
+    }
 }
 
 pub(crate) fn step_config<T: Real>(setup: &Setup, gain: T) -> StepConfig<T> {

@@ -364,7 +364,9 @@ impl Study {
                         0.0
                     },
             ),
-            ..BuildContext::new(chain, gain)
+            // A drop whose overshoot clips the ADC is refused by the estimators, as the
+            // firmware refuses a saturated sample.
+            ..BuildContext::new(chain, gain).with_adc_rails(zero)
         };
         // Refuse impossible configurations before spending time.
         for method in &self.setups {
@@ -469,23 +471,37 @@ impl Study {
             truth_g,
             sample_rate_hz: rate,
             setups: stats,
-            crlb_g2: if scene.disturbances.amplifier_noise && oversampling == 1.0 {
-                // The INA114's noise is coloured by the anti-alias filter: add its
-                // autocovariance and use the coloured bound.
-                let mut autocovariance: Vec<f64> =
-                    crlb::amplifier_autocovariance_g2(&chain, samples)
-                        .iter()
-                        .map(|r| r * gain * gain)
-                        .collect();
-                autocovariance[0] += noise_variance;
-                crlb::coloured_known_tare(&unit_step, gain, &autocovariance)
-            } else {
-                crlb::white_known_tare(&unit_step, gain, noise_variance)
-            },
+            crlb_g2: crlb_g2(scene, truth_g, samples),
             crlb_unknown_tare_g2: crlb::white_unknown_tare(&unit_step, gain, noise_variance),
             sensor_settle_s: sensor_settle_s(scene, truth_g),
             example_relative_error,
         })
+    }
+}
+
+/// The known-model, known-tare CRLB of a step of `truth_g` on `scene` at every sample index
+/// up to `samples`, g²: white noise, quantisation (LSB²/12 per conversion, summed over the
+/// oversampled ones) and, when the scene has it and does not oversample, the amplifier's
+/// noise coloured by the filter (the coloured bound).
+pub fn crlb_g2(scene: &Scene, truth_g: f64, samples: usize) -> Vec<f64> {
+    let chain = scene.chain;
+    let gain = chain.counts_per_gram();
+    let oversampling = f64::from(chain.adc.oversampling.max(1));
+    let white_counts =
+        scene.disturbances.white_noise_g * chain.volts_per_gram() / chain.adc.volts_per_code();
+    let noise_variance = oversampling * (white_counts * white_counts + 1.0 / 12.0);
+    let unit_step = crlb::unit_step_response(&chain, truth_g, samples);
+    if scene.disturbances.amplifier_noise && oversampling == 1.0 {
+        // The INA114's noise is coloured by the anti-alias filter: add its
+        // autocovariance and use the coloured bound.
+        let mut autocovariance: Vec<f64> = crlb::amplifier_autocovariance_g2(&chain, samples)
+            .iter()
+            .map(|r| r * gain * gain)
+            .collect();
+        autocovariance[0] += noise_variance;
+        crlb::coloured_known_tare(&unit_step, gain, &autocovariance)
+    } else {
+        crlb::white_known_tare(&unit_step, gain, noise_variance)
     }
 }
 

@@ -131,15 +131,22 @@ enum Command {
     /// scene at 30–80 dB (time to 0.1%, RMS at 50/100/200 ms against the CRLB), CSV +
     /// markdown + charts, and the firmware default's goal figures.
     Study {
-        /// The study (only `speed` so far).
+        /// The study: `speed` or `stability`.
         which: StudyKind,
-        #[arg(long, default_value_t = 1000)]
-        runs: usize,
+        /// Runs per SNR (speed, default 1000) or per Monte Carlo cell (stability, default 100).
+        #[arg(long)]
+        runs: Option<usize>,
         #[arg(long, default_value_t = 1)]
         seed: u64,
-        /// SNRs in dB (comma separated).
-        #[arg(long, value_delimiter = ',', default_values_t = study::SNRS_DB)]
+        /// SNRs in dB (comma separated); default: speed 30–80, stability 10–80 (step 10).
+        #[arg(long, value_delimiter = ',')]
         snr_db: Vec<f64>,
+        /// Stability: the orders of slice A (default 1–40, 15 of them).
+        #[arg(long, value_delimiter = ',')]
+        orders: Vec<usize>,
+        /// Stability: samples of each long run (slice D; 0 leaves the slice out).
+        #[arg(long, default_value_t = host_sim::stability::LONG_SAMPLES)]
+        long_samples: usize,
         /// More methods, after the default list (e.g. a variant under development).
         #[arg(long = "method")]
         methods: Vec<Method>,
@@ -168,6 +175,8 @@ enum Command {
 enum StudyKind {
     /// Speed against accuracy (issue 5, study 7).
     Speed,
+    /// The stability map of every estimator (issue 5, item 8).
+    Stability,
 }
 
 fn create(path: &PathBuf) -> Result<BufWriter<File>> {
@@ -301,13 +310,49 @@ fn main() -> Result<()> {
             charts(&out, runs, seed, configs, readout_s)?;
         }
         Command::Study {
-            which: StudyKind::Speed,
+            which,
             runs,
             seed,
             snr_db,
+            orders,
+            long_samples,
             methods,
             out,
-        } => study::speed_command(runs, seed, &snr_db, methods, &out)?,
+        } => match which {
+            StudyKind::Speed => {
+                let snr_db = if snr_db.is_empty() {
+                    study::SNRS_DB.to_vec()
+                } else {
+                    snr_db
+                };
+                study::speed_command(runs.unwrap_or(1000), seed, &snr_db, methods, &out)?
+            }
+            StudyKind::Stability => {
+                if !methods.is_empty() {
+                    anyhow::bail!(
+                        "study stability runs its own methods; --method is for study speed"
+                    );
+                }
+                let snr_db = if snr_db.is_empty() {
+                    host_sim::stability::SNRS_DB.to_vec()
+                } else {
+                    snr_db
+                };
+                let orders = if orders.is_empty() {
+                    host_sim::stability::ORDERS.to_vec()
+                } else {
+                    orders
+                };
+                host_sim::stability::stability_command(
+                    runs.unwrap_or(100),
+                    seed,
+                    &snr_db,
+                    &orders,
+                    long_samples,
+                    &out,
+                )?
+            }
+        },
         Command::Bench {
             runs,
             samples,
