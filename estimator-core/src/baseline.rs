@@ -46,7 +46,11 @@ pub struct Baseline<T: Real, const K: usize> {
     next_block: usize,
     block_sum: T,
     block_len: u16,
+    /// Σ (x − `settled_origin`) since the reading became stable: deviations, not the load,
+    /// so that a long `f32` sum keeps the precision of the deviations (the stability map
+    /// found the `f32` settled average 11% worse than `f64` at 70 dB when it summed loads).
     settled_sum: T,
+    settled_origin: T,
     settled_count: u32,
     samples: u32,
     fault: Option<InvalidReason>,
@@ -75,6 +79,7 @@ impl<T: Real, const K: usize> Baseline<T, K> {
             block_sum: T::ZERO,
             block_len: 0,
             settled_sum: T::ZERO,
+            settled_origin: T::ZERO,
             settled_count: 0,
             samples: 0,
             fault: None,
@@ -128,9 +133,10 @@ impl<T: Real, const K: usize> Estimator<T> for Baseline<T, K> {
         }
         let x = sample * self.inv_gain;
         if self.settled_count > 0 && self.config.mode == BaselineMode::SettledAverage {
-            self.settled_sum += x;
+            self.settled_sum += x - self.settled_origin;
             self.settled_count += 1;
-            self.estimate = Some(self.settled_sum / T::from_u32(self.settled_count));
+            self.estimate =
+                Some(self.settled_origin + self.settled_sum / T::from_u32(self.settled_count));
             return self.reading();
         }
         self.block_sum += x;
@@ -153,7 +159,8 @@ impl<T: Real, const K: usize> Estimator<T> for Baseline<T, K> {
             if self.config.mode == BaselineMode::SettledAverage {
                 // Everything in the stable window counts towards the average.
                 let count = K as u32 * self.config.block as u32;
-                self.settled_sum = mean * T::from_u32(count);
+                self.settled_origin = mean;
+                self.settled_sum = T::ZERO;
                 self.settled_count = count;
             }
         } else {

@@ -84,7 +84,7 @@ use crate::factor::Factor;
 use crate::input::{check_sample, Decimator, DifferenceWindow};
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
 use crate::real::Real;
-use crate::step::StepConfig;
+use crate::step::{identifiability_floor, recentre, StepConfig};
 
 /// Configuration of a [`BiasCompensatedStepEstimator`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -131,6 +131,9 @@ pub struct BiasCompensatedStepEstimator<T: Real, const N: usize> {
     factor: Factor<T, N, 1>,
     rows: u32,
     effective_rows: T,
+    /// The origin of the targets in `factor`, as in `StepEstimator` (the compensation is
+    /// shift-equivariant: the noise rows carry nothing on the constant column).
+    offset: T,
     /// The latest compensated solution `(ℓ, u)`, for the next row's a-priori residual.
     solution: Option<([T; N], T)>,
     identifiability: T,
@@ -161,6 +164,7 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
             factor: Factor::new(),
             rows: 0,
             effective_rows: T::ZERO,
+            offset: T::ZERO,
             solution: None,
             identifiability: T::ZERO,
             samples: 0,
@@ -288,9 +292,10 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
             self.factor.forget(n, lambda);
         }
         self.effective_rows = self.effective_rows * lambda + T::ONE;
-        let folded = self.factor.fold(n, phi, [T::ONE], x);
+        let folded = self.factor.fold(n, phi, [T::ONE], x - self.offset);
         self.rows = self.rows.saturating_add(1);
-        let [ls_step] = self.factor.tail_solution();
+        let [ls_deviation] = self.factor.tail_solution();
+        let ls_step = self.offset + ls_deviation;
         let [ls_weight] = self.factor.tail_weight();
         if !(ls_step.is_finite() && ls_weight.is_finite() && folded.row_weight.is_finite()) {
             self.latch(InvalidReason::NonFiniteUpdate);
@@ -299,15 +304,24 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
         if (self.rows as usize) < n + 1 {
             return;
         }
-        let Some(compensated) = self.compensated(n) else {
+        let compensated = self.compensated(n);
+        // Where `StepEstimator` would read this least-squares step level, move the factor's
+        // origin to it as that does (σ² = 0 stays least squares bit for bit); the
+        // compensated copy above is in the old origin.
+        let origin = self.offset;
+        if ls_weight > identifiability_floor::<T>() * self.effective_rows {
+            self.offset = recentre(&mut self.factor, n, self.offset, ls_step);
+        }
+        let Some(compensated) = compensated else {
             self.identifiability = T::ZERO;
             self.invalidate(InvalidReason::IllConditioned);
             return;
         };
         let [weight] = compensated.tail_weight();
         self.identifiability = weight / self.effective_rows;
-        let threshold = T::from_f64(100.0) * T::EPSILON * self.effective_rows;
-        let (lead, [step]) = compensated.solution(n);
+        let threshold = identifiability_floor::<T>() * self.effective_rows;
+        let (lead, [deviation]) = compensated.solution(n);
+        let step = origin + deviation;
         // A compensated copy is discarded after each reading, so a non-finite value here is a
         // property of the current data, not a corrupted state: flag, don't latch.
         if !(weight > threshold) || !step.is_finite() || !lead[..n].iter().all(|v| v.is_finite()) {

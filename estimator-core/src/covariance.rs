@@ -9,10 +9,23 @@
 //! Initialisation: instead of inverting the first `(n+1)×(n+1)` block, `Ψ(0) = I/δ` with a
 //! tiny δ (a regularised prior), the usual practical choice; the prior's weight decays
 //! with forgetting and is negligible against the data after a few rows.
+//!
+//! ## Flags (found by the stability map, host-sim `study stability`)
+//! - In `f32` Ψ loses positive definiteness within the first rows of the reference drop at
+//!   every SNR and order the map tried (1–40, 10–80 dB), its readings then off by up to 10⁴
+//!   times the Cramér–Rao bound. Each update therefore factors Ψ (LDLᵀ in `f64`, `(n+1)³/6`
+//!   multiply–adds, more than the update itself: a reference may pay that) and latches
+//!   [`InvalidReason::LostDefiniteness`] at a pivot not above the rounding of its diagonal
+//!   entry, or at a gain denominator `λ + φᵀΨφ` below λ (φᵀΨφ < 0 proves Ψ indefinite).
+//! - Readings whose identifiability `1/(Ψ_uu·(N_eff + δλ^k))` is not above
+//!   [`crate::MIN_IDENTIFIABILITY`] are `Invalid(IllConditioned)`, as in `StepEstimator`.
+//! - As in `StepEstimator`, the step level is kept relative to an origin that follows the
+//!   estimate (`offset`): kept as the load itself, in `f32` it stalled over long runs (22×
+//!   the steady-state bound after 10⁶ samples at λ = 1, D = 1, against 3.5× in `f64`).
 
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
 use crate::real::Real;
-use crate::step::StepConfig;
+use crate::step::{identifiability_floor, StepConfig};
 
 /// Covariance-form RLS for the data-driven step estimator, capacity `N` (order ≤ N).
 /// `P` must be `N + 1` (the number of unknowns); checked at construction.
@@ -27,6 +40,12 @@ pub struct CovarianceStepEstimator<T: Real, const N: usize, const P: usize> {
     previous: T,
     decimated_samples: u32,
     rows: u32,
+    /// Exponentially weighted row count: the information the data put on the constant column.
+    effective_rows: T,
+    /// The prior's information δ, decayed by λ per row.
+    prior_weight: T,
+    /// The origin of the targets: `theta[n]` is the step level minus this.
+    offset: T,
     samples: u32,
     block_sum: T,
     block_len: u16,
@@ -57,6 +76,9 @@ impl<T: Real, const N: usize, const P: usize> CovarianceStepEstimator<T, N, P> {
             previous: T::ZERO,
             decimated_samples: 0,
             rows: 0,
+            effective_rows: T::ZERO,
+            prior_weight: prior_information,
+            offset: T::ZERO,
             samples: 0,
             block_sum: T::ZERO,
             block_len: 0,
@@ -77,6 +99,55 @@ impl<T: Real, const N: usize, const P: usize> CovarianceStepEstimator<T, N, P> {
             }
         }
         min
+    }
+
+    /// Ψ, the inverse information matrix (its leading `(n+1)×(n+1)` block is in use), for
+    /// studies that test it for positive definiteness.
+    pub fn inverse_information(&self) -> &[[T; P]; P] {
+        &self.psi
+    }
+
+    /// `1 / (Ψ_uu·(N_eff + δ·λ^rows))`, the analogue of `StepEstimator::identifiability`:
+    /// the information on `u` is at most that of the constant column, `N_eff` plus the
+    /// decayed prior, so in exact arithmetic this lies in (0, 1]. Outside, Ψ no longer is the
+    /// inverse of any information matrix of these data.
+    pub fn identifiability(&self) -> T {
+        let n = self.config.order;
+        let information = self.effective_rows + self.prior_weight;
+        T::ONE / (self.psi[n][n] * information)
+    }
+
+    /// True when the leading `(n+1)×(n+1)` block of Ψ, as stored, has an LDLᵀ factorisation
+    /// whose pivots are positive beyond the rounding of their diagonal entries in `T`,
+    /// `(n+1)·ε_T·Ψ_ii`: Ψ is positive definite as stored. Computed in `f64` whatever `T`:
+    /// in `f32` the factorisation cannot resolve the indefiniteness it must find (the map
+    /// found runs that an `f32` LDLᵀ passed and an `f64` Cholesky did not). This form is a
+    /// host reference, so the cost is accepted.
+    fn positive_definite(&self) -> bool {
+        let p = self.config.order + 1;
+        let rounding = p as f64 * T::EPSILON.to_f64();
+        // L (unit lower, strictly below the diagonal) and the pivots, row by row.
+        let mut l = [[0.0f64; P]; P];
+        let mut pivots = [0.0f64; P];
+        for i in 0..p {
+            for j in 0..i {
+                let mut value = self.psi[i][j].to_f64();
+                for k in 0..j {
+                    value -= l[i][k] * l[j][k] * pivots[k];
+                }
+                l[i][j] = value / pivots[j];
+            }
+            let diagonal = self.psi[i][i].to_f64();
+            let mut pivot = diagonal;
+            for k in 0..i {
+                pivot -= l[i][k] * l[i][k] * pivots[k];
+            }
+            if !(pivot > rounding * diagonal) || !pivot.is_finite() {
+                return false;
+            }
+            pivots[i] = pivot;
+        }
+        true
     }
 
     fn reading(&self) -> Reading<T> {
@@ -131,7 +202,7 @@ impl<T: Real, const N: usize, const P: usize> CovarianceStepEstimator<T, N, P> {
             denom += phi[i] * psi_phi[i];
             prediction += phi[i] * self.theta[i];
         }
-        let error = x - prediction;
+        let error = (x - self.offset) - prediction;
         for i in 0..p {
             self.theta[i] += psi_phi[i] / denom * error;
         }
@@ -142,17 +213,37 @@ impl<T: Real, const N: usize, const P: usize> CovarianceStepEstimator<T, N, P> {
             }
         }
         self.rows = self.rows.saturating_add(1);
-        let u = self.theta[n];
+        self.effective_rows = self.effective_rows * lambda + T::ONE;
+        self.prior_weight *= lambda;
+        let u = self.offset + self.theta[n];
         if !(u.is_finite() && denom.is_finite() && self.psi[n][n].is_finite()) {
             self.latch(InvalidReason::NonFiniteUpdate);
+            return;
+        }
+        // φᵀΨφ < 0 (a denominator below λ) proves the Ψ this row used indefinite; the LDLᵀ
+        // test checks the Ψ the next row will use.
+        if !(denom >= lambda) || !self.positive_definite() {
+            self.latch(InvalidReason::LostDefiniteness);
             return;
         }
         if (self.rows as usize) < p {
             return;
         }
+        if !(self.identifiability() > identifiability_floor::<T>()) {
+            self.state = State::Invalid(InvalidReason::IllConditioned);
+            self.estimate = None;
+            self.residual = None;
+            return;
+        }
         self.state = State::Estimating;
         self.residual = self.estimate.map(|_| error);
         self.estimate = Some(u);
+        // Move the origin to the estimate (exact difference of the stored origins, as in
+        // `step::recentre`); only the step unknown changes.
+        let origin = self.offset + (u - self.offset);
+        let applied = origin - self.offset;
+        self.theta[n] -= applied;
+        self.offset = origin;
     }
 }
 

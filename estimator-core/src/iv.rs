@@ -297,6 +297,10 @@ pub struct IvStepEstimator<T: Real, const N: usize> {
     rows: u32,
     /// Exponentially weighted row count.
     effective_rows: T,
+    /// The origin of the targets folded into `factor`, moved to each valid estimate as in
+    /// `StepEstimator` (the system's step unknown is the estimate minus this): in `f32` a
+    /// right-hand side holding the load itself stalls over long runs.
+    offset: T,
     /// The latest determined solution `[ℓ; u]`, for the next row's a-priori residual.
     solution: Option<Column<T, N>>,
     identifiability: T,
@@ -319,6 +323,7 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
             factor: InstrumentFactor::new(),
             rows: 0,
             effective_rows: T::ZERO,
+            offset: T::ZERO,
             solution: None,
             identifiability: T::ZERO,
             samples: 0,
@@ -401,7 +406,7 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
             self.factor.forget(n, lambda);
         }
         self.effective_rows = self.effective_rows * lambda + T::ONE;
-        let row_weight = self.factor.fold(n, z, phi, x);
+        let row_weight = self.factor.fold(n, z, phi, x - self.offset);
         self.rows = self.rows.saturating_add(1);
         if !(row_weight.is_finite() && self.factor.constant_weight.is_finite()) {
             self.latch(InvalidReason::NonFiniteUpdate);
@@ -436,7 +441,7 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
                 return;
             }
         };
-        let step = solved.theta.last;
+        let step = self.offset + solved.theta.last;
         let identifiability = T::ONE / (self.effective_rows * solved.last_row_norm2);
         self.identifiability = if identifiability.is_finite() {
             identifiability
@@ -454,9 +459,23 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
             return;
         }
         self.residual = prior_residual;
-        self.solution = Some(solved.theta);
+        let mut theta = solved.theta;
+        theta.last = step;
+        self.solution = Some(theta);
         self.state = State::Estimating;
         self.estimate = Some(step);
+        // Move the origin to the estimate: the right-hand side `Qᵀx` moves by the shift
+        // times `Qᵀ1`, the system's step column. The shift is the exact difference of the
+        // stored origins, as in `step::recentre`.
+        let origin = self.offset + (step - self.offset);
+        let applied = origin - self.offset;
+        if applied != T::ZERO {
+            for i in 0..n {
+                self.factor.rhs.lead[i] -= applied * self.factor.system.right[i];
+            }
+            self.factor.rhs.last -= applied * self.factor.system.corner;
+            self.offset = origin;
+        }
     }
 }
 

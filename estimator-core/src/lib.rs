@@ -64,4 +64,4 @@ pub use real::Real;
 pub use scale::{
     CountsScale, RawSample, Scale, ScaleConfig, ScaleFault, ScaleReading, ScaleState, TareError,
 };
-pub use step::{StepConfig, StepEstimator, MAX_DECIMATION};
+pub use step::{StepConfig, StepEstimator, MAX_DECIMATION, MIN_IDENTIFIABILITY};

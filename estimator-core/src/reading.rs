@@ -20,6 +20,10 @@ pub enum InvalidReason {
     /// biased. Like ill-conditioning it is a property of the data so far and clears when the
     /// best fit moves inside.
     OutsideModelRange,
+    /// The covariance form's inverse information matrix Ψ is no longer positive definite
+    /// (single-precision rounding on ill-conditioned data): its gain and estimate are no
+    /// longer those of any least-squares problem. Found by the stability map; latches.
+    LostDefiniteness,
 }
 
 impl InvalidReason {

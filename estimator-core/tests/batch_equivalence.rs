@@ -1,10 +1,15 @@
 //! The recursive estimate equals an independent batch least-squares solve of the same
 //! Hankel system (thesis eq. 3.15) at every sample once the problem is determined, and is
-//! exact on noise-free data of the right order.
+//! exact on noise-free data of the right order. Readings the estimator flags as
+//! ill-conditioned (identifiability at or below `MIN_IDENTIFIABILITY`, e.g. the exactly
+//! determined first rows of an over-parameterised fit) have no estimate to compare; the test
+//! checks that the flag is exactly that condition.
 
 mod support;
 
-use estimator_core::{Estimator, State, StepConfig, StepEstimator};
+use estimator_core::{
+    Estimator, InvalidReason, State, StepConfig, StepEstimator, MIN_IDENTIFIABILITY,
+};
 use support::*;
 
 const STEP: f64 = 1.3832;
@@ -22,6 +27,26 @@ struct Worst {
     err: f64,
     err_over_tol: f64,
     checked: usize,
+    flagged: usize,
+}
+
+/// A reading past warm-up: an estimate, or `IllConditioned` exactly when the
+/// identifiability is at or below the floor.
+fn determined(est: &StepEstimator<f64, 12>, state: State, what: &str) -> bool {
+    let identifiability = est.identifiability();
+    if state == State::Invalid(InvalidReason::IllConditioned) {
+        assert!(
+            identifiability <= MIN_IDENTIFIABILITY,
+            "{what}: flagged at identifiability {identifiability:.3e}"
+        );
+        return false;
+    }
+    assert_eq!(state, State::Estimating, "{what}");
+    assert!(
+        identifiability > MIN_IDENTIFIABILITY,
+        "{what}: valid at {identifiability:.3e}"
+    );
+    true
 }
 
 /// Push `y` through the estimator and compare with the batch solution at every sample.
@@ -34,6 +59,7 @@ fn compare_with_batch(sensor: &Sensor, y: &[f64], order: usize, forgetting: f64)
         err: 0.0,
         err_over_tol: 0.0,
         checked: 0,
+        flagged: 0,
     };
     for (k, &sample) in y.iter().enumerate() {
         let reading = est.push(sample);
@@ -46,12 +72,14 @@ fn compare_with_batch(sensor: &Sensor, y: &[f64], order: usize, forgetting: f64)
             );
             continue;
         }
-        assert_eq!(
+        if !determined(
+            &est,
             reading.state,
-            State::Estimating,
-            "{} n={order} k={k}",
-            sensor.name
-        );
+            &format!("{} n={order} k={k}", sensor.name),
+        ) {
+            worst.flagged += 1;
+            continue;
+        }
         let (k_mat, rhs) = hankel_system(&x, order, forgetting, k + 1);
         let batch = batch_solve(&k_mat, &rhs);
         let reference = batch.theta[order];
@@ -88,8 +116,17 @@ fn recursive_estimate_equals_batch_least_squares() {
                     let y = response(&sensor, samples, snr_db, 11 + order as u64);
                     let worst = compare_with_batch(&sensor, &y, order, forgetting);
                     println!(
-                        "{:32} n={order:2} λ={forgetting:4} SNR={snr_db:?}: max rel diff {:.2e}, max diff/bound {:.2e}, {} samples",
-                        sensor.name, worst.err, worst.err_over_tol, worst.checked
+                        "{:32} n={order:2} λ={forgetting:4} SNR={snr_db:?}: max rel diff {:.2e}, max diff/bound {:.2e}, {} samples ({} flagged ill-conditioned)",
+                        sensor.name, worst.err, worst.err_over_tol, worst.checked, worst.flagged
+                    );
+                    // Flags are the exception (the first rows of over-parameterised fits),
+                    // not the rule: most readings are compared.
+                    assert!(
+                        worst.checked > 4 * worst.flagged,
+                        "{}: {} checked, {} flagged",
+                        sensor.name,
+                        worst.checked,
+                        worst.flagged
                     );
                     // The two low-order scenes are well conditioned (κ_u < 1e4): there the
                     // bound itself is below 1e-9 and so is the difference.
@@ -115,6 +152,13 @@ fn noise_free_response_of_the_right_order_gives_the_exact_step() {
             let reading = est.push(sample);
             if k < 2 * order {
                 assert!(reading.estimate.is_none());
+                continue;
+            }
+            // The right order on exact data: flagged only while barely determined (the
+            // 4 kHz load cell's smooth first differences leave the step identifiable below
+            // the floor for its first 60 samples, 12n).
+            if !determined(&est, reading.state, &format!("{} k={k}", sensor.name)) {
+                assert!(k < 20 * order, "{} k={k}: flagged late", sensor.name);
                 continue;
             }
             let err = (reading.estimate.unwrap() - STEP).abs() / STEP;

@@ -7,7 +7,9 @@
 
 mod support;
 
-use estimator_core::{CovarianceStepEstimator, Estimator, StepConfig, StepEstimator};
+use estimator_core::{
+    CovarianceStepEstimator, Estimator, InvalidReason, State, StepConfig, StepEstimator,
+};
 use support::*;
 
 const MASS_G: f64 = 138.32;
@@ -44,8 +46,11 @@ fn factored_f32_tracks_f64_over_a_million_samples_with_forgetting() {
             let reference = f64_ref.push(sample);
             let factored = f32_fac.push(sample as f32);
             let covariance = f32_cov.push(sample as f32);
+            // Flagged only as barely determined in the transient (`MIN_IDENTIFIABILITY`).
             assert!(
-                !factored.is_invalid(),
+                !factored.is_invalid()
+                    || (k < 4000
+                        && factored.state == State::Invalid(InvalidReason::IllConditioned)),
                 "n={order} D={decimation} k={k}: {:?}",
                 factored.state
             );

@@ -381,7 +381,10 @@ pub fn method_spec(config: &WeighingConfig, precision: Precision) -> Method {
             noise_variance: Some(config.noise_variance_counts2),
         },
         WeighingMethod::InstrumentalVariable { order, decimation } => {
-            Method::InstrumentalVariable(setup(order, decimation, 1.0))
+            Method::InstrumentalVariable {
+                setup: setup(order, decimation, 1.0),
+                delay: None,
+            }
         }
         WeighingMethod::ModelBank {
             decimation,

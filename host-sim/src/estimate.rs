@@ -20,6 +20,7 @@ pub fn state_name(state: State) -> &'static str {
         State::Invalid(InvalidReason::NonFiniteUpdate) => "invalid_non_finite_update",
         State::Invalid(InvalidReason::MissingSample) => "invalid_missing_sample",
         State::Invalid(InvalidReason::OutsideModelRange) => "invalid_outside_model_range",
+        State::Invalid(InvalidReason::LostDefiniteness) => "invalid_lost_definiteness",
     }
 }
 

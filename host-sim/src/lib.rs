@@ -65,4 +65,6 @@ pub mod ramp_study;
 #[cfg(feature = "std")]
 pub mod scene;
 #[cfg(feature = "std")]
+pub mod stability;
+#[cfg(feature = "std")]
 pub mod study;

@@ -8,8 +8,8 @@
 //! settled[:block=80][,K=10][,band_g=0.5][,precision=..]          wait until stable, then average
 //! moving[:block=80][,K=10][,band_g=0.5][,precision=..]           boxcar mean while stable
 //! ramp:n=5,D=16[,lambda=..][,lag_s=0][,precision=..]            affine-input estimator
-//! iv:n=7,D=12[,lambda=..][,precision=..]                         instrumental variables (delay n+1)
-//! bc:n=7,D=12[,lambda=..][,noise_var=..][,precision=..]          bias-compensated least squares
+//! iv:n=7,D=16[,delay=n+1][,lambda=..][,precision=..]            instrumental variables
+//! bc:n=7,D=16[,lambda=..][,noise_var=..][,precision=..]         bias-compensated LS, σ² from the tare
 //! model:D=8,K=33,span=0.68-1.3,fn_hz=25.0,zeta=0.03[,filter_hz=100]  bank on an identified model
 //! ```
 //!
@@ -50,10 +50,10 @@ use std::str::FromStr;
 
 use anyhow::{anyhow, bail, Result};
 use estimator_core::{
-    Baseline, BaselineConfig, BaselineMode, BiasCompensatedConfig, BiasCompensatedStepEstimator,
-    CovarianceStepEstimator, Estimator, InitialState, IvConfig, IvStepEstimator, LoadCellModel,
-    ModelBank, ModelConfig, RampConfig, RampEstimator, Reading, Real, SensorModel, StepConfig,
-    StepEstimator, MAX_DECIMATION,
+    max_instrument_delay, Baseline, BaselineConfig, BaselineMode, BiasCompensatedConfig,
+    BiasCompensatedStepEstimator, CovarianceStepEstimator, Estimator, InitialState, IvConfig,
+    IvStepEstimator, LoadCellModel, ModelBank, ModelConfig, NoiseMeter, RampConfig, RampEstimator,
+    Reading, Real, SensorModel, StepConfig, StepEstimator, MAX_DECIMATION,
 };
 
 use crate::montecarlo::{Precision, Setup, CAPACITY};
@@ -192,13 +192,20 @@ pub enum Method {
     Moving(BaselineSpec),
     /// `RampEstimator`.
     Ramp(RampSpec),
-    /// `IvStepEstimator`: instrumental variables, delay n + 1, the default floor.
-    InstrumentalVariable(Setup),
+    /// `IvStepEstimator`: instrumental variables, instruments delayed by `delay` decimated
+    /// rows (`None`: the core's default, `n + 1`), the default identifiability floor.
+    InstrumentalVariable {
+        /// Order, decimation, forgetting and precision.
+        setup: Setup,
+        /// Instrument delay in decimated rows.
+        delay: Option<usize>,
+    },
     /// `BiasCompensatedStepEstimator`.
     BiasCompensated {
         /// Order, decimation, forgetting and precision.
         setup: Setup,
-        /// Raw-sample noise variance, raw units²; `None`: the build context's.
+        /// Raw-sample noise variance, raw units²; `None`: the build context's (measured at
+        /// tare, [`BuildContext::tare_noise_variance`]).
         noise_variance: Option<f64>,
     },
 }
@@ -213,6 +220,10 @@ pub struct BuildContext {
     /// Noise variance of one raw sample as measured at tare, raw units² (for
     /// bias-compensated methods; `None` when no tare was measured).
     pub tare_noise_variance: Option<f64>,
+    /// Samples (tare removed) outside this range are refused as `OutOfRange`: the ADC's
+    /// rails, where a drop's overshoot clips (`None`: no range, e.g. recorded data of
+    /// unknown origin). The baselines take no range.
+    pub valid_range: Option<(f64, f64)>,
 }
 
 impl BuildContext {
@@ -222,6 +233,17 @@ impl BuildContext {
             gain,
             chain,
             tare_noise_variance: None,
+            valid_range: None,
+        }
+    }
+
+    /// The same with the chain's ADC rails as the valid range, for samples with the tare
+    /// `zero` (raw units) removed: a code at 0 or at the full-scale code is clipped.
+    pub fn with_adc_rails(self, zero: f64) -> Self {
+        let top = f64::from(self.chain.adc.max_code());
+        Self {
+            valid_range: Some((0.5 - zero, top - 0.5 - zero)),
+            ..self
         }
     }
 }
@@ -232,7 +254,7 @@ impl Method {
         match self {
             Method::Step(setup)
             | Method::Covariance { setup, .. }
-            | Method::InstrumentalVariable(setup)
+            | Method::InstrumentalVariable { setup, .. }
             | Method::BiasCompensated { setup, .. } => setup.precision,
             Method::Ramp(spec) => spec.setup.precision,
             Method::Model(spec) => spec.precision,
@@ -244,6 +266,16 @@ impl Method {
     pub fn step_setup(&self) -> Option<&Setup> {
         match self {
             Method::Step(setup) => Some(setup),
+            _ => None,
+        }
+    }
+
+    /// The block length a tare measurement must be metered at for this method (the
+    /// bias-compensated estimator's `D`; see `estimator_core::NoiseMeter`), `None` for the
+    /// methods that take no tare noise.
+    pub fn tare_decimation(&self) -> Option<u16> {
+        match self {
+            Method::BiasCompensated { setup, .. } => Some(setup.decimation),
             _ => None,
         }
     }
@@ -272,6 +304,10 @@ impl Method {
     ) -> Result<Box<dyn Estimator<T> + Send>> {
         let gain = T::from_f64(context.gain);
         let core = |e: estimator_core::ConfigError| anyhow!("{e}");
+        let step_config = |setup: &Setup, gain: T| ranged(step_config(setup, gain), context);
+        let (valid_min, valid_max) = context
+            .valid_range
+            .unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
         Ok(match self {
             Method::Step(setup) => {
                 Box::new(StepEstimator::<T, CAPACITY>::new(step_config(setup, gain)).map_err(core)?)
@@ -294,16 +330,19 @@ impl Method {
                 })
                 .map_err(core)?,
             ),
-            Method::InstrumentalVariable(setup) => Box::new(
-                IvStepEstimator::<T, CAPACITY>::new(IvConfig::new(step_config(setup, gain)))
-                    .map_err(core)?,
-            ),
+            Method::InstrumentalVariable { setup, delay } => {
+                let mut config = IvConfig::new(step_config(setup, gain));
+                if let Some(delay) = delay {
+                    config = config.with_instrument_delay(*delay);
+                }
+                Box::new(IvStepEstimator::<T, CAPACITY>::new(config).map_err(core)?)
+            }
             Method::BiasCompensated {
                 setup,
                 noise_variance,
             } => {
                 let Some(variance) = noise_variance.or(context.tare_noise_variance) else {
-                    bail!("no noise variance: give `noise_var` (raw units², measured at tare)");
+                    bail!("needs the noise variance measured at tare (raw units²), and none was given (`noise_var` in the spec, or `estimate --tare-variance V`)");
                 };
                 Box::new(
                     BiasCompensatedStepEstimator::<T, CAPACITY>::new(BiasCompensatedConfig::new(
@@ -343,7 +382,9 @@ impl Method {
                     model_candidates(&context.chain, context.gain, spec)?
                         .iter()
                         .map(|model| {
-                            ModelConfig::new(convert_model(model)).with_decimation(spec.decimation)
+                            ModelConfig::new(convert_model(model))
+                                .with_decimation(spec.decimation)
+                                .with_valid_range(T::from_f64(valid_min), T::from_f64(valid_max))
                         })
                         .collect();
                 model_bank::<T>(&configs)?
@@ -352,7 +393,26 @@ impl Method {
     }
 }
 
-fn step_config<T: Real>(setup: &Setup, gain: T) -> StepConfig<T> {
+/// The raw-rate noise variance (raw units²) that `NoiseMeter` measures over an empty-pan
+/// `record` (tare removed or not) at block length `decimation`, as the firmware meters it
+/// before a weighing; `None` when the record is too short for two differences.
+pub fn measured_tare_variance(record: &[f64], decimation: u16) -> Option<f64> {
+    let mut meter = NoiseMeter::<f64>::new(decimation).ok()?;
+    for &sample in record {
+        meter.push(sample).ok()?;
+    }
+    meter.noise_variance()
+}
+
+/// `config` with the context's valid range, if it has one.
+pub(crate) fn ranged<T: Real>(config: StepConfig<T>, context: &BuildContext) -> StepConfig<T> {
+    match context.valid_range {
+        Some((low, high)) => config.with_valid_range(T::from_f64(low), T::from_f64(high)),
+        None => config,
+    }
+}
+
+pub(crate) fn step_config<T: Real>(setup: &Setup, gain: T) -> StepConfig<T> {
     StepConfig::new(setup.order, gain)
         .with_forgetting(T::from_f64(setup.forgetting))
         .with_decimation(setup.decimation)
@@ -525,6 +585,7 @@ struct Fields {
     natural_frequency_hz: Option<f64>,
     damping_ratio: Option<f64>,
     filter_cutoff_hz: Option<f64>,
+    delay: Option<usize>,
     /// Canonical names of the keys given, in order.
     given: Vec<&'static str>,
 }
@@ -674,6 +735,11 @@ impl Fields {
                         }
                     }
                 }
+                "delay" => {
+                    let expected = "an instrument delay in decimated rows, at least n + 1";
+                    fields.delay = Some(value.parse().map_err(|_| bad(expected))?);
+                    "delay"
+                }
                 other => bail!("method `{spec}`: unknown key `{other}`"),
             };
             if fields.given.contains(&canonical) {
@@ -770,10 +836,6 @@ impl FromStr for Method {
                     lag_s: fields.lag_s.unwrap_or(0.0),
                 })
             }
-            "iv" => {
-                fields.only(spec, family, &step_keys)?;
-                Method::InstrumentalVariable(fields.setup(spec, family)?)
-            }
             "bc" => {
                 fields.only(
                     spec,
@@ -830,6 +892,23 @@ impl FromStr for Method {
                     identified,
                 })
             }
+            "iv" => {
+                fields.only(spec, family, &["n", "D", "lambda", "precision", "delay"])?;
+                let setup = fields.setup(spec, family)?;
+                if let Some(delay) = fields.delay {
+                    // The core's range (iv.rs): no shared noise sample from n + 1 rows on; the
+                    // history ring bounds it above.
+                    let (low, high) =
+                        (setup.order + 1, max_instrument_delay(CAPACITY, setup.order));
+                    if !(low..=high).contains(&delay) {
+                        bail!("method `{spec}`: key `delay`: expected an instrument delay from {low} (n + 1) to {high} decimated rows, found `{delay}`");
+                    }
+                }
+                Method::InstrumentalVariable {
+                    setup,
+                    delay: fields.delay,
+                }
+            }
             "settled" => Method::Settled(fields.baseline(spec, family)?),
             "moving" => Method::Moving(fields.baseline(spec, family)?),
             _ => unreachable!("family checked above"),
@@ -880,6 +959,14 @@ impl fmt::Display for Method {
                 }
                 Ok(())
             }
+            Method::InstrumentalVariable { setup, delay } => {
+                f.write_str("iv:")?;
+                write_setup(f, setup)?;
+                if let Some(delay) = delay {
+                    write!(f, ",delay={delay}")?;
+                }
+                Ok(())
+            }
             Method::Model(spec) => {
                 write!(
                     f,
@@ -902,10 +989,6 @@ impl fmt::Display for Method {
                     None => write!(f, ",cal_g={}", spec.calibration_g)?,
                 }
                 write_precision(f, spec.precision)
-            }
-            Method::InstrumentalVariable(setup) => {
-                f.write_str("iv:")?;
-                write_setup(f, setup)
             }
             Method::BiasCompensated {
                 setup,
@@ -974,6 +1057,9 @@ mod tests {
             "bc:n=3,D=16,lambda=0.99",
             "model:D=8,K=33,span=0.68-1.3,fn_hz=25.00031,zeta=0.030001",
             "model:D=4,K=9,span=0.9-1.1,fn_hz=20,zeta=0.05,filter_hz=50,precision=f32",
+            "iv:n=7,D=16",
+            "iv:n=5,D=1,lambda=0.999,precision=f32,delay=11",
+            "bc:n=7,D=12,precision=f32",
         ] {
             let method = parse(spec);
             assert_eq!(method.to_string(), spec);
@@ -1032,6 +1118,13 @@ mod tests {
                 "iv:n=3,noise_var=1",
                 ["`noise_var`", "expected n, D, lambda, precision"],
             ),
+            ("iv:n=7,D=16,delay=7", ["`delay`", "from 8 (n + 1) to 153"]),
+            ("iv:n=7,delay=x", ["`delay`", "at least n + 1"]),
+            (
+                "bc:n=7,delay=9",
+                ["`delay`", "expected n, D, lambda, precision"],
+            ),
+            ("iv:D=16", ["`n` is required", "order from 1 to 40"]),
         ];
         for (spec, needles) in cases {
             let message = error(spec);
@@ -1070,6 +1163,35 @@ mod tests {
             message.contains("step:n=3,D=1") && message.contains("gain"),
             "{message}"
         );
+    }
+
+    #[test]
+    fn bc_needs_the_tare_variance_and_iv_takes_its_delay() {
+        let mut context = BuildContext::new(SensorChain::reference(), 73.25);
+        let message = parse("bc:n=7,D=16")
+            .build(&context)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            message.contains("bc:n=7,D=16") && message.contains("tare"),
+            "{message}"
+        );
+        context.tare_noise_variance = Some(1000.0);
+        for spec in [
+            "bc:n=7,D=16",
+            "bc:n=40,D=1,precision=f32",
+            "iv:n=7,D=16",
+            "iv:n=7,D=1,delay=153",
+        ] {
+            let built = parse(spec).build(&context);
+            assert!(built.is_ok(), "{spec}: {:?}", built.err());
+        }
+        // The core refuses a negative variance; the error names the method.
+        context.tare_noise_variance = Some(-1.0);
+        assert!(parse("bc:n=7").build(&context).is_err());
+        assert_eq!(parse("bc:n=7").tare_decimation(), Some(1));
+        assert_eq!(parse("iv:n=7,D=16").tare_decimation(), None);
     }
 
     #[test]

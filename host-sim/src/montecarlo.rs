@@ -6,7 +6,9 @@
 //! noise-free zero code, as a calibrated scale knows it), and records for every sample
 //! index after the onset the bias, standard deviation and RMS error of each estimator
 //! configuration, the CRLB, and for each run the time the estimate reaches and stays
-//! within 0.5%, 0.1% and 0.05%.
+//! within 0.5%, 0.1% and 0.05%. Methods that need the noise variance at tare (`bc`) get it
+//! measured: `estimator_core::NoiseMeter` over 0.3 s of simulated empty pan before each run
+//! ([`tare_record`], on a noise stream of its own so other methods' records do not change).
 
 use std::fmt;
 use std::io::Write;
@@ -19,9 +21,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
 use crate::crlb;
-use crate::method::{BuildContext, Method};
+use crate::method::{measured_tare_variance, BuildContext, Method};
 use crate::scene::Scene;
-use crate::simulated::run_seed;
+use crate::simulated::{run_seed, Script, SimulatedAdc};
 use estimator_core::AdcSource;
 
 /// The largest order the host tools accept.
@@ -278,6 +280,34 @@ pub struct Study {
     pub samples: usize,
 }
 
+/// Samples of empty pan metered before each run for the methods that take the tare noise
+/// (`bc`): 0.3 s at 4 kHz, the empty stretch the firmware demo has before its first drop.
+pub const TARE_SAMPLES: usize = 1200;
+
+/// A salt for the tare's noise stream, so that adding a tare to a study leaves every other
+/// method's record (and figures) unchanged.
+const TARE_STREAM: u64 = 0x7a5e_0000_7a5e_0000;
+
+/// Run `run`'s empty-pan record before the drop, tare removed (ADC codes minus the
+/// noise-free zero): the scene's chain and disturbances on its own noise stream.
+pub fn tare_record(scene: &Scene, seed: u64, run: u64) -> Vec<f64> {
+    let end_s = TARE_SAMPLES as f64 / scene.chain.sample_rate_hz;
+    let mut adc = SimulatedAdc::new(
+        scene.chain,
+        Script::<1>::new(end_s),
+        scene.disturbances,
+        run_seed(seed ^ TARE_STREAM, run),
+    );
+    let zero = scene.chain.zero_code();
+    (0..TARE_SAMPLES)
+        .map(|_| {
+            adc.read()
+                .map(|code| f64::from(code) - zero)
+                .unwrap_or(f64::NAN)
+        })
+        .collect()
+}
+
 /// The last index after which `|error|/truth` stays within `tolerance`, as a time.
 fn settle_time(errors: &[Option<f64>], truth: f64, tolerance: f64, rate: f64) -> f64 {
     let mut last_outside: Option<usize> = None;
@@ -324,9 +354,8 @@ impl Study {
         // the oversampled conversions.
         let noise_variance = oversampling * (white_counts * white_counts + 1.0 / 12.0);
         let context = BuildContext {
-            // The variance a tare measurement would see: the white part and the amplifier's
-            // noise at lag 0 (the methods that need it are not built yet; they will
-            // measure it from a tare record where the firmware does).
+            // The modelled variance (white part, quantisation, the amplifier's noise at lag
+            // 0) only to validate the methods below; every run measures its own tare.
             tare_noise_variance: Some(
                 noise_variance
                     + if scene.disturbances.amplifier_noise {
@@ -335,12 +364,20 @@ impl Study {
                         0.0
                     },
             ),
-            ..BuildContext::new(chain, gain)
+            // A drop whose overshoot clips the ADC is refused by the estimators, as the
+            // firmware refuses a saturated sample.
+            ..BuildContext::new(chain, gain).with_adc_rails(zero)
         };
         // Refuse impossible configurations before spending time.
         for method in &self.setups {
             method.build(&context)?;
+            if let Some(decimation) = method.tare_decimation() {
+                if TARE_SAMPLES / usize::from(decimation) < 3 {
+                    bail!("method `{method}`: a tare of {TARE_SAMPLES} samples is too short to meter the noise at D = {decimation}");
+                }
+            }
         }
+        let needs_tare = self.setups.iter().any(|m| m.tare_decimation().is_some());
         let rate = chain.sample_rate_hz;
         let setups = &self.setups;
         let run_one = |run: usize| -> (Vec<Vec<Option<f64>>>, ()) {
@@ -355,10 +392,18 @@ impl Study {
                         .unwrap_or(f64::NAN)
                 })
                 .collect();
+            let tare = needs_tare.then(|| tare_record(scene, self.seed, run as u64));
             let errors = setups
                 .iter()
                 .map(|method| {
-                    // Validated above.
+                    let context = match (method.tare_decimation(), &tare) {
+                        (Some(decimation), Some(tare)) => BuildContext {
+                            tare_noise_variance: measured_tare_variance(tare, decimation),
+                            ..context
+                        },
+                        _ => context,
+                    };
+                    // Validated above (the tare is long enough for the meter's D).
                     let mut estimator = method.build(&context).expect("validated");
                     record
                         .iter()
@@ -426,23 +471,37 @@ impl Study {
             truth_g,
             sample_rate_hz: rate,
             setups: stats,
-            crlb_g2: if scene.disturbances.amplifier_noise && oversampling == 1.0 {
-                // The INA114's noise is coloured by the anti-alias filter: add its
-                // autocovariance and use the coloured bound.
-                let mut autocovariance: Vec<f64> =
-                    crlb::amplifier_autocovariance_g2(&chain, samples)
-                        .iter()
-                        .map(|r| r * gain * gain)
-                        .collect();
-                autocovariance[0] += noise_variance;
-                crlb::coloured_known_tare(&unit_step, gain, &autocovariance)
-            } else {
-                crlb::white_known_tare(&unit_step, gain, noise_variance)
-            },
+            crlb_g2: crlb_g2(scene, truth_g, samples),
             crlb_unknown_tare_g2: crlb::white_unknown_tare(&unit_step, gain, noise_variance),
             sensor_settle_s: sensor_settle_s(scene, truth_g),
             example_relative_error,
         })
+    }
+}
+
+/// The known-model, known-tare CRLB of a step of `truth_g` on `scene` at every sample index
+/// up to `samples`, g²: white noise, quantisation (LSB²/12 per conversion, summed over the
+/// oversampled ones) and, when the scene has it and does not oversample, the amplifier's
+/// noise coloured by the filter (the coloured bound).
+pub fn crlb_g2(scene: &Scene, truth_g: f64, samples: usize) -> Vec<f64> {
+    let chain = scene.chain;
+    let gain = chain.counts_per_gram();
+    let oversampling = f64::from(chain.adc.oversampling.max(1));
+    let white_counts =
+        scene.disturbances.white_noise_g * chain.volts_per_gram() / chain.adc.volts_per_code();
+    let noise_variance = oversampling * (white_counts * white_counts + 1.0 / 12.0);
+    let unit_step = crlb::unit_step_response(&chain, truth_g, samples);
+    if scene.disturbances.amplifier_noise && oversampling == 1.0 {
+        // The INA114's noise is coloured by the anti-alias filter: add its
+        // autocovariance and use the coloured bound.
+        let mut autocovariance: Vec<f64> = crlb::amplifier_autocovariance_g2(&chain, samples)
+            .iter()
+            .map(|r| r * gain * gain)
+            .collect();
+        autocovariance[0] += noise_variance;
+        crlb::coloured_known_tare(&unit_step, gain, &autocovariance)
+    } else {
+        crlb::white_known_tare(&unit_step, gain, noise_variance)
     }
 }
 

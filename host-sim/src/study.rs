@@ -66,6 +66,11 @@ pub fn default_entries() -> Vec<Entry> {
         entry("model bank, true model at 200 g calibration", "model"),
         entry("settled average (baseline)", "settled"),
         entry("moving average (baseline)", "moving"),
+        entry("instrumental variables (n=7, D=16)", "iv:n=7,D=16"),
+        entry(
+            "bias-compensated, σ² metered at tare (n=7, D=16)",
+            "bc:n=7,D=16",
+        ),
     ]
 }
 

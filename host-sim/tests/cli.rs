@@ -6,8 +6,9 @@ use std::path::PathBuf;
 use std::process::Command;
 
 use estimator_core::{
-    Baseline, BaselineConfig, BaselineMode, CovarianceStepEstimator, Estimator, ModelBank,
-    ModelConfig, RampConfig, RampEstimator, Reading, StepConfig, StepEstimator,
+    Baseline, BaselineConfig, BaselineMode, BiasCompensatedConfig, BiasCompensatedStepEstimator,
+    CovarianceStepEstimator, Estimator, InvalidReason, IvConfig, IvStepEstimator, ModelBank,
+    ModelConfig, RampConfig, RampEstimator, Reading, State, StepConfig, StepEstimator,
 };
 use host_sim::estimate::state_name;
 use host_sim::method::{self, Method};
@@ -248,6 +249,10 @@ fn widen(r: Reading<f32>) -> Reading<f64> {
     }
 }
 
+/// A raw-sample noise variance for `bc`, counts²: the reference scene's white noise at 50 dB
+/// (0.445 g × 73.25 counts/g ≈ 32.6 counts) and the quantisation.
+const TARE_VARIANCE: f64 = 1063.0;
+
 /// Every method through `estimate --method` equals the core's own type fed directly, in the
 /// precision the spec names (f32: the tare removed in f64, then rounded, as the CLI does).
 #[test]
@@ -294,6 +299,16 @@ fn estimate_with_every_method_equals_the_core() {
                     StepConfig::new(5, gain)
                         .with_decimation(8)
                         .with_forgetting(0.999),
+                )
+                .unwrap(),
+            ),
+        ),
+        (
+            "covariance:n=7,D=16",
+            all_f64(
+                &mut CovarianceStepEstimator::<f64, 40, 41>::new(
+                    StepConfig::new(7, gain).with_decimation(16),
+                    1e-6,
                 )
                 .unwrap(),
             ),
@@ -356,17 +371,63 @@ fn estimate_with_every_method_equals_the_core() {
                 .unwrap(),
             ),
         ),
+        (
+            "iv:n=7,D=16",
+            all_f64(
+                &mut IvStepEstimator::<f64, 40>::new(IvConfig::new(
+                    StepConfig::new(7, gain).with_decimation(16),
+                ))
+                .unwrap(),
+            ),
+        ),
+        (
+            "iv:n=5,D=12,delay=11,precision=f32",
+            all_f32(
+                &mut IvStepEstimator::<f32, 40>::new(
+                    IvConfig::new(StepConfig::new(5, g32).with_decimation(12))
+                        .with_instrument_delay(11),
+                )
+                .unwrap(),
+            ),
+        ),
+        (
+            "bc:n=3,D=16",
+            all_f64(
+                &mut BiasCompensatedStepEstimator::<f64, 40>::new(BiasCompensatedConfig::new(
+                    StepConfig::new(3, gain).with_decimation(16),
+                    TARE_VARIANCE,
+                ))
+                .unwrap(),
+            ),
+        ),
+        (
+            "bc:n=3,D=16,precision=f32",
+            all_f32(
+                &mut BiasCompensatedStepEstimator::<f32, 40>::new(BiasCompensatedConfig::new(
+                    StepConfig::new(3, g32).with_decimation(16),
+                    TARE_VARIANCE as f32,
+                ))
+                .unwrap(),
+            ),
+        ),
     ];
     for (spec, readings) in cases {
-        // Each case must exercise a valid estimate, or equality would prove little.
+        // Each case must exercise a valid estimate (or, for the f32 covariance form, which
+        // the stability map found to lose positive definiteness, its flag), or equality
+        // would prove little.
         assert!(
-            readings.iter().any(|r| r.estimate.is_some()),
+            readings.iter().any(|r| r.estimate.is_some())
+                || readings
+                    .iter()
+                    .any(|r| r.state == State::Invalid(InvalidReason::LostDefiniteness)),
             "{spec}: never valid"
         );
         let stdout = run_ok(
             host_sim()
                 .args(["estimate", "--method", spec, "--gain", &gain.to_string()])
-                .args(["--zero", &zero.to_string(), "--input"])
+                .args(["--zero", &zero.to_string()])
+                // Only `bc` reads it; the others must ignore it.
+                .args(["--tare-variance", &TARE_VARIANCE.to_string(), "--input"])
                 .arg(&csv),
         );
         let expected = expected_lines(readings.into_iter());
@@ -430,6 +491,18 @@ fn bad_method_specs_are_errors_naming_spec_key_and_expectation() {
         .unwrap();
     assert!(!output.status.success());
     assert!(String::from_utf8_lossy(&output.stderr).contains("--method"));
+    // `bc` without the tare's noise variance is refused, naming what is missing.
+    let output = host_sim()
+        .args(["estimate", "--gain", "1", "--method", "bc:n=3", "--input"])
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("bc:n=3,D=1") && stderr.contains("--tare-variance"),
+        "{stderr}"
+    );
     // --method and the step shorthand exclude each other.
     let output = host_sim()
         .args(["estimate", "--gain", "1", "--method", "settled"])

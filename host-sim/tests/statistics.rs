@@ -215,3 +215,34 @@ fn amplifier_noise_autocovariance_matches_simulation() {
     // The noise is coloured: the lag-10 correlation is far from zero.
     assert!(computed[10] / computed[0] > 0.1, "{:?}", &computed[..11]);
 }
+
+#[test]
+fn the_tare_record_meters_the_scenes_noise() {
+    // `bc` in a study gets σ² from `NoiseMeter` over 1,200 simulated empty-pan samples. At
+    // D = 1 one measurement has a relative standard error of √(3/1199) = 5% (noise_meter.rs);
+    // the mean of 40 runs is known to 0.8%, so it must match the modelled variance (white +
+    // LSB²/12; the amplifier's 0.0068 g adds 0.02%) within 4% (5σ). At D = 16 a run has 74
+    // differences (20%): the mean of 40 within 15% (5σ of 3.2%) — block means of the
+    // filter-coloured amplifier noise are still negligible here.
+    use host_sim::method::measured_tare_variance;
+    use host_sim::montecarlo::{tare_record, TARE_SAMPLES};
+    let scene = host_sim::scene::Scene::load("reference-step").unwrap();
+    let gain = scene.chain.counts_per_gram();
+    let white = scene.disturbances.white_noise_g * gain;
+    let modelled = white * white + 1.0 / 12.0;
+    for (decimation, tolerance) in [(1u16, 0.04), (16, 0.15)] {
+        let runs = 40;
+        let mean = (0..runs)
+            .map(|run| {
+                let record = tare_record(&scene, 1, run);
+                assert_eq!(record.len(), TARE_SAMPLES);
+                measured_tare_variance(&record, decimation).unwrap()
+            })
+            .sum::<f64>()
+            / runs as f64;
+        assert!(
+            (mean / modelled - 1.0).abs() < tolerance,
+            "D = {decimation}: metered {mean:.2} counts², modelled {modelled:.2}"
+        );
+    }
+}

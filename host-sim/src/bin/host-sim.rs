@@ -75,6 +75,9 @@ enum Command {
         /// The scene whose sensor chain the `model` method takes its dynamics from.
         #[arg(long, default_value = "reference-step")]
         scene: String,
+        /// Noise variance of one raw sample measured at tare, raw units² (for `bc`).
+        #[arg(long)]
+        tare_variance: Option<f64>,
     },
     /// Calibration as one command: from recorded drops of a known mass (CSVs with a column
     /// `y`: an empty-pan stretch, then the drop), choose the smallest method that meets the
@@ -189,16 +192,24 @@ enum Command {
     /// scene at 30–80 dB (time to 0.1%, RMS at 50/100/200 ms against the CRLB), CSV +
     /// markdown + charts, and the firmware default's goal figures.
     Study {
-        /// `speed` (issue 5, study 7) or `ramp` (conveyor weighing, the `conveyor-ramp` scene:
-        /// its SNRs default to 30,40,50 dB; `--method ramp:n=..,D=..` replaces its setups).
+        /// `speed` (issue 5, study 7), `stability` (issue 5, item 8: the stability map) or `ramp`
+        /// (conveyor weighing, the `conveyor-ramp` scene: its SNRs default to 30,40,50 dB;
+        /// `--method ramp:n=..,D=..` replaces its setups).
         which: StudyKind,
-        #[arg(long, default_value_t = 1000)]
-        runs: usize,
+        /// Runs per SNR (speed, default 1000) or per Monte Carlo cell (stability, default 100).
+        #[arg(long)]
+        runs: Option<usize>,
         #[arg(long, default_value_t = 1)]
         seed: u64,
-        /// SNRs in dB (comma separated).
-        #[arg(long, value_delimiter = ',', default_values_t = study::SNRS_DB)]
+        /// SNRs in dB (comma separated); default: speed 30–80, stability 10–80 (step 10).
+        #[arg(long, value_delimiter = ',')]
         snr_db: Vec<f64>,
+        /// Stability: the orders of slice A (default 1–40, 15 of them).
+        #[arg(long, value_delimiter = ',')]
+        orders: Vec<usize>,
+        /// Stability: samples of each long run (slice D; 0 leaves the slice out).
+        #[arg(long, default_value_t = host_sim::stability::LONG_SAMPLES)]
+        long_samples: usize,
         /// More methods, after the default list (e.g. a variant under development).
         #[arg(long = "method")]
         methods: Vec<Method>,
@@ -229,6 +240,8 @@ enum StudyKind {
     Speed,
     /// Conveyor weighing: slope error at the end of the `conveyor-ramp` scene's ramp.
     Ramp,
+    /// The stability map of every estimator (issue 5, item 8).
+    Stability,
 }
 
 fn create(path: &PathBuf) -> Result<BufWriter<File>> {
@@ -308,6 +321,7 @@ fn main() -> Result<()> {
             precision,
             zero,
             scene,
+            tare_variance,
         } => {
             let method = match (method, order) {
                 (Some(method), _) => method,
@@ -321,7 +335,10 @@ fn main() -> Result<()> {
             };
             let gain = gain.context("give --gain (or --config)")?;
             let zero = zero.unwrap_or(0.0);
-            let context = BuildContext::new(Scene::load(&scene)?.chain, gain);
+            let context = BuildContext {
+                tare_noise_variance: tare_variance,
+                ..BuildContext::new(Scene::load(&scene)?.chain, gain)
+            };
             let file =
                 File::open(&input).with_context(|| format!("cannot open {}", input.display()))?;
             let stdout = std::io::stdout();
@@ -441,40 +458,75 @@ fn main() -> Result<()> {
             charts(&out, runs, seed, configs, readout_s)?;
         }
         Command::Study {
-            which: StudyKind::Speed,
+            which,
             runs,
             seed,
             snr_db,
+            orders,
+            long_samples,
             methods,
             out,
-        } => study::speed_command(runs, seed, &snr_db, methods, &out)?,
-        Command::Study {
-            which: StudyKind::Ramp,
-            runs,
-            seed,
-            snr_db,
-            methods,
-            out: _,
-        } => {
-            // The ramp study takes the regression part of `ramp:` specs (or step specs).
-            let setups = methods
-                .into_iter()
-                .map(|method| match method {
-                    Method::Ramp(spec) => Ok(spec.setup),
-                    Method::Step(setup) => Ok(setup),
-                    other => Err(anyhow::anyhow!(
-                        "study ramp: `{other}` is not a ramp: give `ramp:n=..,D=..`"
-                    )),
-                })
-                .collect::<Result<Vec<_>>>()?;
-            // The speed study's default SNRs are 30–80 dB; the ramp's goal is at 40 dB.
-            let snr_db = if snr_db == study::SNRS_DB {
-                vec![30.0, 40.0, 50.0]
-            } else {
-                snr_db
-            };
-            host_sim::ramp_study::ramp_command("conveyor-ramp", setups, &snr_db, runs, seed)?
-        }
+        } => match which {
+            StudyKind::Speed => {
+                let snr_db = if snr_db.is_empty() {
+                    study::SNRS_DB.to_vec()
+                } else {
+                    snr_db
+                };
+                study::speed_command(runs.unwrap_or(1000), seed, &snr_db, methods, &out)?
+            }
+            StudyKind::Stability => {
+                if !methods.is_empty() {
+                    anyhow::bail!(
+                        "study stability runs its own methods; --method is for study speed"
+                    );
+                }
+                let snr_db = if snr_db.is_empty() {
+                    host_sim::stability::SNRS_DB.to_vec()
+                } else {
+                    snr_db
+                };
+                let orders = if orders.is_empty() {
+                    host_sim::stability::ORDERS.to_vec()
+                } else {
+                    orders
+                };
+                host_sim::stability::stability_command(
+                    runs.unwrap_or(100),
+                    seed,
+                    &snr_db,
+                    &orders,
+                    long_samples,
+                    &out,
+                )?
+            }
+            StudyKind::Ramp => {
+                // The ramp study takes the regression part of `ramp:` specs (or step specs).
+                let setups = methods
+                    .into_iter()
+                    .map(|method| match method {
+                        Method::Ramp(spec) => Ok(spec.setup),
+                        Method::Step(setup) => Ok(setup),
+                        other => Err(anyhow::anyhow!(
+                            "study ramp: `{other}` is not a ramp: give `ramp:n=..,D=..`"
+                        )),
+                    })
+                    .collect::<Result<Vec<_>>>()?;
+                // The ramp's goal is at 40 dB; 30 and 50 dB show the trend.
+                let snr_db = if snr_db.is_empty() {
+                    vec![30.0, 40.0, 50.0]
+                } else {
+                    snr_db
+                };
+                host_sim::ramp_study::ramp_command(
+                    "conveyor-ramp",
+                    setups,
+                    &snr_db,
+                    runs.unwrap_or(1000),
+                    seed,
+                )?
+            }
+        },
         Command::Bench {
             runs,
             samples,
