@@ -6,10 +6,10 @@
 //! config's `prediction` is this scene's), and `J` loads spaced geometrically over a range
 //! (both ends included). The default range is 0.3×–3× the calibration mass, the span the
 //! reference model bank ([`super::BankCandidate::REFERENCE`]) was designed to cover, with its
-//! top clipped to the heaviest load whose landing stays inside the converter's rails
-//! ([`saturation_limit`]): a heavier drop overshoots into a rail (nearly 2× the load on a
-//! lightly damped cell) and the scale flags it instead of weighing it. A given range is
-//! widened to hold `M_c`.
+//! top clipped to the heaviest load whose landing stays inside the converter's rails (the
+//! crate-private `saturation_limit`): a heavier drop overshoots into a rail (nearly 2× the
+//! load on a lightly damped cell) and the scale flags it instead of weighing it. A given
+//! range is widened to hold `M_c`.
 //!
 //! ## At which resonance: the physical law, and the platform mass nobody gave us
 //! With the cell's stiffness `k` and damping `c` fixed, a load `M` on a platform whose moving
