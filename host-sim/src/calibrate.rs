@@ -21,7 +21,8 @@ use std::time::Instant;
 use anyhow::{anyhow, bail, Context, Result};
 use estimator_core::tuning::{
     self, Calibrated, CalibrationError, CalibrationSettings, CandidateGrid, CandidateScore,
-    DropError, OnsetConfig, Prediction, RunSlot, WeighingConfig, WeighingEstimator, WeighingMethod,
+    DropError, LoadCoverage, LoadScene, LoadScore, OnsetConfig, Prediction, RunSlot,
+    WeighingConfig, WeighingEstimator, WeighingMethod, MAX_SCENES,
 };
 use estimator_core::{IdentifyError, LoadCellModel, Real};
 use serde::Deserialize;
@@ -35,7 +36,10 @@ use crate::sensor::STATES;
 pub const BANK_CANDIDATES: usize = 33;
 
 /// The version of the TOML layout this module writes and reads.
-pub const FORMAT: u32 = 1;
+pub const FORMAT: u32 = 2;
+/// The layout before load ranges (no `[range]`, no `[[load]]`): still read, as a
+/// configuration scored at the calibration mass only.
+pub const FORMAT_CALIBRATION_MASS_ONLY: u32 = 1;
 
 /// What `host-sim calibrate` is asked to do.
 #[derive(Clone, Debug)]
@@ -66,6 +70,16 @@ pub struct Options {
     pub evaluate_all: bool,
     /// Largest order n tried.
     pub max_order: usize,
+    /// The lightest load the target must hold at, g; `None`: the core's default (0.3× the
+    /// mass).
+    pub min_load_g: Option<f64>,
+    /// The heaviest, g; `None`: the core's default (3× the mass, clipped to what the
+    /// converter takes).
+    pub max_load_g: Option<f64>,
+    /// Loads spaced over the range.
+    pub loads: usize,
+    /// The platform's moving mass, g, if known.
+    pub platform_mass_g: Option<f64>,
 }
 
 impl Options {
@@ -86,6 +100,10 @@ impl Options {
             precision: Precision::F32,
             evaluate_all: false,
             max_order: 8,
+            min_load_g: None,
+            max_load_g: None,
+            loads: tuning::DEFAULT_LOADS,
+            platform_mass_g: None,
         }
     }
 
@@ -102,6 +120,10 @@ impl Options {
         settings.counts_per_gram = self.counts_per_gram;
         settings.seed = self.seed;
         settings.evaluate_all = self.evaluate_all;
+        settings.min_load_g = self.min_load_g;
+        settings.max_load_g = self.max_load_g;
+        settings.loads = self.loads;
+        settings.platform_mass_g = self.platform_mass_g;
         let high = (1u64 << self.adc_bits.clamp(1, 32)) - 1;
         settings.onset = settings.onset.with_rails(0.0, high as f64);
         settings
@@ -119,6 +141,67 @@ pub struct Outcome {
     pub elapsed_s: f64,
     /// The arithmetic the candidates were scored in.
     pub precision: Precision,
+}
+
+/// The platform's moving mass from drops of a second known mass (see
+/// [`platform_mass_from_drops`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlatformFit {
+    /// The platform's moving mass, g.
+    pub platform_mass_g: f64,
+    /// The calibration mass and what identification found with it on: g, Hz, ζ.
+    pub first: (f64, f64, f64),
+    /// The second mass and what identification found with it on: g, Hz, ζ.
+    pub second: (f64, f64, f64),
+}
+
+impl PlatformFit {
+    /// The physical law also fixes the damping: ζ scales like the frequency (c fixed). This is
+    /// `(ζ₂/ζ₁)/(f₂/f₁) − 1`, the law's misfit in the damping (0 for a cell that obeys it).
+    pub fn damping_law_misfit(&self) -> f64 {
+        (self.second.2 / self.first.2) / (self.second.1 / self.first.1) - 1.0
+    }
+}
+
+/// Identify the resonance with each mass on (the core's `tuning::identify_drops`, f64) and
+/// the platform mass that explains both (`tuning::platform_mass_from_resonances`).
+pub fn platform_mass_from_drops(
+    first: &[Vec<f64>],
+    first_names: &[String],
+    second: &[Vec<f64>],
+    second_names: &[String],
+    second_mass_g: f64,
+    options: &Options,
+) -> Result<PlatformFit> {
+    let identify = |drops: &[Vec<f64>], names: &[String], mass_g: f64| -> Result<(f64, f64, f64)> {
+        let o = Options {
+            mass_g,
+            ..options.clone()
+        };
+        let settings = o.settings();
+        let mut data: Vec<Vec<f64>> = drops.to_vec();
+        let mut slices: Vec<&mut [f64]> = data.iter_mut().map(|d| d.as_mut_slice()).collect();
+        let (identified, _) = tuning::identify_drops::<f64, STATES>(&mut slices, &settings)
+            .map_err(|e| anyhow!("{}", describe_error(&e, names, &o)))?;
+        let m = identified.model;
+        Ok((mass_g, m.natural_frequency_hz, m.damping_ratio))
+    };
+    let first = identify(first, first_names, options.mass_g)?;
+    let second = identify(second, second_names, second_mass_g)?;
+    let platform_mass_g =
+        tuning::platform_mass_from_resonances(first.0, first.1, second.0, second.1).ok_or_else(
+            || {
+                anyhow!(
+                    "platform mass: {} g rings at {:.4} Hz and {} g at {:.4} Hz; by the physical law (f² ∝ 1/(m_p + M)) no platform mass m_p ≥ 0 explains both",
+                    first.0, first.1, second.0, second.1
+                )
+            },
+        )?;
+    Ok(PlatformFit {
+        platform_mass_g,
+        first,
+        second,
+    })
 }
 
 /// The `y` column of a recorded drop. Calibration needs every sample: an empty or
@@ -164,7 +247,8 @@ pub fn calibrate_samples(
         max_order: options.max_order,
         ..CandidateGrid::standard(options.readout_s)
     };
-    let mut runs = vec![RunSlot::EMPTY; options.runs];
+    // `runs` synthetic drops at each scene.
+    let mut runs = vec![RunSlot::EMPTY; options.runs * settings.max_scenes()];
     let mut scores = Vec::new();
     let started = Instant::now();
     let result = match options.precision {
@@ -196,6 +280,8 @@ pub fn calibrate_samples(
     })
 }
 
+// The core's error, passed straight on (its size is the core's choice: no heap there).
+#[allow(clippy::result_large_err)]
 fn run<T: Real>(
     data: &mut [Vec<T>],
     settings: &CalibrationSettings,
@@ -236,11 +322,40 @@ fn percent(relative: f64) -> String {
     format!("{:.4}%", relative * 100.0)
 }
 
+/// A scene in words: `50 g at 1.23x f_n`.
+pub fn scene_name(scene: &LoadScene) -> String {
+    format!("{:.4} g at {:.3}x f_n", scene.mass_g, scene.frequency_ratio)
+}
+
 /// One line per scored candidate, for the log.
 pub fn score_line(score: &CandidateScore, mass_g: f64, target_relative: f64) -> String {
     let p = &score.prediction;
+    let scored = score.loads.iter().flatten().count();
     let verdict = if score.meets {
-        "MEETS".to_string()
+        format!("MEETS at all {scored} loads")
+    } else if let Some(failed) = &score.failed_load {
+        let f = &failed.prediction;
+        if failed.scene.mass_g == mass_g && failed.scene.frequency_ratio == 1.0 {
+            if f.runs < f.planned_runs {
+                format!(
+                    "no ({} of {} runs outside the target: cannot meet it)",
+                    f.runs - f.within_target_runs,
+                    f.runs
+                )
+            } else {
+                "no (95th-percentile bound above the target)".into()
+            }
+        } else {
+            format!(
+                "no at {} (p95 {} of the load, {} of {} runs outside; floor {}), after {} loads met",
+                scene_name(&failed.scene),
+                percent(f.p95_g / failed.scene.mass_g),
+                f.runs - f.within_target_runs,
+                f.runs,
+                percent(failed.noise_floor_g / failed.scene.mass_g),
+                score.loads_met
+            )
+        }
     } else if p.p95_upper_g <= target_relative * mass_g {
         match &score.recorded {
             Some(check) => format!(
@@ -256,7 +371,7 @@ pub fn score_line(score: &CandidateScore, mass_g: f64, target_relative: f64) -> 
             p.runs
         )
     } else {
-        "no (95th-percentile bound above the target)".into()
+        "no".into()
     };
     format!(
         "{:>3} {:<42} p95 {:>9} (bound {:>9}) rms {:>9} valid {}/{}  {verdict}",
@@ -327,31 +442,60 @@ pub fn describe_error(error: &CalibrationError, names: &[String], options: &Opti
             other => format!("the drops do not identify the load cell's model: {other:?}"),
         },
         CalibrationError::TooFewRuns { runs, needed } => {
-            format!("{runs} Monte Carlo runs: at least {needed} are needed for the 95%/95% bound")
+            let scenes = options.settings().max_scenes().max(1);
+            format!(
+                "{} Monte Carlo runs per scene ({scenes} scenes): at least {} are needed for the 95%/95% bound",
+                runs / scenes,
+                needed / scenes
+            )
         }
         CalibrationError::NoCandidates => "no candidate methods".into(),
         CalibrationError::Candidate { method, error } => {
             format!("candidate {method} cannot be built: {error}")
         }
+        CalibrationError::LoadSaturates { mass_g, limit_g } => format!(
+            "load range: a drop of {mass_g} g overshoots into a rail of the {}-bit converter; the heaviest load it takes is {limit_g:.1} g",
+            options.adc_bits
+        ),
         CalibrationError::NoneMeetsTarget {
             best,
             prediction,
+            failed_load,
             recorded_failing,
             evaluated,
         } => {
-            let p = prediction;
             let recorded = match recorded_failing {
                 Some(failing) => format!("; {failing} recorded drops outside the target"),
                 None => String::new(),
             };
+            // Where the best one failed: the calibration mass, or a load of the range.
+            let (where_, p, mass, floor) = match failed_load {
+                Some(load) => (
+                    format!(" at {}", scene_name(&load.scene)),
+                    load.prediction,
+                    load.scene.mass_g,
+                    Some(load.noise_floor_g),
+                ),
+                None => (String::new(), *prediction, options.mass_g, None),
+            };
+            // A method at the floor, unbiased and Gaussian, has its 95th percentile of
+            // |error| at 1.96 times it.
+            let floor = match floor {
+                Some(floor) => format!(
+                    "; no method beats an RMS of {floor:.4} g ({}) there (the noise floor: Cramér–Rao bound with the tare), whose 95th percentile is {} of the load",
+                    percent(floor / mass),
+                    percent(1.96 * floor / mass)
+                ),
+                None => String::new(),
+            };
             format!(
-                "no candidate meets the target of {} at {} ms ({evaluated} evaluated); best is {best} with a 95th percentile of {} ({:.4} g, from {} runs), RMS {}, valid in {} of {} runs{recorded}",
+                "no candidate meets the target of {} at {} ms ({evaluated} evaluated); best is {best} with a 95th percentile{where_} of {} ({:.4} g, from {} runs), RMS {}, valid in {} of {} runs{floor}{recorded}",
                 percent(options.target_relative),
                 options.readout_s * 1e3,
-                percent(p.p95_g / options.mass_g),
+                percent(p.p95_g / mass),
                 p.p95_g,
                 p.runs,
-                percent(p.rms_g / options.mass_g),
+                percent(p.rms_g / mass),
                 p.valid_runs,
                 p.runs
             )
@@ -440,6 +584,37 @@ struct ConfigFile {
     target: TargetFile,
     onset: OnsetFile,
     measured: MeasuredFile,
+    #[serde(default)]
+    range: Option<RangeFile>,
+    #[serde(default)]
+    load: Vec<LoadFile>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RangeFile {
+    min_g: f64,
+    max_g: f64,
+    loads: u32,
+    #[serde(default)]
+    platform_mass_g: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LoadFile {
+    mass_g: f64,
+    frequency_ratio: f64,
+    noise_floor_g: f64,
+    runs: u32,
+    planned_runs: u32,
+    valid_runs: u32,
+    within_target_runs: u32,
+    detection_failures: u32,
+    bias_g: f64,
+    rms_g: f64,
+    p95_g: f64,
+    p95_upper_g: f64,
 }
 
 #[derive(Debug, Deserialize)]
@@ -856,6 +1031,71 @@ fn write_toml(
         "recorded_worst_error_g = {}",
         number(config.recorded_worst_error_g)
     );
+
+    let loads = &config.loads;
+    let _ = writeln!(w, "\n[range]");
+    let _ = writeln!(
+        w,
+        "# The target holds, relative to the load ({} of it), at every scene below: the calibration",
+        percent(config.target_relative)
+    );
+    let _ = writeln!(w, "# mass and `loads` loads spaced geometrically over [min_g, max_g], each with its own synthetic");
+    let _ = writeln!(w, "# drops of the identified model moved to that load by the physical law (stiffness and damping");
+    match loads.platform_mass_g {
+        Some(platform) => {
+            let _ = writeln!(w, "# fixed) with the platform's moving mass {platform} g.");
+        }
+        None => {
+            let _ = writeln!(w, "# fixed). The platform's moving mass is unknown: each load was scored at both ends of what");
+            let _ = writeln!(w, "# physics allows, as calibrated (mass -> infinity) and sqrt(calibration mass / load) times");
+            let _ = writeln!(
+                w,
+                "# faster (mass -> 0). `platform_mass_g` absent: unknown."
+            );
+        }
+    }
+    let _ = writeln!(w, "min_g = {}", number(loads.min_g));
+    let _ = writeln!(w, "max_g = {}", number(loads.max_g));
+    let _ = writeln!(w, "loads = {}", loads.loads);
+    if let Some(platform) = loads.platform_mass_g {
+        let _ = writeln!(w, "platform_mass_g = {}", number(platform));
+    }
+    for score in loads.scores.iter().flatten() {
+        let p = &score.prediction;
+        let mass = score.scene.mass_g;
+        let _ = writeln!(w, "\n[[load]]");
+        let _ = writeln!(
+            w,
+            "# {}: RMS {:.4} g ({}), 95th percentile {:.4} g ({}), bound {:.4} g ({}) <= {:.4} g; noise floor {:.4} g ({}).",
+            scene_name(&score.scene),
+            p.rms_g,
+            percent(p.rms_g / mass),
+            p.p95_g,
+            percent(p.p95_g / mass),
+            p.p95_upper_g,
+            percent(p.p95_upper_g / mass),
+            config.target_relative * mass,
+            score.noise_floor_g,
+            percent(score.noise_floor_g / mass)
+        );
+        let _ = writeln!(w, "mass_g = {}", number(mass));
+        let _ = writeln!(
+            w,
+            "frequency_ratio = {}",
+            number(score.scene.frequency_ratio)
+        );
+        let _ = writeln!(w, "noise_floor_g = {}", number(score.noise_floor_g));
+        let _ = writeln!(w, "runs = {}\nplanned_runs = {}\nvalid_runs = {}\nwithin_target_runs = {}\ndetection_failures = {}",
+            p.runs, p.planned_runs, p.valid_runs, p.within_target_runs, p.detection_failures);
+        let _ = writeln!(
+            w,
+            "bias_g = {}\nrms_g = {}\np95_g = {}\np95_upper_g = {}",
+            number(p.bias_g),
+            number(p.rms_g),
+            number(p.p95_g),
+            number(p.p95_upper_g)
+        );
+    }
     s
 }
 
@@ -875,8 +1115,14 @@ pub fn parse_config(path: &Path, text: &str) -> Result<(WeighingConfig, Precisio
             path.display()
         )
     };
-    if file.format != FORMAT {
-        return Err(bad("format", &format!("{FORMAT}, found {}", file.format)));
+    if file.format != FORMAT && file.format != FORMAT_CALIBRATION_MASS_ONLY {
+        return Err(bad(
+            "format",
+            &format!(
+                "{FORMAT} (or {FORMAT_CALIBRATION_MASS_ONLY}), found {}",
+                file.format
+            ),
+        ));
     }
     let m = &file.method;
     let precision: Precision = m
@@ -959,7 +1205,70 @@ pub fn parse_config(path: &Path, text: &str) -> Result<(WeighingConfig, Precisio
         },
         recorded_drops: file.measured.recorded_drops,
         recorded_worst_error_g: file.measured.recorded_worst_error_g,
+        loads: LoadCoverage::calibration_mass_only(
+            file.target.calibration_mass_g,
+            Prediction {
+                runs: file.measured.runs,
+                planned_runs: file.measured.planned_runs,
+                valid_runs: file.measured.valid_runs,
+                within_target_runs: file.measured.within_target_runs,
+                detection_failures: file.measured.detection_failures,
+                bias_g: file.measured.bias_g,
+                rms_g: file.measured.rms_g,
+                p95_g: file.measured.p95_g,
+                p95_upper_g: file.measured.p95_upper_g,
+            },
+        ),
     };
+    let mut config = config;
+    if file.format == FORMAT {
+        let range = file
+            .range
+            .as_ref()
+            .ok_or_else(|| bad("range", "a [range] table (format 2)"))?;
+        if file.load.is_empty() || file.load.len() > MAX_SCENES {
+            return Err(bad(
+                "load",
+                &format!(
+                    "1 to {MAX_SCENES} [[load]] tables, found {}",
+                    file.load.len()
+                ),
+            ));
+        }
+        let mut scores = [None; MAX_SCENES];
+        for (slot, load) in scores.iter_mut().zip(&file.load) {
+            *slot = Some(LoadScore {
+                scene: LoadScene {
+                    mass_g: load.mass_g,
+                    frequency_ratio: load.frequency_ratio,
+                },
+                noise_floor_g: load.noise_floor_g,
+                prediction: Prediction {
+                    runs: load.runs,
+                    planned_runs: load.planned_runs,
+                    valid_runs: load.valid_runs,
+                    within_target_runs: load.within_target_runs,
+                    detection_failures: load.detection_failures,
+                    bias_g: load.bias_g,
+                    rms_g: load.rms_g,
+                    p95_g: load.p95_g,
+                    p95_upper_g: load.p95_upper_g,
+                },
+            });
+        }
+        config.loads = LoadCoverage {
+            min_g: range.min_g,
+            max_g: range.max_g,
+            loads: range.loads,
+            platform_mass_g: range.platform_mass_g,
+            scores,
+        };
+    } else if file.range.is_some() || !file.load.is_empty() {
+        return Err(bad(
+            "format",
+            "2 for a file with [range] and [[load]] tables, found 1",
+        ));
+    }
     if let Some(spec) = &m.spec {
         let written = method_spec(&config, precision).to_string();
         if spec.trim() != written {
@@ -1026,10 +1335,50 @@ pub fn rust_const(config: &WeighingConfig) -> String {
             f(ratio_max)
         ),
     };
+    let prediction = |p: &Prediction| {
+        format!(
+            "Prediction {{ runs: {}, planned_runs: {}, valid_runs: {}, within_target_runs: {}, detection_failures: {}, bias_g: {}, rms_g: {}, p95_g: {}, p95_upper_g: {} }}",
+            p.runs,
+            p.planned_runs,
+            p.valid_runs,
+            p.within_target_runs,
+            p.detection_failures,
+            f(p.bias_g),
+            f(p.rms_g),
+            f(p.p95_g),
+            f(p.p95_upper_g)
+        )
+    };
+    let c = &config.loads;
+    let scores: Vec<String> = c
+        .scores
+        .iter()
+        .map(|score| match score {
+            Some(s) => format!(
+                "Some(LoadScore {{ scene: LoadScene {{ mass_g: {}, frequency_ratio: {} }}, noise_floor_g: {}, prediction: {} }})",
+                f(s.scene.mass_g),
+                f(s.scene.frequency_ratio),
+                f(s.noise_floor_g),
+                prediction(&s.prediction)
+            ),
+            None => "None".into(),
+        })
+        .collect();
+    let loads = format!(
+        "LoadCoverage {{\n        min_g: {},\n        max_g: {},\n        loads: {},\n        platform_mass_g: {},\n        scores: [\n            {},\n        ],\n    }}",
+        f(c.min_g),
+        f(c.max_g),
+        c.loads,
+        match c.platform_mass_g {
+            Some(m) => format!("Some({})", f(m)),
+            None => "None".into(),
+        },
+        scores.join(",\n            ")
+    );
     let m = &config.model;
     let p = &config.prediction;
     format!(
-        "pub const WEIGHING: WeighingConfig = WeighingConfig {{\n    method: {method},\n    counts_per_gram: {},\n    zero_counts: {},\n    noise_variance_counts2: {},\n    raw_noise_variance_counts2: {},\n    onset: OnsetConfig {{ min_empty_samples: {}, drift_sigma: {}, threshold_sigma: {}, guard_samples: {}, min_step_sigma: {}, min_noise_rms: {}, rail_low: {}, rail_high: {} }},\n    detection_lag_samples: {},\n    model: LoadCellModel {{ natural_frequency_hz: {}, damping_ratio: {}, filter_order: {}, filter_cutoff_hz: {}, counts_per_gram: {}, sample_rate_hz: {} }},\n    identified_counts_per_gram: {},\n    calibration_mass_g: {},\n    readout_s: {},\n    target_relative: {},\n    prediction: Prediction {{ runs: {}, planned_runs: {}, valid_runs: {}, within_target_runs: {}, detection_failures: {}, bias_g: {}, rms_g: {}, p95_g: {}, p95_upper_g: {} }},\n    recorded_drops: {},\n    recorded_worst_error_g: {},\n}};\n",
+        "pub const WEIGHING: WeighingConfig = WeighingConfig {{\n    method: {method},\n    counts_per_gram: {},\n    zero_counts: {},\n    noise_variance_counts2: {},\n    raw_noise_variance_counts2: {},\n    onset: OnsetConfig {{ min_empty_samples: {}, drift_sigma: {}, threshold_sigma: {}, guard_samples: {}, min_step_sigma: {}, min_noise_rms: {}, rail_low: {}, rail_high: {} }},\n    detection_lag_samples: {},\n    model: LoadCellModel {{ natural_frequency_hz: {}, damping_ratio: {}, filter_order: {}, filter_cutoff_hz: {}, counts_per_gram: {}, sample_rate_hz: {} }},\n    identified_counts_per_gram: {},\n    calibration_mass_g: {},\n    readout_s: {},\n    target_relative: {},\n    prediction: Prediction {{ runs: {}, planned_runs: {}, valid_runs: {}, within_target_runs: {}, detection_failures: {}, bias_g: {}, rms_g: {}, p95_g: {}, p95_upper_g: {} }},\n    recorded_drops: {},\n    recorded_worst_error_g: {},\n    loads: {loads},\n}};\n",
         f(config.counts_per_gram),
         f(config.zero_counts),
         f(config.noise_variance_counts2),

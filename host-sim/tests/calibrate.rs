@@ -1,19 +1,23 @@
 //! Calibration as one command (issue 5, item 6): from three simulated drops of the reference
-//! mass, the core's `tuning::calibrate` chooses the smallest method that meets the target,
-//! and that choice holds on FRESH drops of host-sim's own simulator (not the identified
-//! model the choice was scored on).
+//! mass, the core's `tuning::calibrate` chooses the smallest method that meets the target
+//! at every load of the scale's range, and that choice holds on FRESH drops of host-sim's
+//! own simulator (not the identified model the choice was scored on) at loads across the
+//! range, with the simulator's true platform mass (120 g), which calibration did not know.
 //!
-//! Every drop is the shipped `calibration-drop` scene (0.3 s of empty pan, then 138.32 g),
-//! converted by the simulated 16-bit ADC. The fresh drops go through the same onset
-//! detection and tare as calibration, and are read 100 ms after the true landing.
+//! Every calibration drop is the shipped `calibration-drop` scene (0.3 s of empty pan, then
+//! 138.32 g), converted by the simulated 16-bit ADC; a fresh drop is the same scene with
+//! another load and the same noise (σ set by the SNR of the 138.32 g step). The fresh drops
+//! go through the same onset detection and tare as calibration, and are read 100 ms after
+//! the true landing.
 //! Figures: `cargo test --release -p host-sim --test calibrate -- --nocapture`.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::OnceLock;
 
 use estimator_core::tuning::{
-    summarise_drop, CalibrationError, CandidateGrid, OnsetConfig, WeighingConfig,
-    WeighingEstimator, WeighingMethod,
+    summarise_drop, CalibrationError, CandidateGrid, LoadCoverage, LoadScene, LoadScore,
+    OnsetConfig, Prediction, WeighingConfig, WeighingEstimator, WeighingMethod, MAX_SCENES,
 };
 use estimator_core::{Estimator, LoadCellModel};
 use host_sim::calibrate::{self, Options, Outcome};
@@ -26,8 +30,30 @@ const MASS_G: f64 = 138.32;
 const CALIBRATION_SEEDS: [u64; 3] = [1, 2, 3];
 const FRESH_SEED: u64 = 20_240_601;
 
+/// The lightest load at which 0.1% at 100 ms is asked at 50 dB. The noise floor there
+/// (Cramér–Rao bound with the tare, 0.026 g) puts even an estimator at the floor at a 95th
+/// percentile of 1.96 × 0.026 = 0.051 g, i.e. 0.1% of 51 g; calibration finds no method for
+/// 70 g and one for 80 g (host-sim's README), so the range starts at 80 g. Its top is the
+/// default: the heaviest load whose overshoot the 16-bit converter takes (~342 g).
+const MIN_LOAD_G: f64 = 80.0;
+/// Loads the fresh drops check: the range's ends (340 g: just inside the top), the
+/// calibration mass and one between.
+const FRESH_LOADS_G: [f64; 4] = [MIN_LOAD_G, MASS_G, 250.0, 340.0];
+
 fn scene(snr_db: f64) -> Scene {
     Scene::load("calibration-drop").unwrap().with_snr_db(snr_db)
+}
+
+/// The calibration-drop scene with another load, the noise set by the same 138.32 g step.
+fn scene_with_load(snr_db: f64, mass_g: f64) -> Scene {
+    Scene::parse(
+        Path::new("fresh.toml"),
+        &format!(
+            "duration_s = 1.8\n[[events]]\ntime_s = 0.3\nmass_g = {mass_g}\n[noise]\nsnr_step_g = {MASS_G}\n"
+        ),
+    )
+    .unwrap()
+    .with_snr_db(snr_db)
 }
 
 /// The codes of one drop of the scene, as `simulate` writes them.
@@ -59,6 +85,28 @@ fn options(readout_s: f64, target_relative: f64) -> Options {
     }
 }
 
+/// The scoring before load ranges: the calibration mass only.
+fn at_calibration_mass_only(options: Options) -> Options {
+    Options {
+        min_load_g: Some(MASS_G),
+        max_load_g: Some(MASS_G),
+        ..options
+    }
+}
+
+/// 50 dB, 0.1% at 100 ms from 80 g to the converter's limit, platform mass unknown, f32:
+/// calibrated once for the tests that need it.
+fn range_50db() -> &'static Outcome {
+    static OUTCOME: OnceLock<Outcome> = OnceLock::new();
+    OUTCOME.get_or_init(|| {
+        let options = Options {
+            min_load_g: Some(MIN_LOAD_G),
+            ..options(0.1, 0.001)
+        };
+        calibrated(50.0, &options).unwrap()
+    })
+}
+
 fn calibrated(snr_db: f64, options: &Options) -> Result<Outcome, String> {
     let (drops, names) = calibration_drops(&scene(snr_db));
     calibrate::calibrate_samples(&drops, &names, options, |_| {}).map_err(|e| format!("{e:#}"))
@@ -79,23 +127,31 @@ fn binomial_upper(n: usize, p: f64, alpha: f64) -> usize {
 
 /// Errors at the readout on fresh drops, through the same detection and tare.
 struct Fresh {
+    mass_g: f64,
     runs: usize,
     outside: usize,
     rms_g: f64,
     p95_g: f64,
 }
 
-fn fresh(config: &WeighingConfig, precision: Precision, snr_db: f64, runs: usize) -> Fresh {
-    let scene = scene(snr_db);
+/// `runs` fresh drops of `mass_g` (seeds `run_seed(FRESH_SEED, run)`), each through the
+/// config's own onset detection and tare, as the firmware would run them; then the method
+/// from the detected onset and from the landing (the two ends the config claims), the larger
+/// |error| counting, as in the prediction.
+fn fresh_at(
+    config: &WeighingConfig,
+    precision: Precision,
+    snr_db: f64,
+    mass_g: f64,
+    runs: usize,
+) -> Fresh {
+    let scene = scene_with_load(snr_db, mass_g);
     let (landing, _, _) = scene.studied_step();
     let readout = config.readout_samples();
-    let target_g = config.target_relative * MASS_G;
+    let target_g = config.target_relative * mass_g;
     let mut errors = Vec::with_capacity(runs);
     for run in 0..runs as u64 {
         let codes = record(&scene, run_seed(FRESH_SEED, run), landing + readout + 1);
-        // The config's own onset detection, as the firmware would run it; then the method
-        // from the detected onset and from the landing (the two ends the config claims),
-        // the larger |error| counting, as in the prediction.
         let error = match summarise_drop(&codes, &config.onset) {
             Ok(summary) => {
                 let mut worst = 0.0f64;
@@ -106,7 +162,7 @@ fn fresh(config: &WeighingConfig, precision: Precision, snr_db: f64, runs: usize
                     for &code in &codes[start.min(codes.len())..] {
                         last = estimator.push(code - summary.zero).estimate;
                     }
-                    let error = last.map_or(f64::INFINITY, |estimate| estimate - MASS_G);
+                    let error = last.map_or(f64::INFINITY, |estimate| estimate - mass_g);
                     // Never NaN: a missing reading is an infinite error.
                     if error.abs() > worst.abs() {
                         worst = error;
@@ -126,6 +182,7 @@ fn fresh(config: &WeighingConfig, precision: Precision, snr_db: f64, runs: usize
     magnitudes.sort_by(f64::total_cmp);
     let p95_g = magnitudes[((0.95 * runs as f64).ceil() as usize).max(1) - 1];
     Fresh {
+        mass_g,
         runs,
         outside,
         rms_g,
@@ -133,30 +190,48 @@ fn fresh(config: &WeighingConfig, precision: Precision, snr_db: f64, runs: usize
     }
 }
 
+fn fresh(config: &WeighingConfig, precision: Precision, snr_db: f64, runs: usize) -> Fresh {
+    fresh_at(config, precision, snr_db, MASS_G, runs)
+}
+
+/// The claim at one load: P(|error| > target) ≤ 5%. Then the count outside is at most
+/// Bin(runs, 0.05) in distribution; the check fails if it exceeds that law's 99.9th
+/// percentile (a 0.1% false alarm for a selection exactly at its limit at that load; with
+/// four loads checked, at most 0.4% for the test).
+fn holds(result: &Fresh) -> bool {
+    result.outside <= binomial_upper(result.runs, 0.05, 0.001)
+}
+
+fn describe(result: &Fresh, target_relative: f64) -> String {
+    format!(
+        "{:.2} g: {} fresh drops, RMS {:.4} g ({:.4}%), p95 {:.4} g ({:.4}%), {} outside {:.4} g (allowed {})",
+        result.mass_g,
+        result.runs,
+        result.rms_g,
+        result.rms_g / result.mass_g * 100.0,
+        result.p95_g,
+        result.p95_g / result.mass_g * 100.0,
+        result.outside,
+        target_relative * result.mass_g,
+        binomial_upper(result.runs, 0.05, 0.001)
+    )
+}
+
 fn check_on_fresh_drops(outcome: &Outcome, snr_db: f64, runs: usize) {
     let config = &outcome.calibrated.config;
     let result = fresh(config, outcome.precision, snr_db, runs);
-    let target_g = config.target_relative * MASS_G;
     let p = &config.prediction;
-    // The claim: P(|error| > target) ≤ 5%. Then the count outside is at most Bin(runs, 0.05)
-    // in distribution; the test fails if it exceeds that law's 99.9th percentile (a 0.1%
-    // false alarm for a selection that is exactly at its limit; a real one is below it).
-    let allowed = binomial_upper(runs, 0.05, 0.001);
     println!(
-        "{snr_db} dB, {} at {} ms: predicted RMS {:.4} g, p95 {:.4} g (bound {:.4}); fresh ({} runs) RMS {:.4} g, p95 {:.4} g, {} outside the target {:.4} g (allowed {allowed})",
+        "{snr_db} dB, {} at {} ms: predicted RMS {:.4} g, p95 {:.4} g (bound {:.4}); {}",
         config.method,
         config.readout_s * 1e3,
         p.rms_g,
         p.p95_g,
         p.p95_upper_g,
-        result.runs,
-        result.rms_g,
-        result.p95_g,
-        result.outside,
-        target_g
+        describe(&result, config.target_relative)
     );
     assert!(
-        result.outside <= allowed,
+        holds(&result),
         "{} of {runs} fresh drops outside the target",
         result.outside
     );
@@ -173,13 +248,13 @@ fn check_on_fresh_drops(outcome: &Outcome, snr_db: f64, runs: usize) {
 }
 
 #[test]
-fn the_chosen_configuration_meets_the_target_on_fresh_drops() {
-    let options = options(0.1, 0.001);
-    let outcome = calibrated(50.0, &options).unwrap();
+fn the_chosen_configuration_meets_the_target_on_fresh_drops_across_the_load_range() {
+    let outcome = range_50db();
     let c = &outcome.calibrated;
+    let config = &c.config;
     println!(
-        "50 dB, 0.1% at 100 ms: chose {} after {} candidates in {:.2} s",
-        c.config.method, c.evaluated, outcome.elapsed_s
+        "50 dB, 0.1% at 100 ms over {:.1}-{:.1} g: chose {} after {} candidates in {:.2} s",
+        config.loads.min_g, config.loads.max_g, config.method, c.evaluated, outcome.elapsed_s
     );
     // Everything scored before the choice failed, and the choice is the first that passed:
     // candidates come in size order.
@@ -188,34 +263,246 @@ fn the_chosen_configuration_meets_the_target_on_fresh_drops() {
     }
     let (last, before) = outcome.scores.split_last().unwrap();
     assert!(last.meets && before.iter().all(|s| !s.meets));
-    assert_eq!(last.method, c.config.method);
+    assert_eq!(last.method, config.method);
     // The gain the drops showed: the simulator's is 73.2547 counts/g; the identified one is
     // a fit over three 1.5 s drops whose standard deviation host-sim's model_based test
     // bounds at 1.8e-3 counts/g (2.4e-5 relative); allow 5 of them.
     let truth = scene(50.0).chain.counts_per_gram();
     assert!(
-        (c.config.counts_per_gram / truth - 1.0).abs() < 1.2e-4,
+        (config.counts_per_gram / truth - 1.0).abs() < 1.2e-4,
         "{} vs {truth}",
-        c.config.counts_per_gram
+        config.counts_per_gram
     );
-    check_on_fresh_drops(&outcome, 50.0, 400);
+    // The range asked for, its top the converter's limit (the fresh loads lie inside it),
+    // and the platform mass unknown: the calibration mass, then each of 4 loads at two
+    // resonances; every scene within the target relative to its load.
+    let loads = &config.loads;
+    assert_eq!(loads.min_g, MIN_LOAD_G);
+    assert!(loads.max_g >= FRESH_LOADS_G[3], "{}", loads.max_g);
+    assert_eq!(loads.platform_mass_g, None);
+    let scored: Vec<&LoadScore> = loads.scores.iter().flatten().collect();
+    assert_eq!(scored.len(), 9);
+    for score in &scored {
+        println!(
+            "  scored {:.2} g at {:.3}x f_n: p95 {:.4}% (bound {:.4}%), floor {:.4} g",
+            score.scene.mass_g,
+            score.scene.frequency_ratio,
+            score.p95_over_target(1.0) * 100.0,
+            score.bound_over_target(1.0) * 100.0,
+            score.noise_floor_g
+        );
+        assert!(score.bound_over_target(config.target_relative) <= 1.0);
+    }
+
+    // Fresh drops of the simulator (platform mass 120 g: each load at its true resonance,
+    // between the two ends scored): 400 at the calibration mass (also checked against the
+    // prediction), 300 at each other load.
+    check_on_fresh_drops(outcome, 50.0, 400);
+    for mass_g in FRESH_LOADS_G {
+        if mass_g == MASS_G {
+            continue;
+        }
+        let result = fresh_at(config, outcome.precision, 50.0, mass_g, 300);
+        println!("  {}", describe(&result, config.target_relative));
+        assert!(
+            holds(&result),
+            "{}",
+            describe(&result, config.target_relative)
+        );
+    }
 
     // The TOML written for it reads back to the same configuration.
     let names: Vec<String> = CALIBRATION_SEEDS
         .iter()
         .map(|s| format!("d{s}.csv"))
         .collect();
-    let text = calibrate::to_toml(&outcome, &names, "host-sim calibrate ...");
+    let text = calibrate::to_toml(outcome, &names, "host-sim calibrate ...");
     let (read, precision) = calibrate::parse_config(Path::new("w.toml"), &text).unwrap();
-    assert_eq!(read, c.config);
+    assert_eq!(read, *config);
     assert_eq!(precision, outcome.precision);
+}
+
+#[test]
+fn a_choice_good_only_at_the_calibration_mass_is_rejected_and_a_range_the_noise_rules_out_is_refused(
+) {
+    // Scored at the calibration mass only (the scoring before load ranges), calibration chose
+    // `step:n=2,D=32,lambda=0.852`, within 0.1% at 138.32 g but not at light loads.
+    let old = calibrated(50.0, &at_calibration_mass_only(options(0.1, 0.001))).unwrap();
+    let old_method = old.calibrated.config.method;
+    assert!(
+        matches!(
+            old_method,
+            WeighingMethod::Step {
+                order: 2,
+                decimation: 32,
+                forgetting,
+            } if forgetting < 1.0
+        ),
+        "{old_method}"
+    );
+    assert_eq!(old.calibrated.config.loads.scores[1], None);
+    // The README's old failure, on fresh simulator drops: at 50 g it misses 0.1% in far more
+    // runs than a 95% claim allows.
+    let at_50 = fresh_at(&old.calibrated.config, old.precision, 50.0, 50.0, 400);
+    println!("old choice {old_method}: {}", describe(&at_50, 0.001));
+    assert!(!holds(&at_50), "{}", describe(&at_50, 0.001));
+
+    // Over 80 g to the converter's limit it is scored again and stopped at a load lighter
+    // than the calibration mass; the choice is a larger model (which holds on fresh drops
+    // across the range: the test above).
+    let new = range_50db();
+    let new_method = new.calibrated.config.method;
+    let again = new
+        .scores
+        .iter()
+        .find(|s| s.method == old_method)
+        .expect("the old choice is scored over the range too");
+    let failed = again.failed_load.expect("it fails at some load");
+    println!(
+        "over {MIN_LOAD_G} g and up it fails at {:.2} g at {:.3}x f_n; the range chose {new_method}",
+        failed.scene.mass_g, failed.scene.frequency_ratio
+    );
+    assert!(!again.meets && failed.scene.mass_g < MASS_G);
+    assert!(new_method.size_key() > old_method.size_key());
+
+    // And a range that holds 50 g (the default, 0.3× = 41.5 g) is refused, not given a
+    // configuration that misses there: no candidate meets it, and where the best one failed
+    // even a method at the noise floor would not (its 95th percentile, 1.96 × the floor, is
+    // above 0.1% of the load).
+    let options = options(0.1, 0.001);
+    let settings = options.settings();
+    let (drops, _) = calibration_drops(&scene(50.0));
+    let mut data: Vec<Vec<f32>> = drops
+        .iter()
+        .map(|d| d.iter().map(|&v| v as f32).collect())
+        .collect();
+    let mut slices: Vec<&mut [f32]> = data.iter_mut().map(|d| d.as_mut_slice()).collect();
+    let mut runs = vec![estimator_core::tuning::RunSlot::EMPTY; 400 * settings.max_scenes()];
+    let grid = CandidateGrid::standard(0.1);
+    match estimator_core::tuning::calibrate::<f32, 40, 5, 33>(
+        &mut slices,
+        &settings,
+        &grid,
+        &mut runs,
+        |_| {},
+    ) {
+        Err(CalibrationError::NoneMeetsTarget {
+            best,
+            failed_load: Some(load),
+            evaluated,
+            ..
+        }) => {
+            println!(
+                "0.3x-3x: refused after {evaluated}; best {best} failed at {:.2} g, noise floor {:.4} g",
+                load.scene.mass_g, load.noise_floor_g
+            );
+            assert_eq!(evaluated, grid.len());
+            assert!((load.scene.mass_g / (0.3 * MASS_G) - 1.0).abs() < 1e-12);
+            assert!(1.96 * load.noise_floor_g > 0.001 * load.scene.mass_g);
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn at_70_db_the_default_range_holds_at_both_ends() {
+    // At 70 dB (σ = 0.044 g) the noise floor is 0.003 g at every load: what decides is the
+    // model's own error. The default range, 0.3× the mass to the converter's limit.
+    let outcome = calibrated(70.0, &options(0.1, 0.001)).unwrap();
+    let config = &outcome.calibrated.config;
+    let loads = &config.loads;
+    println!(
+        "70 dB, 0.1% at 100 ms over {:.2}-{:.2} g: {}",
+        loads.min_g, loads.max_g, config.method
+    );
+    assert!((loads.min_g / (0.3 * MASS_G) - 1.0).abs() < 1e-12);
+    // Scored at the calibration mass only it would be `step:n=2,D=32` (0.09% off at 138 g,
+    // nearly all bias); over the range that one is stopped at a light load.
+    let small = WeighingMethod::Step {
+        order: 2,
+        decimation: 32,
+        forgetting: 1.0,
+    };
+    let scored = outcome.scores.iter().find(|s| s.method == small).unwrap();
+    assert!(scored.prediction.p95_upper_g <= 0.001 * MASS_G && !scored.meets);
+    assert!(config.method.size_key() > small.size_key());
+    for mass_g in [loads.min_g, 340.0] {
+        let result = fresh_at(config, outcome.precision, 70.0, mass_g, 300);
+        println!("  {}", describe(&result, 0.001));
+        assert!(holds(&result), "{}", describe(&result, 0.001));
+    }
+}
+
+#[test]
+fn the_platform_mass_from_a_second_mass_is_the_simulators() {
+    // Two drops of 250 g besides the three of 138.32 g: the two identified resonances and the
+    // physical law give the platform's moving mass, 120 g in the simulator.
+    let (first, first_names) = calibration_drops(&scene(50.0));
+    let heavy = scene_with_load(50.0, 250.0);
+    let second: Vec<Vec<f64>> = [11u64, 12]
+        .iter()
+        .map(|&seed| record(&heavy, seed, heavy.samples()))
+        .collect();
+    let second_names = vec!["s11.csv".to_string(), "s12.csv".to_string()];
+    let options = options(0.1, 0.001);
+    let fit = calibrate::platform_mass_from_drops(
+        &first,
+        &first_names,
+        &second,
+        &second_names,
+        250.0,
+        &options,
+    )
+    .unwrap();
+    println!(
+        "platform mass {:.3} g from {:.5} Hz at 138.32 g and {:.5} Hz at 250 g; damping law misfit {:+.2e}",
+        fit.platform_mass_g,
+        fit.first.1,
+        fit.second.1,
+        fit.damping_law_misfit()
+    );
+    // host-sim's model_based test bounds the identified f_n of three 50 dB drops at 1.9e-4
+    // Hz (7.7e-6 relative; two 250 g drops: ~1.1e-5) and ζ at 2.6e-4 relative (two drops:
+    // ~4e-4). m_p = (M_a − ρM_b)/(ρ − 1) with ρ = (f_b/f_a)² = 0.698 moves by
+    // (M_b − M_a)/(ρ − 1)² = 1,224 g per unit of ρ, and ρ by 2ρ·1.3e-5 = 1.9e-5 (1σ): 0.023 g.
+    // Allow 5σ: 0.12 g. The damping law's misfit has σ ≈ 4.8e-4; 5σ: 2.4e-3.
+    assert!(
+        (fit.platform_mass_g - 120.0).abs() < 0.12,
+        "{}",
+        fit.platform_mass_g
+    );
+    assert!(fit.damping_law_misfit().abs() < 2.4e-3);
+    // Drops of 250 g said to be of 100 g: the "lighter" mass rings slower, which no platform
+    // explains.
+    let message = format!(
+        "{:#}",
+        calibrate::platform_mass_from_drops(
+            &first,
+            &first_names,
+            &second,
+            &second_names,
+            100.0,
+            &options
+        )
+        .unwrap_err()
+    );
+    assert!(message.contains("no platform mass"), "{message}");
 }
 
 #[test]
 fn a_quieter_scale_needs_no_larger_model() {
     // A target both SNRs can meet: 0.2% at 60 ms. At 40 dB (σ = 1.4 g) the noise decides;
     // at 70 dB (0.044 g) only the model error does.
-    let options = options(0.06, 0.002);
+    // From the calibration mass to the converter's limit, with the platform mass known
+    // (120 g, as a second mass gives it: `platform_mass_from_drops`): at 40 dB the noise
+    // floor alone (0.099 g at 60 ms) rules out 0.2% of lighter loads, and with the platform
+    // unknown the slowest resonance allowed at 342 g (0.64×) leaves no method within 0.2%
+    // 60 ms after the landing.
+    let options = Options {
+        min_load_g: Some(MASS_G),
+        platform_mass_g: Some(120.0),
+        ..options(0.06, 0.002)
+    };
     let noisy = calibrated(40.0, &options).unwrap();
     let quiet = calibrated(70.0, &options).unwrap();
     let (noisy_method, quiet_method) = (
@@ -258,7 +545,7 @@ fn an_impossible_target_names_the_best_candidate() {
     let settings = options.settings();
     let mut data: Vec<Vec<f64>> = drops.clone();
     let mut slices: Vec<&mut [f64]> = data.iter_mut().map(|d| d.as_mut_slice()).collect();
-    let mut runs = vec![estimator_core::tuning::RunSlot::EMPTY; 60];
+    let mut runs = vec![estimator_core::tuning::RunSlot::EMPTY; 60 * settings.max_scenes()];
     let grid = CandidateGrid {
         max_order: 2,
         decimations: &[16],
@@ -347,7 +634,7 @@ fn malformed_drops_are_refused_by_name() {
     .err()
     .unwrap();
     assert!(
-        format!("{error:#}").contains("20 Monte Carlo runs: at least 59"),
+        format!("{error:#}").contains("20 Monte Carlo runs per scene (9 scenes): at least 59"),
         "{error:#}"
     );
 }
@@ -360,12 +647,12 @@ fn f32_and_f64_calibrations_agree() {
     // ~1e-6 relative (host-sim's model_based test), far below its own error (~1e-5), and the
     // estimators' f32 rounding moves each error by ~1e-4 g against a 95th percentile of
     // ~0.08 g: the same method must be chosen and its percentile agree within 2%.
-    let options32 = options(0.1, 0.001);
     let options64 = Options {
         precision: Precision::F64,
-        ..options32.clone()
+        min_load_g: Some(MIN_LOAD_G),
+        ..options(0.1, 0.001)
     };
-    let a = calibrated(50.0, &options32).unwrap();
+    let a = range_50db();
     let b = calibrated(50.0, &options64).unwrap();
     let (c32, c64) = (&a.calibrated.config, &b.calibrated.config);
     println!(
@@ -417,6 +704,43 @@ fn config_with(method: WeighingMethod) -> WeighingConfig {
         },
         recorded_drops: 3,
         recorded_worst_error_g: 0.085_5,
+        loads: coverage(None),
+    }
+}
+
+/// Three scenes: a light load at two resonances and the calibration mass.
+fn coverage(platform_mass_g: Option<f64>) -> LoadCoverage {
+    let prediction = |rms_g: f64| Prediction {
+        runs: 400,
+        planned_runs: 400,
+        valid_runs: 400,
+        within_target_runs: 398,
+        detection_failures: 0,
+        bias_g: 0.002_5,
+        rms_g,
+        p95_g: 2.0 * rms_g,
+        p95_upper_g: 2.2 * rms_g,
+    };
+    let score = |mass_g: f64, frequency_ratio: f64, rms_g: f64| {
+        Some(LoadScore {
+            scene: LoadScene {
+                mass_g,
+                frequency_ratio,
+            },
+            noise_floor_g: 0.026_1,
+            prediction: prediction(rms_g),
+        })
+    };
+    let mut scores = [None; MAX_SCENES];
+    scores[0] = score(80.0, 1.0, 0.036_4);
+    scores[1] = score(80.0, (MASS_G / 80.0f64).sqrt(), 0.036_8);
+    scores[2] = score(MASS_G, 1.0, 0.048_2);
+    LoadCoverage {
+        min_g: 80.0,
+        max_g: 341.720_7,
+        loads: 4,
+        platform_mass_g,
+        scores,
     }
 }
 
@@ -450,7 +774,11 @@ fn the_toml_round_trips_and_refuses_what_it_cannot_use() {
     ];
     for method in methods {
         for precision in [Precision::F32, Precision::F64] {
-            let config = config_with(method);
+            let mut config = config_with(method);
+            // The platform mass known and unknown in turn.
+            if precision == Precision::F64 {
+                config.loads = coverage(Some(119.99));
+            }
             let text = calibrate::config_toml(&config, precision);
             let (read, read_precision) = calibrate::parse_config(Path::new("w.toml"), &text)
                 .unwrap_or_else(|e| panic!("{method}: {e:#}\n{text}"));
@@ -487,8 +815,22 @@ fn the_toml_round_trips_and_refuses_what_it_cannot_use() {
     assert!(calibrate::parse_config(Path::new("w.toml"), &without_spec).is_ok());
     let message = refused(&without_spec.replace("order = 2", "order = 0"));
     assert!(message.contains("order 0 is not in"), "{message}");
-    let message = refused(&text.replace("format = 1", "format = 7"));
+    let message = refused(&text.replace("format = 2", "format = 7"));
     assert!(message.contains("`format`"), "{message}");
+    // Format 1 (before load ranges) still reads, as scored at the calibration mass only; a
+    // format-1 file with a range, or a format-2 file without one, is refused.
+    let ranged_from = text.find("\n[range]").unwrap();
+    let format_1 = text[..ranged_from].replace("format = 2", "format = 1");
+    let (read, _) = calibrate::parse_config(Path::new("w.toml"), &format_1).unwrap();
+    let config = config_with(methods[0]);
+    assert_eq!(
+        read.loads,
+        LoadCoverage::calibration_mass_only(MASS_G, config.prediction)
+    );
+    let message = refused(&text.replace("format = 2", "format = 1"));
+    assert!(message.contains("`format`"), "{message}");
+    let message = refused(&text[..ranged_from]);
+    assert!(message.contains("`range`"), "{message}");
     // A bank whose size the host's bank type does not hold.
     let bank = calibrate::config_toml(
         &config_with(WeighingMethod::ModelBank {
@@ -551,7 +893,14 @@ fn the_command_end_to_end_and_estimate_config_equals_the_core() {
     let out = temp("weighing.toml");
     let mut command = host_sim();
     command
-        .args(["calibrate", "--mass-g", "138.32", "--out"])
+        .args([
+            "calibrate",
+            "--mass-g",
+            "138.32",
+            "--min-load-g",
+            "80",
+            "--out",
+        ])
         .arg(&out);
     for drop in &drops {
         command.arg("--drop").arg(drop);
@@ -615,4 +964,66 @@ fn the_command_end_to_end_and_estimate_config_equals_the_core() {
     );
     assert_eq!(by_spec, stdout, "{spec}");
     let _ = std::fs::remove_dir_all(temp_dir());
+}
+
+/// The README's calibration table, checked on fresh drops across each range (400 per load):
+/// `cargo test --release -p host-sim --test calibrate readme_table -- --ignored --nocapture`
+/// (about a minute on 2 cores; behind `--ignored` for CI time).
+#[test]
+#[ignore]
+fn readme_table_on_fresh_drops_across_the_loads() {
+    // (SNR, target, lightest load, platform mass): the platform mass the second-mass drops
+    // identify (README: 119.99 g; the test above) lets 0.1% hold from 70 g at 50 dB.
+    let rows: [(f64, f64, Option<f64>, Option<f64>); 6] = [
+        (50.0, 0.001, Some(MIN_LOAD_G), None),
+        (50.0, 0.001, Some(70.0), Some(119.99)),
+        (50.0, 0.0005, Some(MASS_G), None),
+        (70.0, 0.001, None, None),
+        (70.0, 0.0005, None, None),
+        (40.0, 0.002, Some(MASS_G), None),
+    ];
+    for (snr_db, target, min_load_g, platform_mass_g) in rows {
+        let options = Options {
+            min_load_g,
+            platform_mass_g,
+            ..options(0.1, target)
+        };
+        let outcome = match calibrated(snr_db, &options) {
+            Ok(outcome) => outcome,
+            Err(e) => {
+                println!("{snr_db} dB, {}%: {e}", target * 100.0);
+                continue;
+            }
+        };
+        let config = &outcome.calibrated.config;
+        let loads = &config.loads;
+        println!(
+            "{snr_db} dB, {}% at 100 ms over {:.2}-{:.2} g: {} ({} scored, {:.2} s)",
+            target * 100.0,
+            loads.min_g,
+            loads.max_g,
+            config.method,
+            outcome.calibrated.evaluated,
+            outcome.elapsed_s
+        );
+        let worst = loads.worst(target).unwrap();
+        println!(
+            "  worst scene {:.2} g at {:.3}x: p95 {:.4}% (bound {:.4}%)",
+            worst.scene.mass_g,
+            worst.scene.frequency_ratio,
+            worst.p95_over_target(1.0) * 100.0,
+            worst.bound_over_target(1.0) * 100.0
+        );
+        let mut masses = vec![loads.min_g];
+        for mass_g in [80.0, MASS_G, 250.0, 340.0] {
+            if mass_g > loads.min_g && mass_g <= loads.max_g && !masses.contains(&mass_g) {
+                masses.push(mass_g);
+            }
+        }
+        for mass_g in masses {
+            let result = fresh_at(config, outcome.precision, snr_db, mass_g, 400);
+            println!("  {}", describe(&result, target));
+            assert!(holds(&result), "{}", describe(&result, target));
+        }
+    }
 }

@@ -15,6 +15,7 @@ use crate::real::Real;
 use crate::step::{StepConfig, StepEstimator};
 
 use super::candidates::WeighingMethod;
+use super::loads::LoadCoverage;
 use super::onset::OnsetConfig;
 
 /// What the Monte Carlo of calibration predicts for a method at the readout time.
@@ -85,6 +86,9 @@ pub struct WeighingConfig {
     pub recorded_drops: u32,
     /// The largest |error| at the readout over the recorded drops, g.
     pub recorded_worst_error_g: f64,
+    /// The loads the method was scored at (`prediction` is the one at the calibration
+    /// mass) and what it did at each: the range the target holds over.
+    pub loads: LoadCoverage,
 }
 
 impl WeighingConfig {
@@ -266,6 +270,20 @@ mod tests {
             },
             recorded_drops: 0,
             recorded_worst_error_g: 0.0,
+            loads: LoadCoverage::calibration_mass_only(
+                138.32,
+                Prediction {
+                    runs: 0,
+                    planned_runs: 0,
+                    valid_runs: 0,
+                    within_target_runs: 0,
+                    detection_failures: 0,
+                    bias_g: 0.0,
+                    rms_g: 0.0,
+                    p95_g: 0.0,
+                    p95_upper_g: 0.0,
+                },
+            ),
         }
     }
 

@@ -16,43 +16,68 @@
 //! 3. **The noise**: pooled over the drops' empty stretches. The Monte Carlo uses its upper
 //!    confidence value, `σ̂²·(1 + 2·√(3/M))` for `M` differences (two standard errors of the
 //!    meter), so that a lucky tare does not flatter the scores.
-//! 4. **Scores** ([`synthetic`]): `R` seeded synthetic drops of the identified model (the gain
-//!    the drops showed, the measured noise, an empty stretch as long as the shortest
-//!    recorded one up to 2× the reference stretch), each run through the same onset detection
-//!    and tare, then the method twice: from the detected onset and from the landing itself,
-//!    the two ends of where a scale may start it; the larger |error| at `readout_s` after the
-//!    landing counts. (A model of too low an order can be right from one start and far off
-//!    from the other: `n = 2, D = 32` on the reference cell is within 0.02% from 5 samples
-//!    after the landing and 0.6% off from 10 before it. Requiring both keeps the choice from
-//!    hanging on one detector's lag.) A method meets the target when an upper 95% confidence
-//!    bound on the 95th percentile of |error| is within it (at most 12 of 400 runs outside),
-//!    counting an invalid reading or a failed detection as outside.
-//! 5. **Confirmation** on the recorded drops: the method from each drop's detected onset and
+//! 4. **The loads** ([`loads`]): the scale must hold the target, relative to the load, at
+//!    every load of a range (default 0.3×–3× the calibration mass, the top clipped to the
+//!    heaviest load whose overshoot the converter takes), not only at the calibration mass.
+//!    The identified model is moved to each load by the physical law; the platform's moving
+//!    mass, which one calibration mass cannot reveal, is either given (weighed, or from drops
+//!    of a second mass: [`identify_drops`] and [`platform_mass_from_resonances`]) or bounded:
+//!    each load is then scored at both ends of what physics allows. Each scene also gets its
+//!    noise floor (the Cramér–Rao bound with the tare), to tell a method's miss from the
+//!    sensor's.
+//! 5. **Scores** ([`synthetic`]): at each scene, `R` seeded synthetic drops of the moved
+//!    model (the gain the drops showed, the measured noise, an empty stretch as long as the
+//!    shortest recorded one up to 2× the reference stretch), each run through the same onset
+//!    detection and tare, then the method twice: from the detected onset and from the
+//!    landing itself, the two ends of where a scale may start it; the larger |error| at
+//!    `readout_s` after the landing counts. (A model of too low an order can be right from
+//!    one start and far off from the other: `n = 2, D = 32` on the reference cell is within
+//!    0.02% from 5 samples after the landing and 0.6% off from 10 before it. Requiring both
+//!    keeps the choice from hanging on one detector's lag.) A method meets the target when,
+//!    **at every scene**, an upper 95% confidence bound on the 95th percentile of |error| is
+//!    within the target at that load (at most 12 of 400 runs outside), counting an invalid
+//!    reading or a failed detection as outside. The calibration mass is scored first (the
+//!    config's `prediction`), then the loads farthest from it; a method is stopped at the
+//!    first scene it cannot meet.
+//! 6. **Confirmation** on the recorded drops: the method from each drop's detected onset and
 //!    from the synthetic drops' mean detection lag before it, read at `readout_s` after that
 //!    earlier start; both must be within the target. These drops also gave the model, the
 //!    gain and the noise, so this is a consistency check (it catches a sensor the identified
 //!    model does not describe), not an independent test.
-//! 6. **Choice**: candidates in the order of [`candidates`] (smallest model first); the first
+//! 7. **Choice**: candidates in the order of [`candidates`] (smallest model first); the first
 //!    that meets both is chosen, and the larger ones are not needed (not even evaluated,
-//!    unless asked). If none meets the target the error names the best one and its scores.
+//!    unless asked). If none meets the target the error names the best one (the most scenes
+//!    met), where it failed, and the noise floor there.
 //!
-//! What it must never do: hand out a configuration that did not meet the target, or hide
-//! why (every refusal is a typed error: a malformed drop names it and the sample, an
-//! impossible target names the best candidate and its figures), allocate, or panic on data.
+//! Cost: the detection runs once per scene and run (`scenes × R`); each candidate then runs
+//! `2 × R` drops per scene it reaches. Memory: the caller's `scenes × R` run slots (24 bytes
+//! each) and, on the stack, each scene's discretised model.
+//!
+//! What it must never do: hand out a configuration that did not meet the target at every
+//! scored load, or hide why (every refusal is a typed error: a malformed drop names it and
+//! the sample, a range the converter cannot take names its limit, an impossible target names
+//! the best candidate, the load it failed at and its figures), allocate, or panic on data.
 //!
 //! Honest limits: the Monte Carlo is only as good as the identified model: a second mode, a
 //! non-linearity, creep or coloured noise that the model lacks are seen only by the
-//! confirmation on the recorded drops. Scores are at the calibration mass only (the bank
-//! covers other loads by the physical law; the data-driven methods need no model of the load).
-//! Host-sim's tests check the chosen configuration on fresh drops of its own simulator.
+//! confirmation on the recorded drops, which are at the calibration mass only; other loads
+//! rest on the physical law. With the platform mass unknown the scores are those of the worse
+//! end at each load, so they are cautious for any real platform. Loads between the scored
+//! ones are not scored. Host-sim's tests check the chosen configuration on fresh drops of its
+//! own simulator across the range.
 
 pub mod candidates;
 pub mod config;
+pub mod loads;
 pub mod onset;
 pub mod synthetic;
 
 pub use candidates::{BankCandidate, CandidateGrid, WeighingMethod, STANDARD_DECIMATIONS};
 pub use config::{Prediction, WeighingConfig, WeighingEstimator};
+pub use loads::{
+    platform_mass_from_resonances, LoadCoverage, LoadScene, LoadScore, DEFAULT_LOADS,
+    DEFAULT_RANGE_RELATIVE, MAX_LOADS, MAX_SCENES,
+};
 pub use onset::{summarise, summarise_drop, DropError, DropSummary, OnsetConfig};
 pub use synthetic::{upper_order_statistic, RunSlot, MIN_RUNS};
 
@@ -95,6 +120,20 @@ pub struct CalibrationSettings {
     pub seed: u64,
     /// Score every candidate, not only up to the first that meets the target.
     pub evaluate_all: bool,
+    /// The lightest load the target must hold at, g. `None`: the lower end of
+    /// [`DEFAULT_RANGE_RELATIVE`] × `mass_g`. The range is widened to hold `mass_g`; both
+    /// ends equal to `mass_g`: the calibration mass only (the scoring before load ranges).
+    pub min_load_g: Option<f64>,
+    /// The heaviest load, g; it must land within the converter's rails. `None`: the upper
+    /// end of [`DEFAULT_RANGE_RELATIVE`] × `mass_g`, clipped to the heaviest load whose
+    /// landing the converter takes ([`loads`]).
+    pub max_load_g: Option<f64>,
+    /// Loads spaced geometrically over the range, ends included (1..=[`MAX_LOADS`]).
+    pub loads: usize,
+    /// The platform's moving mass, g, if known (weighed, or from drops of a second mass:
+    /// [`platform_mass_from_resonances`]); `None`: both ends of what physics allows are
+    /// scored at every load.
+    pub platform_mass_g: Option<f64>,
 }
 
 impl CalibrationSettings {
@@ -117,12 +156,34 @@ impl CalibrationSettings {
             identify: IdentifyConfig::new(mass_g, filter_order, filter_cutoff_hz, sample_rate_hz),
             seed: 1,
             evaluate_all: false,
+            min_load_g: None,
+            max_load_g: None,
+            loads: DEFAULT_LOADS,
+            platform_mass_g: None,
         }
     }
 
     /// The readout as samples after the onset.
     pub fn readout_samples(&self) -> usize {
         readout_samples(self.readout_s, self.identify.sample_rate_hz)
+    }
+
+    /// True when only the calibration mass is scored (both ends of the range are it).
+    pub fn calibration_mass_only(&self) -> bool {
+        self.min_load_g == Some(self.mass_g) && self.max_load_g == Some(self.mass_g)
+    }
+
+    /// The most scenes these settings score: the calibration mass, and each load at one
+    /// resonance (platform mass known) or two (unknown). [`calibrate`] takes `runs.len() /
+    /// max_scenes()` runs per scene; a scene that coincides with another leaves its slots
+    /// unused.
+    pub fn max_scenes(&self) -> usize {
+        if self.calibration_mass_only() {
+            1
+        } else {
+            let ends = if self.platform_mass_g.is_some() { 1 } else { 2 };
+            1 + self.loads.min(MAX_LOADS) * ends
+        }
     }
 }
 
@@ -150,12 +211,41 @@ pub struct CandidateScore {
     pub index: usize,
     /// The method.
     pub method: WeighingMethod,
-    /// The Monte Carlo's figures.
+    /// The Monte Carlo's figures at the calibration mass (always scored first).
     pub prediction: Prediction,
+    /// The figures at each scene scored, in the order of [`LoadCoverage::scores`] (by mass
+    /// then ratio; `None`: not scored, because the method had already failed elsewhere).
+    pub loads: [Option<LoadScore>; MAX_SCENES],
+    /// Scenes at which the 95%/95% bound met the target.
+    pub loads_met: u32,
+    /// The scene at which the Monte Carlo stopped it (the bound above the target there).
+    pub failed_load: Option<LoadScore>,
     /// The recorded drops' figures (only for a method the Monte Carlo accepted).
     pub recorded: Option<RecordedCheck>,
-    /// Meets the target: in the Monte Carlo and on every recorded drop.
+    /// Meets the target: in the Monte Carlo at every scene and on every recorded drop.
     pub meets: bool,
+}
+
+impl CandidateScore {
+    /// How close it came: more scenes met first, then the smaller 95th percentile over
+    /// the target where it failed (or at its worst scene). Smaller is better.
+    fn rank(&self, target_relative: f64) -> (u32, f64) {
+        let at = self.failed_load.or_else(|| {
+            let mut worst: Option<LoadScore> = None;
+            for score in self.loads.iter().flatten() {
+                if worst.is_none_or(|w| {
+                    score.p95_over_target(target_relative) > w.p95_over_target(target_relative)
+                }) {
+                    worst = Some(*score);
+                }
+            }
+            worst
+        });
+        (
+            u32::MAX - self.loads_met,
+            at.map_or(f64::INFINITY, |s| s.p95_over_target(target_relative)),
+        )
+    }
 }
 
 /// What calibration found.
@@ -177,6 +267,8 @@ pub struct Calibrated {
     pub monte_carlo_noise_variance_counts2: f64,
     /// Empty samples before each synthetic drop.
     pub synthetic_empty_samples: usize,
+    /// Synthetic drops per scene.
+    pub runs_per_scene: usize,
 }
 
 /// Why calibration gave no configuration.
@@ -218,13 +310,24 @@ pub enum CalibrationError {
         /// Why.
         error: ConfigError,
     },
-    /// No candidate meets the target; the best one (smallest 95th percentile) and its figures
-    /// (every candidate's are in the `report` calls).
+    /// A load of the given range lands beyond a rail of the converter (its overshoot).
+    LoadSaturates {
+        /// The load asked for, g.
+        mass_g: f64,
+        /// The heaviest load the converter takes, g.
+        limit_g: f64,
+    },
+    /// No candidate meets the target; the best one (the most scenes met, then the smallest
+    /// 95th percentile where it failed) and its figures (every candidate's are in the
+    /// `report` calls).
     NoneMeetsTarget {
         /// The best candidate.
         best: WeighingMethod,
-        /// Its Monte Carlo figures.
+        /// Its Monte Carlo figures at the calibration mass.
         prediction: Prediction,
+        /// Where the Monte Carlo stopped it (`None`: it met every scene and failed on the
+        /// recorded drops).
+        failed_load: Option<LoadScore>,
         /// Recorded drops outside the target, when the Monte Carlo accepted it.
         recorded_failing: Option<u32>,
         /// Candidates evaluated.
@@ -254,6 +357,18 @@ fn check_settings(settings: &CalibrationSettings) -> Result<(), ConfigError> {
         || !settings.onset.is_valid()
     {
         return Err(ConfigError::Model);
+    }
+    let range_ok = settings.min_load_g.is_none_or(positive)
+        && settings.max_load_g.is_none_or(positive)
+        && match (settings.min_load_g, settings.max_load_g) {
+            (Some(low), Some(high)) => low <= high,
+            _ => true,
+        };
+    let platform_ok = settings
+        .platform_mass_g
+        .is_none_or(|m| m.is_finite() && m >= 0.0);
+    if !range_ok || !platform_ok || !(1..=MAX_LOADS).contains(&settings.loads) {
+        return Err(ConfigError::Range);
     }
     Ok(())
 }
@@ -328,19 +443,18 @@ fn confirm<T: Real, E: Estimator<T>>(
     check
 }
 
-/// Calibrate: see the module docs. `drops` are raw samples (ADC codes) in `T`, each an
-/// empty-pan stretch then the drop of `settings.mass_g`; they are tared in place. `runs`
-/// holds one slot per Monte Carlo run (at least [`MIN_RUNS`]; 400 gives the figures in
-/// host-sim's README). `report` sees every candidate evaluated, in order. `N` is the
-/// capacity of the data-driven estimators, `S` the model's states (2 + filter order), `K`
-/// the bank's size.
-pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
+/// Steps 1 and 2 of [`calibrate`] on their own: each drop checked (and required to hold the
+/// readout after its onset), its zero, noise and onset found and the drop tared **in
+/// place**, then the model identified from the onsets at `settings.mass_g`. Calibration
+/// calls it; a caller that has drops of a second mass uses it to identify the resonance there
+/// and then the platform mass ([`platform_mass_from_resonances`]).
+// The error is ~200 bytes (the best candidate's figures where it failed) and there is no
+// heap to box it into; it is returned once per calibration.
+#[allow(clippy::result_large_err)]
+pub fn identify_drops<T: Real, const S: usize>(
     drops: &mut [&mut [T]],
     settings: &CalibrationSettings,
-    grid: &CandidateGrid<'_>,
-    runs: &mut [RunSlot],
-    mut report: impl FnMut(&CandidateScore),
-) -> Result<Calibrated, CalibrationError> {
+) -> Result<(Identified, [Option<DropSummary>; MAX_DROPS]), CalibrationError> {
     check_settings(settings)?;
     if drops.is_empty() {
         return Err(CalibrationError::NoDrops);
@@ -348,20 +462,7 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
     if drops.len() > MAX_DROPS {
         return Err(CalibrationError::TooManyDrops { drops: drops.len() });
     }
-    let Some(upper_index) = upper_order_statistic(runs.len(), QUANTILE, CONFIDENCE) else {
-        return Err(CalibrationError::TooFewRuns {
-            runs: runs.len(),
-            needed: MIN_RUNS,
-        });
-    };
-    if grid.is_empty() {
-        return Err(CalibrationError::NoCandidates);
-    }
-    let sample_rate_hz = settings.identify.sample_rate_hz;
     let readout = settings.readout_samples();
-    let mass_g = settings.mass_g;
-    let target_g = settings.target_relative * mass_g;
-
     // 1. Each drop: checks, zero, noise, onset; then tare in place.
     let mut summaries: [Option<DropSummary>; MAX_DROPS] = [None; MAX_DROPS];
     for (index, drop) in drops.iter_mut().enumerate() {
@@ -395,6 +496,49 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
         identify::<T, S>(&slices[..count], &settings.identify)
             .map_err(CalibrationError::Identify)?
     };
+    Ok((identified, summaries))
+}
+
+/// Calibrate: see the module docs. `drops` are raw samples (ADC codes) in `T`, each an
+/// empty-pan stretch then the drop of `settings.mass_g`; they are tared in place. `runs`
+/// holds the Monte Carlo's slots: `runs.len() / settings.max_scenes()` runs for each scene
+/// (at least [`MIN_RUNS`] each; 400 gives the figures in host-sim's README). `report` sees
+/// every candidate evaluated, in order. `N` is the capacity of the data-driven estimators,
+/// `S` the model's states (2 + filter order), `K` the bank's size.
+// See `identify_drops` on the error's size.
+#[allow(clippy::result_large_err)]
+pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
+    drops: &mut [&mut [T]],
+    settings: &CalibrationSettings,
+    grid: &CandidateGrid<'_>,
+    runs: &mut [RunSlot],
+    mut report: impl FnMut(&CandidateScore),
+) -> Result<Calibrated, CalibrationError> {
+    check_settings(settings)?;
+    if drops.is_empty() {
+        return Err(CalibrationError::NoDrops);
+    }
+    if drops.len() > MAX_DROPS {
+        return Err(CalibrationError::TooManyDrops { drops: drops.len() });
+    }
+    let max_scenes = settings.max_scenes();
+    let runs_per_scene = runs.len() / max_scenes;
+    let Some(upper_index) = upper_order_statistic(runs_per_scene, QUANTILE, CONFIDENCE) else {
+        return Err(CalibrationError::TooFewRuns {
+            runs: runs.len(),
+            needed: MIN_RUNS * max_scenes,
+        });
+    };
+    if grid.is_empty() {
+        return Err(CalibrationError::NoCandidates);
+    }
+    let sample_rate_hz = settings.identify.sample_rate_hz;
+    let readout = settings.readout_samples();
+    let mass_g = settings.mass_g;
+    let target = settings.target_relative;
+
+    let (identified, summaries) = identify_drops::<T, S>(drops, settings)?;
+    let count = drops.len();
     let identified_gain = identified.model.counts_per_gram;
     let gain = settings.counts_per_gram.unwrap_or(identified_gain);
 
@@ -402,6 +546,7 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
     let (raw_variance, relative_error) =
         pooled_noise(drops, &summaries, 1).ok_or(CalibrationError::Settings(ConfigError::Model))?;
     let monte_carlo_variance = raw_variance * (1.0 + 2.0 * relative_error);
+    let sigma = libm::sqrt(monte_carlo_variance);
     let (mut zero_sum, mut zero_weight) = (0.0, 0.0);
     let mut shortest_empty = usize::MAX;
     for summary in summaries.iter().flatten() {
@@ -409,45 +554,112 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
         zero_weight += summary.empty_samples as f64;
         shortest_empty = shortest_empty.min(summary.onset);
     }
+    let zero_counts = zero_sum / zero_weight;
 
-    // 4. The synthetic drops and their onsets (once: they do not depend on the method).
+    // 4. The loads: the range (its top within what the converter takes) and the scenes.
+    let saturation = |high_g: f64| {
+        loads::saturation_limit::<S>(
+            &identified.model,
+            mass_g,
+            high_g,
+            settings.platform_mass_g,
+            zero_counts,
+            (settings.onset.rail_low, settings.onset.rail_high),
+            libm::sqrt(raw_variance),
+            readout,
+        )
+    };
+    let (default_low, default_high) = DEFAULT_RANGE_RELATIVE;
+    let max_g = match settings.max_load_g {
+        Some(high) => {
+            let limit_g = saturation(high)?;
+            if limit_g < high {
+                return Err(CalibrationError::LoadSaturates {
+                    mass_g: high,
+                    limit_g,
+                });
+            }
+            high.max(mass_g)
+        }
+        None => saturation(default_high * mass_g)?,
+    };
+    let min_g = settings
+        .min_load_g
+        .unwrap_or(default_low * mass_g)
+        .min(mass_g);
+    if min_g > max_g {
+        return Err(CalibrationError::Settings(ConfigError::Range));
+    }
+    let plan = if settings.calibration_mass_only() {
+        loads::Plan::new(mass_g, mass_g, mass_g, 1, Some(0.0))
+    } else {
+        loads::Plan::new(
+            mass_g,
+            min_g,
+            max_g,
+            settings.loads,
+            settings.platform_mass_g,
+        )
+    };
+    let (mut ratio_low, mut ratio_high) = (1.0f64, 1.0f64);
+    for scene in &plan.scenes[..plan.count] {
+        ratio_low = ratio_low.min(scene.frequency_ratio);
+        ratio_high = ratio_high.max(scene.frequency_ratio);
+    }
+
+    // 5. The synthetic drops of every scene and their onsets (once: they do not depend on
+    // the method). The scene scored k-th in the plan's order takes the slots
+    // [k·R, (k + 1)·R), so the calibration mass has runs 0..R.
     let reference = settings.onset.min_empty_samples;
     let empty = shortest_empty
         .min(2 * reference)
         .max(reference + settings.onset.guard_samples + 1);
-    let synthetic = Synthetic {
-        model: identified.model.sensor_model::<f64, S>()?,
-        mass_g,
-        sigma: libm::sqrt(monte_carlo_variance),
-        empty,
-        length: empty + readout + 1,
-    };
+    let tare_samples = empty - settings.onset.guard_samples;
+    let mut synthetics: [Option<Synthetic<S>>; MAX_SCENES] = [None; MAX_SCENES];
+    let mut floors = [0.0f64; MAX_SCENES];
+    for (index, scene) in plan.scenes[..plan.count].iter().enumerate() {
+        let synthetic = Synthetic {
+            model: identified
+                .model
+                .with_frequency_ratio(scene.frequency_ratio)
+                .sensor_model::<f64, S>()?,
+            mass_g: scene.mass_g,
+            sigma,
+            empty,
+            length: empty + readout + 1,
+        };
+        floors[index] = loads::noise_floor_g(&synthetic, readout, tare_samples, identified_gain);
+        synthetics[index] = Some(synthetic);
+    }
     // The synthetic drops have no rails.
     let mut synthetic_onset = settings.onset;
     synthetic_onset.rail_low = f64::NEG_INFINITY;
     synthetic_onset.rail_high = f64::INFINITY;
     let (mut lag_sum, mut detected) = (0.0, 0usize);
-    for (run, slot) in runs.iter_mut().enumerate() {
-        let key = run_key(settings.seed, run as u64);
-        *slot = RunSlot {
-            run: run as u32,
-            ..RunSlot::EMPTY
+    for (position, &scene) in plan.order[..plan.count].iter().enumerate() {
+        let Some(synthetic) = &synthetics[scene] else {
+            continue;
         };
-        if let Ok(summary) = summarise(|| synthetic.samples(key, 0), &synthetic_onset) {
-            slot.onset = summary.onset as u32;
-            slot.zero = summary.zero;
-            lag_sum += summary.onset as f64 - empty as f64;
-            detected += 1;
+        let first = position * runs_per_scene;
+        for (run, slot) in runs[first..first + runs_per_scene].iter_mut().enumerate() {
+            let run = (first + run) as u32;
+            let key = run_key(settings.seed, u64::from(run));
+            *slot = RunSlot {
+                run,
+                ..RunSlot::EMPTY
+            };
+            if let Ok(summary) = summarise(|| synthetic.samples(key, 0), &synthetic_onset) {
+                slot.onset = summary.onset as u32;
+                slot.zero = summary.zero;
+                if scene == plan.calibration {
+                    lag_sum += summary.onset as f64 - empty as f64;
+                    detected += 1;
+                }
+            }
         }
     }
     let detection_lag = lag_sum / detected.max(1) as f64;
     let recorded_lag = libm::round(detection_lag).max(0.0) as usize;
-    let scoring = Scoring {
-        readout_samples: readout,
-        target_g,
-        upper_index,
-        min_runs: MIN_RUNS_WHEN_FAILING,
-    };
 
     let mut model = identified.model;
     model.counts_per_gram = gain;
@@ -456,7 +668,7 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
             .get(0, sample_rate_hz)
             .ok_or(CalibrationError::NoCandidates)?,
         counts_per_gram: gain,
-        zero_counts: zero_sum / zero_weight,
+        zero_counts,
         noise_variance_counts2: raw_variance,
         raw_noise_variance_counts2: raw_variance,
         onset: settings.onset,
@@ -465,10 +677,10 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
         identified_counts_per_gram: identified_gain,
         calibration_mass_g: mass_g,
         readout_s: settings.readout_s,
-        target_relative: settings.target_relative,
+        target_relative: target,
         prediction: Prediction {
             runs: 0,
-            planned_runs: runs.len() as u32,
+            planned_runs: runs_per_scene as u32,
             valid_runs: 0,
             within_target_runs: 0,
             detection_failures: 0,
@@ -479,16 +691,39 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
         },
         recorded_drops: count as u32,
         recorded_worst_error_g: f64::INFINITY,
+        loads: LoadCoverage {
+            min_g,
+            max_g,
+            loads: if settings.calibration_mass_only() {
+                1
+            } else {
+                settings.loads as u32
+            },
+            platform_mass_g: settings.platform_mass_g,
+            scores: [None; MAX_SCENES],
+        },
     };
 
-    // 5–6. Candidates, smallest first.
+    // 6–7. Candidates, smallest first; at each, the scenes in the plan's order, except that
+    // the scene that stopped the previous candidate comes right after the calibration mass
+    // (neighbouring candidates tend to fail at the same load, and a failing one stops there).
     let mut chosen: Option<(CandidateScore, f64)> = None;
     let mut best: Option<CandidateScore> = None;
     let mut evaluated = 0usize;
+    let mut last_failed: Option<usize> = None;
     for index in 0..grid.len() {
-        let Some(method) = grid.get(index, sample_rate_hz) else {
+        let Some(mut method) = grid.get(index, sample_rate_hz) else {
             break;
         };
+        if let WeighingMethod::ModelBank {
+            candidates,
+            ratio_min,
+            ratio_max,
+            ..
+        } = &mut method
+        {
+            cover_ratios(*candidates, ratio_min, ratio_max, ratio_low, ratio_high);
+        }
         // The bias-compensated method takes the noise as its block means see it.
         let method_variance = pooled_noise(drops, &summaries, method.decimation())
             .map(|(variance, _)| variance)
@@ -501,10 +736,65 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
         candidate.onset.rail_high = f64::INFINITY;
         let mut estimator = WeighingEstimator::<T, N, S, K>::with_method(&candidate, &method, 0.0)
             .map_err(|error| CalibrationError::Candidate { method, error })?;
-        let prediction = score(&mut estimator, &synthetic, settings.seed, runs, &scoring);
         evaluated += 1;
-        let monte_carlo_meets = prediction.p95_upper_g <= target_g;
-        let recorded = monte_carlo_meets.then(|| {
+
+        let mut sequence = [0usize; MAX_SCENES];
+        let mut length = 0;
+        let mut push = |scene: usize| {
+            if !sequence[..length].contains(&scene) {
+                sequence[length] = scene;
+                length += 1;
+            }
+        };
+        push(plan.calibration);
+        if let Some(scene) = last_failed {
+            push(scene);
+        }
+        for &scene in &plan.order[..plan.count] {
+            push(scene);
+        }
+        let mut load_scores = [None; MAX_SCENES];
+        let (mut loads_met, mut failed_load) = (0u32, None);
+        for &scene in &sequence[..length] {
+            let Some(synthetic) = &synthetics[scene] else {
+                continue;
+            };
+            let position = plan.order[..plan.count]
+                .iter()
+                .position(|&s| s == scene)
+                .unwrap_or(0);
+            let first = position * runs_per_scene;
+            let target_g = target * synthetic.mass_g;
+            let scoring = Scoring {
+                readout_samples: readout,
+                target_g,
+                upper_index,
+                min_runs: MIN_RUNS_WHEN_FAILING,
+            };
+            let prediction = score(
+                &mut estimator,
+                synthetic,
+                settings.seed,
+                &mut runs[first..first + runs_per_scene],
+                &scoring,
+            );
+            let load_score = LoadScore {
+                scene: plan.scenes[scene],
+                noise_floor_g: floors[scene],
+                prediction,
+            };
+            load_scores[scene] = Some(load_score);
+            if prediction.p95_upper_g <= target_g {
+                loads_met += 1;
+            } else {
+                failed_load = Some(load_score);
+                last_failed = Some(scene);
+                break;
+            }
+        }
+        let prediction =
+            load_scores[plan.calibration].map_or(config.prediction, |s: LoadScore| s.prediction);
+        let recorded = failed_load.is_none().then(|| {
             confirm(
                 &mut estimator,
                 drops,
@@ -512,7 +802,7 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
                 recorded_lag,
                 readout,
                 mass_g,
-                target_g,
+                target * mass_g,
             )
         });
         let meets = matches!(recorded, Some(check) if check.failing == 0);
@@ -520,11 +810,14 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
             index,
             method,
             prediction,
+            loads: load_scores,
+            loads_met,
+            failed_load,
             recorded,
             meets,
         };
         report(&scored);
-        if best.is_none_or(|b| prediction.p95_g < b.prediction.p95_g) {
+        if best.is_none_or(|b| scored.rank(target) < b.rank(target)) {
             best = Some(scored);
         }
         if meets && chosen.is_none() {
@@ -540,6 +833,7 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
             Some(best) => CalibrationError::NoneMeetsTarget {
                 best: best.method,
                 prediction: best.prediction,
+                failed_load: best.failed_load,
                 recorded_failing: best.recorded.map(|check| check.failing),
                 evaluated,
             },
@@ -549,6 +843,7 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
     config.method = chosen.method;
     config.noise_variance_counts2 = method_variance;
     config.prediction = chosen.prediction;
+    config.loads.scores = chosen.loads;
     if let Some(check) = chosen.recorded {
         config.recorded_worst_error_g = check.worst_error_g;
     }
@@ -561,7 +856,25 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
         noise_relative_standard_error: relative_error,
         monte_carlo_noise_variance_counts2: monte_carlo_variance,
         synthetic_empty_samples: empty,
+        runs_per_scene,
     })
+}
+
+/// Widen a bank of `candidates` models over `[ratio_min, ratio_max]` so that it spans the
+/// scored resonances `[low, high]` with one candidate beyond each end (the bank flags a best
+/// fit on its edge as out of range): unchanged when it already does, else
+/// `[low/s, high·s]` with the spacing `s = (high/low)^(1/(K − 3))`.
+fn cover_ratios(candidates: usize, ratio_min: &mut f64, ratio_max: &mut f64, low: f64, high: f64) {
+    if candidates < 4 || !(*ratio_max > *ratio_min) {
+        return;
+    }
+    let given_step = libm::pow(*ratio_max / *ratio_min, 1.0 / (candidates - 1) as f64);
+    if *ratio_min * given_step <= low && *ratio_max / given_step >= high {
+        return;
+    }
+    let step = libm::pow(high / low, 1.0 / (candidates - 3) as f64);
+    *ratio_min = low / step;
+    *ratio_max = high * step;
 }
 
 #[cfg(test)]
@@ -603,8 +916,13 @@ mod tests {
         out
     }
 
+    /// The calibration mass only: the machinery of one scene (the loads have their test).
     fn settings() -> CalibrationSettings {
-        CalibrationSettings::new(MASS_G, 0.1, 0.001, 4000.0, 3, 100.0)
+        CalibrationSettings {
+            min_load_g: Some(MASS_G),
+            max_load_g: Some(MASS_G),
+            ..CalibrationSettings::new(MASS_G, 0.1, 0.001, 4000.0, 3, 100.0)
+        }
     }
 
     const DECIMATIONS: [u16; 2] = [32, 16];
@@ -620,6 +938,7 @@ mod tests {
         }
     }
 
+    #[allow(clippy::result_large_err)]
     fn run(
         drops: &mut [[f64; EMPTY + RESPONSE]],
         settings: &CalibrationSettings,
@@ -627,7 +946,7 @@ mod tests {
         runs: usize,
         report: impl FnMut(&CandidateScore),
     ) -> Result<Calibrated, CalibrationError> {
-        let mut slots = [RunSlot::EMPTY; 100];
+        let mut slots = [RunSlot::EMPTY; 300];
         let mut slices: [&mut [f64]; 3] = [&mut [], &mut [], &mut []];
         let count = drops.len().min(3);
         for (slice, drop) in slices.iter_mut().zip(drops.iter_mut()) {
@@ -748,6 +1067,17 @@ mod tests {
                 needed: 59
             })
         );
+        // Over a range, 59 runs at each scene: the calibration mass and two resonances at
+        // each of 4 loads when the platform mass is unknown.
+        let ranged = CalibrationSettings::new(MASS_G, 0.1, 0.001, 4000.0, 3, 100.0);
+        assert_eq!(ranged.max_scenes(), 9);
+        assert_eq!(
+            run(&mut drops, &ranged, &grid, 300, |_| {}),
+            Err(CalibrationError::TooFewRuns {
+                runs: 300,
+                needed: 59 * 9
+            })
+        );
         for broken in [
             CalibrationSettings {
                 target_relative: 0.0,
@@ -763,6 +1093,27 @@ mod tests {
             },
             CalibrationSettings {
                 mass_g: -1.0,
+                ..settings()
+            },
+            CalibrationSettings {
+                loads: 0,
+                ..settings()
+            },
+            CalibrationSettings {
+                loads: MAX_LOADS + 1,
+                ..settings()
+            },
+            CalibrationSettings {
+                min_load_g: Some(200.0),
+                max_load_g: Some(100.0),
+                ..settings()
+            },
+            CalibrationSettings {
+                min_load_g: Some(0.0),
+                ..settings()
+            },
+            CalibrationSettings {
+                platform_mass_g: Some(-1.0),
                 ..settings()
             },
         ] {
@@ -818,5 +1169,119 @@ mod tests {
                 error: ConfigError::Order { .. }
             })
         ));
+    }
+
+    #[test]
+    fn every_load_of_the_range_must_meet_the_target() {
+        // Loads 0.5×–2× the mass (69 and 277 g) with the platform mass known (120 g, the
+        // reference cell's): three scenes, 100 runs each. 0.2%: at 100 runs the bound allows
+        // one run outside, and 0.1% of 69 g is within 2σ of the noise floor (0.028 g).
+        let ranged = CalibrationSettings {
+            min_load_g: Some(0.5 * MASS_G),
+            max_load_g: Some(2.0 * MASS_G),
+            loads: 2,
+            platform_mass_g: Some(120.0),
+            ..CalibrationSettings::new(MASS_G, 0.1, 0.002, 4000.0, 3, 100.0)
+        };
+        assert_eq!(ranged.max_scenes(), 3);
+        let mut drops = [recording(1), recording(2), recording(3)];
+        let mut seen: [Option<CandidateScore>; 8] = [None; 8];
+        let mut count = 0;
+        let calibrated = run(&mut drops, &ranged, &small_grid(), 300, |score| {
+            seen[count] = Some(*score);
+            count += 1;
+        })
+        .unwrap();
+        assert_eq!(calibrated.runs_per_scene, 100);
+        let loads = &calibrated.config.loads;
+        assert_eq!((loads.min_g, loads.max_g), (0.5 * MASS_G, 2.0 * MASS_G));
+        assert_eq!(loads.platform_mass_g, Some(120.0));
+        let scores: [LoadScore; 3] = core::array::from_fn(|i| loads.scores[i].unwrap());
+        assert!(loads.scores[3..].iter().all(Option::is_none));
+        // By mass, each at the resonance the physical law gives it; every one within the
+        // target relative to its own load.
+        let masses = [0.5 * MASS_G, MASS_G, 2.0 * MASS_G];
+        for (score, mass) in scores.iter().zip(masses) {
+            assert_eq!(score.scene.mass_g, mass);
+            let ratio = ((120.0 + MASS_G) / (120.0 + mass)).sqrt();
+            assert!((score.scene.frequency_ratio - ratio).abs() < 1e-12);
+            assert_eq!(score.prediction.runs, 100);
+            assert!(score.bound_over_target(0.002) <= 1.0, "{score:?}");
+            // No method beats the noise floor: an RMS over 100 runs is known to 1/√200 =
+            // 7% relative (1σ); allow 3 of them below the floor.
+            assert!(
+                score.prediction.rms_g >= 0.79 * score.noise_floor_g,
+                "{score:?}"
+            );
+        }
+        assert_eq!(calibrated.config.prediction, scores[1].prediction);
+        // Every candidate before the choice failed at some scene (or on the recorded drops);
+        // a failing one names where.
+        for score in seen[..count - 1].iter().flatten() {
+            assert!(!score.meets);
+            match score.failed_load {
+                Some(failed) => assert!(failed.bound_over_target(0.002) > 1.0),
+                None => assert!(score.recorded.is_some_and(|c| c.failing > 0)),
+            }
+        }
+        // More scenes to meet can only keep or raise the choice: the calibration mass is
+        // scored on the same synthetic drops (runs 0..R) either way.
+        let mut again = [recording(1), recording(2), recording(3)];
+        let at_mass_settings = CalibrationSettings {
+            target_relative: 0.002,
+            ..settings()
+        };
+        let mut at_mass_seen: [Option<CandidateScore>; 8] = [None; 8];
+        let mut at_mass_count = 0;
+        let at_mass = run(&mut again, &at_mass_settings, &small_grid(), 100, |score| {
+            at_mass_seen[at_mass_count] = Some(*score);
+            at_mass_count += 1;
+        })
+        .unwrap();
+        for (a, b) in seen
+            .iter()
+            .zip(&at_mass_seen)
+            .take(count.min(at_mass_count))
+        {
+            let (a, b) = (a.unwrap(), b.unwrap());
+            assert_eq!((a.method, a.prediction), (b.method, b.prediction));
+        }
+        assert!(at_mass.config.method.size_key() <= calibrated.config.method.size_key());
+
+        // A heaviest load the 16-bit converter cannot take on this cell (zero 16,764): its
+        // overshoot reaches the rail; the error names the heaviest load it takes.
+        let mut railed = ranged;
+        railed.onset = railed.onset.with_rails(0.0, 65_535.0);
+        railed.max_load_g = Some(600.0);
+        let mut again = [recording(1), recording(2), recording(3)];
+        match run(&mut again, &railed, &small_grid(), 300, |_| {}) {
+            Err(CalibrationError::LoadSaturates { mass_g, limit_g }) => {
+                assert_eq!(mass_g, 600.0);
+                // (65,535 − 16,764)/73.25 = 666 g of static range; a drop overshoots to
+                // nearly twice its load.
+                assert!(limit_g > 300.0 && limit_g < 360.0, "{limit_g}");
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn the_bank_is_widened_to_the_scored_resonances_with_a_candidate_beyond_each() {
+        let reference = BankCandidate::REFERENCE;
+        // The reference cell's loads 0.3×–3× with its platform (ratios 0.695–1.26): covered,
+        // unchanged.
+        let (mut low, mut high) = (reference.ratio_min, reference.ratio_max);
+        cover_ratios(33, &mut low, &mut high, 0.695, 1.26);
+        assert_eq!((low, high), (reference.ratio_min, reference.ratio_max));
+        // The platform mass unknown (ratios 0.634–1.826): widened so that candidate 1 and
+        // candidate K − 2 are the scored ends.
+        cover_ratios(33, &mut low, &mut high, 0.634, 1.826);
+        let ratios = LoadCellModel::frequency_ratios::<33>(low, high).unwrap();
+        assert!((ratios[1] / 0.634 - 1.0).abs() < 1e-12, "{}", ratios[1]);
+        assert!((ratios[31] / 1.826 - 1.0).abs() < 1e-12, "{}", ratios[31]);
+        // Too few candidates to keep one beyond each end: left alone.
+        let (mut low, mut high) = (0.9, 1.1);
+        cover_ratios(3, &mut low, &mut high, 0.5, 2.0);
+        assert_eq!((low, high), (0.9, 1.1));
     }
 }

@@ -129,6 +129,28 @@ enum Command {
         /// Also print the configuration as a Rust constant (for a firmware build script).
         #[arg(long)]
         rust: bool,
+        /// Lightest load the target must hold at, g (default: 0.3x the mass). With
+        /// --max-load-g, both equal to --mass-g: score the calibration mass only.
+        #[arg(long)]
+        min_load_g: Option<f64>,
+        /// Heaviest load the target must hold at, g (default: 3x the mass, clipped to the
+        /// heaviest load whose landing the converter takes).
+        #[arg(long)]
+        max_load_g: Option<f64>,
+        /// Loads spaced geometrically over the range, ends included (1-8).
+        #[arg(long, default_value_t = estimator_core::tuning::DEFAULT_LOADS)]
+        loads: usize,
+        /// The platform's moving mass (pan and the cell's free end), g, if known; default:
+        /// unknown, each load scored at both ends of what physics allows.
+        #[arg(long, conflicts_with = "second_drop")]
+        platform_mass_g: Option<f64>,
+        /// A recorded drop of a second known mass (repeat for each): the platform mass is
+        /// identified from the two resonances (with --second-mass-g).
+        #[arg(long, requires = "second_mass_g")]
+        second_drop: Vec<PathBuf>,
+        /// The second known mass, g.
+        #[arg(long, requires = "second_drop")]
+        second_mass_g: Option<f64>,
     },
     /// Monte Carlo of the core on a scene: CSV per SNR, configuration and sample index.
     Montecarlo {
@@ -369,8 +391,18 @@ fn main() -> Result<()> {
             max_order,
             all,
             rust,
+            min_load_g,
+            max_load_g,
+            loads,
+            platform_mass_g,
+            second_drop,
+            second_mass_g,
         } => {
-            let options = calibrate::Options {
+            let mut options = calibrate::Options {
+                min_load_g,
+                max_load_g,
+                loads,
+                platform_mass_g,
                 readout_s: readout_ms * 1e-3,
                 target_relative: target_pct * 1e-2,
                 counts_per_gram,
@@ -385,6 +417,38 @@ fn main() -> Result<()> {
                 ..calibrate::Options::new(drops.clone(), mass_g)
             };
             let names: Vec<String> = drops.iter().map(|p| p.display().to_string()).collect();
+            if let Some(second_mass_g) = second_mass_g {
+                let read = |paths: &[PathBuf]| {
+                    paths
+                        .iter()
+                        .map(|p| calibrate::read_drop(p))
+                        .collect::<Result<Vec<_>>>()
+                };
+                let second_names: Vec<String> = second_drop
+                    .iter()
+                    .map(|p| p.display().to_string())
+                    .collect();
+                let fit = calibrate::platform_mass_from_drops(
+                    &read(&drops)?,
+                    &names,
+                    &read(&second_drop)?,
+                    &second_names,
+                    second_mass_g,
+                    &options,
+                )?;
+                println!(
+                    "platform mass {:.2} g: {} g rings at {:.4} Hz (zeta {:.5}), {} g at {:.4} Hz (zeta {:.5}); the damping follows the law within {:+.2}%",
+                    fit.platform_mass_g,
+                    fit.first.0,
+                    fit.first.1,
+                    fit.first.2,
+                    fit.second.0,
+                    fit.second.1,
+                    fit.second.2,
+                    fit.damping_law_misfit() * 100.0
+                );
+                options.platform_mass_g = Some(fit.platform_mass_g);
+            }
             eprintln!(
                 "calibrate: {} drops of {mass_g} g, target {target_pct}% at {readout_ms} ms, {runs} synthetic drops per candidate, {precision:?}",
                 drops.len()
@@ -612,6 +676,35 @@ fn print_calibration(
         options.target_relative * mass,
         options.target_relative * 100.0
     );
+    let loads = &config.loads;
+    println!(
+        "  over {:.2}-{:.2} g ({} loads, platform mass {}), {} synthetic drops each:",
+        loads.min_g,
+        loads.max_g,
+        loads.loads,
+        loads
+            .platform_mass_g
+            .map_or("unknown: both ends".to_string(), |m| format!("{m} g")),
+        c.runs_per_scene
+    );
+    for score in loads.scores.iter().flatten() {
+        let p = &score.prediction;
+        let m = score.scene.mass_g;
+        println!(
+            "    {:>9.4} g at {:.3}x f_n: RMS {:.4} g ({:.4}%), 95th pct {:.4}% (bound {:.4}%) <= {}%, within in {} of {}; noise floor {:.4} g ({:.4}%)",
+            m,
+            score.scene.frequency_ratio,
+            p.rms_g,
+            p.rms_g / m * 100.0,
+            p.p95_g / m * 100.0,
+            p.p95_upper_g / m * 100.0,
+            options.target_relative * 100.0,
+            p.within_target_runs,
+            p.runs,
+            score.noise_floor_g,
+            score.noise_floor_g / m * 100.0
+        );
+    }
     if let Some(check) = &c.chosen.recorded {
         let errors: Vec<String> = check.errors_g[..check.drops as usize]
             .iter()
