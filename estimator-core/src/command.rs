@@ -22,7 +22,7 @@
 //! returns at once, so a board may call it from any task.
 
 use crate::calibration::{self, Calibration, CalibrationError, CalibrationSource, RECORD_LEN};
-use crate::scale::{Scale, ScaleFault, ScaleReading, ScaleState};
+use crate::scale::{Scale, ScaleEstimator, ScaleFault, ScaleReading, ScaleState};
 
 /// What the operator asked for.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -200,10 +200,10 @@ impl Commands {
 
     /// Decide `command` against the scale's current reading. `now_sample` is the board's
     /// sample count (wrapping), used for the calibration timeout only.
-    pub fn handle<const N: usize>(
+    pub fn handle<E: ScaleEstimator>(
         &mut self,
         command: Command,
-        scale: &mut Scale<N>,
+        scale: &mut Scale<E>,
         now_sample: u32,
     ) -> Result<CommandOutcome, CommandRefusal> {
         if self.is_calibrating() && command != Command::CancelCalibration {
@@ -269,9 +269,9 @@ impl Commands {
     /// failed. The known mass counts once a load change happened after the zero and the
     /// reading has been stable for `calibration_settle_samples` since that change; an empty
     /// pan after a bump does not.
-    pub fn poll<const N: usize>(
+    pub fn poll<E: ScaleEstimator>(
         &mut self,
-        scale: &mut Scale<N>,
+        scale: &mut Scale<E>,
         now_sample: u32,
     ) -> Option<Result<Calibration, CalibrationFailure>> {
         self.refine_tare(scale);
@@ -316,7 +316,7 @@ impl Commands {
     /// Re-take the tare from the current estimate while the tared load is still on (no load
     /// change since), the reading is stable, and the estimate is within the stability band
     /// of the tare first taken; stop refining otherwise, keeping the last value.
-    fn refine_tare<const N: usize>(&mut self, scale: &mut Scale<N>) {
+    fn refine_tare<E: ScaleEstimator>(&mut self, scale: &mut Scale<E>) {
         let Some(refinement) = self.refining else {
             return;
         };
@@ -484,7 +484,7 @@ impl KeyDebouncer {
 mod tests {
     extern crate std;
     use super::*;
-    use crate::scale::{CountsScale, RawSample, ScaleConfig};
+    use crate::scale::{CountsScale, RawSample, StepScale};
 
     const FS: f32 = 4000.0;
     /// The calibration the scale starts with.
@@ -544,7 +544,7 @@ mod tests {
 
     /// A scale, its cell, the command machine and a sample clock.
     struct Bench {
-        scale: Scale<8>,
+        scale: StepScale<8>,
         cell: Cell,
         commands: Commands,
         now: u32,
@@ -557,7 +557,7 @@ mod tests {
                 zero_counts: ZERO,
             };
             Self {
-                scale: Scale::new(ScaleConfig::weighing_default(FS), calibration).unwrap(),
+                scale: StepScale::step_default(FS, calibration).unwrap(),
                 cell: Cell::new(0.2, gain_factor),
                 commands: Commands::new(CommandConfig::weighing_default(FS)),
                 now: 0,
@@ -805,7 +805,7 @@ mod tests {
             (measured, CalibrationSource::Stored)
         );
         let changes = bench.scale.reading().load_changes;
-        bench.scale.recalibrate(stored.counts_scale()).unwrap();
+        bench.scale.recalibrate(stored.counts_scale());
         assert_eq!(bench.scale.reading().load_changes, changes + 1);
         let after = bench.run_s(0.2).mass_g.unwrap();
         assert!(
@@ -835,7 +835,7 @@ mod tests {
             counts_per_gram: f32::NAN,
             zero_counts: ZERO,
         };
-        bench.scale.recalibrate(impossible).unwrap();
+        bench.scale.recalibrate(impossible);
         let reading = bench.run_s(0.01);
         assert_eq!(reading.state, ScaleState::Invalid(ScaleFault::Uncalibrated));
         assert_eq!(reading.mass_g, None);

@@ -62,6 +62,7 @@ pub use ramp::{RampConfig, RampEstimator};
 pub use reading::{ConfigError, Estimator, InvalidReason, Reading, State};
 pub use real::Real;
 pub use scale::{
-    CountsScale, RawSample, Scale, ScaleConfig, ScaleFault, ScaleReading, ScaleState, TareError,
+    CountsScale, RawSample, Scale, ScaleConfig, ScaleEstimator, ScaleFault, ScaleReading,
+    ScaleState, StepScale, TareError,
 };
 pub use step::{StepConfig, StepEstimator, MAX_DECIMATION, MIN_IDENTIFIABILITY};

@@ -125,3 +125,19 @@ pub trait Estimator<T> {
     /// Forget everything and start over for a new load.
     fn reset(&mut self);
 }
+
+/// An estimator behind a mutable reference is one too: the owner may keep a large one (a
+/// model bank is 20 KB) in a `static` and hand the user a reference, instead of moving it.
+impl<T, E: Estimator<T> + ?Sized> Estimator<T> for &mut E {
+    fn push(&mut self, sample: T) -> Reading<T> {
+        (**self).push(sample)
+    }
+
+    fn push_missing(&mut self) -> Reading<T> {
+        (**self).push_missing()
+    }
+
+    fn reset(&mut self) {
+        (**self).reset()
+    }
+}

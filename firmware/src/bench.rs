@@ -151,3 +151,53 @@ pub fn measure_loop_overhead(messages: &[SampleMessage]) -> u64 {
     }
     since(start) as u64
 }
+
+/// What the free stack is filled with, to find how deep it was used later.
+const STACK_PAINT: u32 = 0xA5A5_5A5A;
+
+extern "C" {
+    // Both from the linker script (cortex-m-rt's `link.x`, moved by flip-link): the stack
+    // grows down from `_stack_start` to `_stack_end`.
+    static _stack_start: u32;
+    static _stack_end: u32;
+}
+
+/// The stack's bounds, as addresses: (lowest, highest).
+fn stack_bounds() -> (usize, usize) {
+    // Only the addresses of the linker's symbols are taken (safe since Rust 1.82), nothing
+    // is read.
+    (
+        core::ptr::addr_of!(_stack_end) as usize,
+        core::ptr::addr_of!(_stack_start) as usize,
+    )
+}
+
+/// Fill the stack below the current stack pointer (less a margin for this function) with
+/// [`STACK_PAINT`]. Call it early in `init`, with interrupts still disabled.
+#[inline(never)]
+pub fn paint_stack() {
+    let (lowest, _) = stack_bounds();
+    let below = cortex_m::register::msp::read() as usize - 256;
+    let mut address = lowest;
+    while address < below {
+        // Safety: the words between the stack's end and 256 bytes below the stack pointer
+        // belong to no live frame (the stack grows down and nothing else is placed there:
+        // flip-link puts `.data`/`.bss` above it), and interrupts are off in `init`.
+        unsafe { core::ptr::write_volatile(address as *mut u32, STACK_PAINT) };
+        address += 4;
+    }
+}
+
+/// Bytes of the stack used since [`paint_stack`] (the deepest word no longer painted), and
+/// the stack's size.
+pub fn stack_used() -> (u32, u32) {
+    let (lowest, highest) = stack_bounds();
+    let mut address = lowest;
+    // Safety: reads words of the stack region between its end and its start.
+    while address < highest
+        && unsafe { core::ptr::read_volatile(address as *const u32) } == STACK_PAINT
+    {
+        address += 4;
+    }
+    ((highest - address) as u32, (highest - lowest) as u32)
+}

@@ -2,11 +2,25 @@
 //! numbers, dropped samples, readout cadence), the operator's commands on the scale, and
 //! the readout and command line formats.
 
+use core::mem::MaybeUninit;
+
 use estimator_core::command::{self, CalibrationStore, StoreFailure};
+use estimator_core::tuning::{WeighingEstimator, WeighingMethod};
 use estimator_core::{
     AdcSource, Calibration, CalibrationFailure, Command, CommandConfig, CommandOutcome,
-    CommandRefusal, Commands, ConfigError, RawSample, Scale, ScaleConfig, ScaleReading,
+    CommandRefusal, Commands, ConfigError, CountsScale, RawSample, Scale, ScaleReading,
 };
+
+/// The weighing configuration, generated at build time from `firmware/weighing.toml` (what
+/// `host-sim calibrate` wrote) by `build.rs`: `WEIGHING` and the estimator's sizes.
+pub mod config {
+    #![allow(clippy::excessive_precision, clippy::unreadable_literal)]
+    use estimator_core::tuning::{
+        LoadCoverage, LoadScene, LoadScore, OnsetConfig, Prediction, WeighingConfig, WeighingMethod,
+    };
+    use estimator_core::LoadCellModel;
+    include!(concat!(env!("OUT_DIR"), "/weighing.rs"));
+}
 
 /// Raw ADC sample rate of both boards.
 pub const SAMPLE_RATE_HZ: u32 = 4_000;
@@ -17,8 +31,27 @@ pub const SAMPLES_PER_READOUT: u32 = SAMPLE_RATE_HZ / READOUT_HZ;
 /// Depth of the hand-off queue: 16 ms of samples, far more than the estimator task ever
 /// lags (it runs every sample); a full queue is counted, not hidden.
 pub const QUEUE_CAPACITY: usize = 64;
-/// Capacity (largest order) of the estimator in the firmware.
-pub const ESTIMATOR_CAPACITY: usize = 8;
+/// The configured method's estimator, sized for it (`config::ORDER_CAPACITY` etc.).
+pub type FirmwareEstimator = WeighingEstimator<
+    f32,
+    { config::ORDER_CAPACITY },
+    { config::MODEL_STATES },
+    { config::BANK_CANDIDATES },
+>;
+
+/// Where the configured estimator lives: a zero-initialised `static` (an RTIC `init` local)
+/// that [`scale`] writes it into. The scale holds a reference, so the estimator (a model
+/// bank is 20 KB) is never moved through the stack with the scale and the pipeline.
+pub type EstimatorStorage = MaybeUninit<FirmwareEstimator>;
+
+/// The scale both boards run: the weighing decisions around the configured method.
+pub type FirmwareScale = Scale<&'static mut FirmwareEstimator>;
+
+// The configuration was identified and scored at a sample rate: it must be the boards'.
+const _: () = assert!(
+    config::WEIGHING.model.sample_rate_hz == SAMPLE_RATE_HZ as f64,
+    "firmware/weighing.toml: key `model.sample_rate_hz`: expected 4000.0, the boards' ADC rate (pipeline::SAMPLE_RATE_HZ); recalibrate at that rate"
+);
 
 /// One sample as the hand-off queues it: its sequence number and what the ADC gave.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -67,7 +100,7 @@ pub struct Readout {
 /// The estimator task's state: the scale, the operator's commands on it, and the
 /// bookkeeping around them.
 pub struct Pipeline {
-    scale: Scale<ESTIMATOR_CAPACITY>,
+    scale: FirmwareScale,
     commands: Commands,
     next_sequence: u32,
     dropped: u32,
@@ -75,13 +108,24 @@ pub struct Pipeline {
 
 impl Pipeline {
     /// A pipeline around a configured scale.
-    pub fn new(scale: Scale<ESTIMATOR_CAPACITY>) -> Self {
+    pub fn new(scale: FirmwareScale) -> Self {
         Self {
             scale,
             commands: Commands::new(CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32)),
             next_sequence: 0,
             dropped: 0,
         }
+    }
+
+    /// Start over as at boot, with the same scale configuration and the calibration in use
+    /// (the bench replays a scene through the application's pipeline first: a second one
+    /// would need another 20 KB of stack for a model bank). The restart counts as a load
+    /// change.
+    pub fn restart(&mut self) {
+        self.scale.recalibrate(self.scale.counts_scale());
+        self.commands = Commands::new(CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32));
+        self.next_sequence = 0;
+        self.dropped = 0;
     }
 
     /// Samples lost since boot.
@@ -112,7 +156,7 @@ impl Pipeline {
     }
 
     /// Convert with `calibration` from now on (the estimate restarts, the tare clears).
-    pub fn apply_calibration(&mut self, calibration: &Calibration) -> Result<(), ConfigError> {
+    pub fn apply_calibration(&mut self, calibration: &Calibration) {
         self.scale.recalibrate(calibration.counts_scale())
     }
 
@@ -152,9 +196,59 @@ impl Pipeline {
     }
 }
 
-/// The scale configuration both boards run (see `firmware/README.md` for how it was chosen).
-pub fn scale_config() -> ScaleConfig {
-    ScaleConfig::weighing_default(SAMPLE_RATE_HZ as f32)
+/// The scale both boards run: the configured method (`firmware/weighing.toml`) with the
+/// decisions' thresholds for it, converting counts with the board's `calibration`.
+///
+/// The estimator is written into `storage`. Not inlined: building a model bank takes tens
+/// of KB of stack for its temporaries; in a frame of its own that stack is free again once
+/// the scale is built.
+#[inline(never)]
+pub fn scale(
+    calibration: CountsScale,
+    storage: &'static mut EstimatorStorage,
+) -> Result<FirmwareScale, ConfigError> {
+    Scale::configured_in(&config::WEIGHING, storage, calibration)
+}
+
+/// Log the configured method and what calibration predicted for it, as one line:
+/// `config method=step n=5 D=24 lambda=1 … sample_rate_hz=4000 target_pct=0.05 readout_ms=100
+/// p95_g=…` (the bench and the README quote it).
+pub fn log_config() {
+    let weighing = &config::WEIGHING;
+    let target_pct = (weighing.target_relative * 100.0) as f32;
+    let readout_ms = (weighing.readout_s * 1e3) as f32;
+    let p95_g = weighing.prediction.p95_g as f32;
+    let p95_upper_g = weighing.prediction.p95_upper_g as f32;
+    let calibration_mass_g = weighing.calibration_mass_g as f32;
+    match weighing.method {
+        WeighingMethod::Step {
+            order,
+            decimation,
+            forgetting,
+        } => defmt::println!(
+            "config method=step n={=usize} D={=u16} lambda={=f32} sample_rate_hz={=u32} target_pct={=f32} readout_ms={=f32} mass_g={=f32} p95_g={=f32} p95_bound_g={=f32}",
+            order, decimation, forgetting as f32, SAMPLE_RATE_HZ, target_pct, readout_ms, calibration_mass_g, p95_g, p95_upper_g
+        ),
+        WeighingMethod::BiasCompensated { order, decimation } => defmt::println!(
+            "config method=bias_compensated n={=usize} D={=u16} noise_variance_counts2={=f32} sample_rate_hz={=u32} target_pct={=f32} readout_ms={=f32} mass_g={=f32} p95_g={=f32} p95_bound_g={=f32}",
+            order, decimation, weighing.noise_variance_counts2 as f32, SAMPLE_RATE_HZ, target_pct, readout_ms, calibration_mass_g, p95_g, p95_upper_g
+        ),
+        WeighingMethod::InstrumentalVariable { order, decimation } => defmt::println!(
+            "config method=instrumental_variable n={=usize} D={=u16} sample_rate_hz={=u32} target_pct={=f32} readout_ms={=f32} mass_g={=f32} p95_g={=f32} p95_bound_g={=f32}",
+            order, decimation, SAMPLE_RATE_HZ, target_pct, readout_ms, calibration_mass_g, p95_g, p95_upper_g
+        ),
+        WeighingMethod::ModelBank {
+            decimation,
+            candidates,
+            ratio_min,
+            ratio_max,
+        } => defmt::println!(
+            "config method=model_bank D={=u16} K={=usize} ratios={=f32}-{=f32} fn_hz={=f32} zeta={=f32} sample_rate_hz={=u32} target_pct={=f32} readout_ms={=f32} mass_g={=f32} p95_g={=f32} p95_bound_g={=f32}",
+            decimation, candidates, ratio_min as f32, ratio_max as f32,
+            weighing.model.natural_frequency_hz as f32, weighing.model.damping_ratio as f32,
+            SAMPLE_RATE_HZ, target_pct, readout_ms, calibration_mass_g, p95_g, p95_upper_g
+        ),
+    }
 }
 
 /// Emit one readout line. The host-side checker (`tests::e2e`) parses exactly this format.
@@ -251,24 +345,16 @@ pub fn finish_calibration<S>(
             return;
         }
     };
-    let mut applied = Ok(());
     lock(&mut |pipeline| {
         sample = pipeline.samples();
-        applied = pipeline.apply_calibration(&stored);
+        pipeline.apply_calibration(&stored);
     });
-    match applied {
-        Ok(()) => defmt::println!(
-            "command sample={=u32} calibrate=done counts_per_gram={=f32} zero_counts={=f32} (stored, read back, applied)",
-            sample,
-            stored.counts_per_gram,
-            stored.zero_counts
-        ),
-        Err(error) => defmt::println!(
-            "command sample={=u32} calibrate=failed (stored but refused by the scale: {})",
-            sample,
-            error
-        ),
-    }
+    defmt::println!(
+        "command sample={=u32} calibrate=done counts_per_gram={=f32} zero_counts={=f32} (stored, read back, applied)",
+        sample,
+        stored.counts_per_gram,
+        stored.zero_counts
+    );
 }
 
 fn log_store_failure<E: defmt::Format>(sample: u32, failure: &StoreFailure<E>) {

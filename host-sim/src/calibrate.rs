@@ -1108,7 +1108,7 @@ pub fn config_toml(config: &WeighingConfig, precision: Precision) -> String {
 /// values are checked by building the configured method.
 pub fn parse_config(path: &Path, text: &str) -> Result<(WeighingConfig, Precision)> {
     let file: ConfigFile =
-        toml::from_str(text).map_err(|e| anyhow!("weighing config {}: {e}", path.display()))?;
+        toml::from_str(text).map_err(|e| anyhow!("{}", describe_toml_error(path, text, &e)))?;
     let bad = |key: &str, expected: &str| {
         anyhow!(
             "weighing config {}: key `{key}`: expected {expected}",
@@ -1284,11 +1284,110 @@ pub fn parse_config(path: &Path, text: &str) -> Result<(WeighingConfig, Precisio
     Ok((config, precision))
 }
 
+/// A TOML error of the config as `weighing config <file>: line L: key `table.key`: <what
+/// toml says, with what it expected>`, then toml's own excerpt. The key is found from the
+/// error's position: the key on that line, or for a missing key the table header toml
+/// points at and the field it names.
+fn describe_toml_error(path: &Path, text: &str, error: &toml::de::Error) -> String {
+    let message = error.message().trim();
+    let Some(span) = error.span() else {
+        return format!("weighing config {}: {message}", path.display());
+    };
+    let start = span.start.min(text.len());
+    let line_number = text[..start].matches('\n').count() + 1;
+    let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
+    let line = text[line_start..].lines().next().unwrap_or("").trim();
+    // The table the position is in: the last header at or before its line.
+    let table = text[..line_start + line.len()]
+        .lines()
+        .rev()
+        .map(str::trim)
+        .find(|l| l.starts_with('[') && l.ends_with(']'))
+        .map(|l| l.trim_matches(|c| c == '[' || c == ']').trim().to_string());
+    let missing = message
+        .strip_prefix("missing field `")
+        .and_then(|rest| rest.split('`').next());
+    let key = match (missing, line.split_once('=')) {
+        (Some(field), _) => Some(field.to_string()),
+        (None, Some((key, _))) if !line.starts_with('[') => Some(key.trim().to_string()),
+        _ => None,
+    };
+    let key = match (&table, key) {
+        (Some(table), Some(key)) => format!("key `{table}.{key}`"),
+        (None, Some(key)) => format!("key `{key}`"),
+        (Some(table), None) => format!("table `[{table}]`"),
+        (None, None) => "the file".into(),
+    };
+    let what = match missing {
+        Some(_) => format!("{message} (every key is required: expected it in this table, as `host-sim calibrate` writes it)"),
+        None => message.to_string(),
+    };
+    format!(
+        "weighing config {}: line {line_number}: {key}: {what}\n{error}",
+        path.display()
+    )
+}
+
 /// Read a configuration file.
 pub fn load_config(path: &Path) -> Result<(WeighingConfig, Precision)> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read weighing config {}", path.display()))?;
     parse_config(path, &text)
+}
+
+/// What the firmware's build script (`firmware/build.rs`) generates from the text of its
+/// weighing config `path`: the parsed, checked configuration as [`rust_const`], and the
+/// sizes the firmware's estimator type takes from it (`ORDER_CAPACITY`: the configured
+/// order, 1 for the bank; `MODEL_STATES`: the identified model's states; `BANK_CANDIDATES`:
+/// the bank's K, 1 for the data-driven methods), so the image holds exactly the configured
+/// method.
+///
+/// One parser: this is [`parse_config`], the same that `estimate --config` uses, so the
+/// file the firmware accepts is the file host-sim accepts. On top of it the firmware asks
+/// for `precision = "f32"` (its FPU is single precision: a method scored in `f64` was not
+/// scored in the arithmetic it would run). Every refusal names the file, the key and what
+/// was expected.
+pub fn firmware_constants(path: &Path, text: &str) -> Result<String> {
+    let (config, precision) = parse_config(path, text)?;
+    if precision != Precision::F32 {
+        bail!(
+            "weighing config {}: key `method.precision`: expected \"f32\" (the firmware runs single precision; calibrate with --precision f32), found \"{}\"",
+            path.display(),
+            precision_name(precision)
+        );
+    }
+    let (order_capacity, bank_candidates) = match config.method {
+        WeighingMethod::ModelBank { candidates, .. } => (1, candidates),
+        method => (method.order().unwrap_or(1), 1),
+    };
+    let model_states = usize::from(config.model.filter_order) + 2;
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "// Generated from {} by host_sim::calibrate::firmware_constants; do not edit.",
+        path.display()
+    );
+    let _ = writeln!(
+        out,
+        "/// The weighing configuration the firmware runs (written by `host-sim calibrate`)."
+    );
+    out.push_str(&rust_const(&config));
+    let _ = writeln!(
+        out,
+        "/// Largest model order the estimator holds: the configured order (1 for the bank)."
+    );
+    let _ = writeln!(out, "pub const ORDER_CAPACITY: usize = {order_capacity};");
+    let _ = writeln!(
+        out,
+        "/// States of the identified model (the bank's candidates): 2 + the filter's order."
+    );
+    let _ = writeln!(out, "pub const MODEL_STATES: usize = {model_states};");
+    let _ = writeln!(
+        out,
+        "/// Candidates of the model bank (1 for the data-driven methods)."
+    );
+    let _ = writeln!(out, "pub const BANK_CANDIDATES: usize = {bank_candidates};");
+    Ok(out)
 }
 
 /// The configuration as a Rust constant, `pub const WEIGHING: WeighingConfig = ...;`, for a

@@ -845,6 +845,97 @@ fn the_toml_round_trips_and_refuses_what_it_cannot_use() {
     assert!(message.contains("model bank"), "{message}");
 }
 
+/// What the firmware's build script generates: the constant and the sizes of the configured
+/// method; and every refusal names the file, the key and what was expected (the build fails
+/// with exactly these messages).
+#[test]
+fn the_firmware_constants_size_the_method_and_refuse_by_key() {
+    let path = Path::new("firmware/weighing.toml");
+    let step = WeighingMethod::Step {
+        order: 5,
+        decimation: 24,
+        forgetting: 1.0,
+    };
+    let text = calibrate::config_toml(&config_with(step), Precision::F32);
+    let source = calibrate::firmware_constants(path, &text).unwrap();
+    assert!(source.contains("pub const WEIGHING: WeighingConfig = WeighingConfig {"));
+    assert!(source
+        .contains("method: WeighingMethod::Step { order: 5, decimation: 24, forgetting: 1.0 }"));
+    assert!(
+        source.contains("pub const ORDER_CAPACITY: usize = 5;"),
+        "{source}"
+    );
+    assert!(
+        source.contains("pub const MODEL_STATES: usize = 5;"),
+        "{source}"
+    );
+    assert!(
+        source.contains("pub const BANK_CANDIDATES: usize = 1;"),
+        "{source}"
+    );
+    let bank = WeighingMethod::ModelBank {
+        decimation: 8,
+        candidates: calibrate::BANK_CANDIDATES,
+        ratio_min: 0.68,
+        ratio_max: 1.3,
+    };
+    let bank_text = calibrate::config_toml(&config_with(bank), Precision::F32);
+    let source = calibrate::firmware_constants(path, &bank_text).unwrap();
+    assert!(
+        source.contains("pub const ORDER_CAPACITY: usize = 1;"),
+        "{source}"
+    );
+    assert!(
+        source.contains(&format!(
+            "pub const BANK_CANDIDATES: usize = {};",
+            calibrate::BANK_CANDIDATES
+        )),
+        "{source}"
+    );
+
+    let refused = |text: &str| match calibrate::firmware_constants(path, text) {
+        Ok(_) => panic!("accepted:\n{text}"),
+        Err(e) => format!("{e:#}"),
+    };
+    let names = |message: &str, key: &str, expected: &str| {
+        assert!(message.contains("firmware/weighing.toml"), "{message}");
+        assert!(message.contains(key), "{message}");
+        assert!(message.contains(expected), "{message}");
+    };
+    // A key left out (every one is required).
+    let without: String = text
+        .lines()
+        .filter(|line| !line.starts_with("counts_per_gram = "))
+        .map(|line| format!("{line}\n"))
+        .collect();
+    names(
+        &refused(&without),
+        "`scale.counts_per_gram`",
+        "missing field",
+    );
+    // A value of the wrong type.
+    names(
+        &refused(&text.replace("decimation = 24", "decimation = \"24\"")),
+        "`method.decimation`",
+        "expected u16",
+    );
+    // Scored in f64: the firmware runs f32.
+    let f64_text = calibrate::config_toml(&config_with(step), Precision::F64);
+    names(
+        &refused(&f64_text),
+        "`method.precision`",
+        "expected \"f32\"",
+    );
+    // Not a method the core has.
+    names(
+        &refused(&text.replace("kind = \"step\"", "kind = \"kalman\"")),
+        "`method.kind`",
+        "one of step",
+    );
+    // Not TOML at all.
+    assert!(refused("format = [").contains("firmware/weighing.toml"));
+}
+
 fn host_sim() -> Command {
     Command::new(env!("CARGO_BIN_EXE_host-sim"))
 }

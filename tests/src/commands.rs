@@ -22,7 +22,7 @@ use std::fmt::Write as _;
 use estimator_core::command::{self, CalibrationStore};
 use estimator_core::{
     Calibration, CalibrationFailure, Command, CommandConfig, CommandOutcome, CommandRefusal,
-    Commands, Scale, ScaleConfig,
+    Commands, ScaleEstimator,
 };
 
 use crate::e2e::{self, ReadoutLine, RunLog, Scene, READOUT_HZ, SAMPLE_RATE_HZ};
@@ -532,11 +532,9 @@ pub fn host_replay(seed: u64) -> RunLog {
         "calibration counts_per_gram={} zero_counts={} source={source:?}",
         calibration.counts_per_gram, calibration.zero_counts
     ));
-    let mut scale = Scale::<8>::new(
-        ScaleConfig::weighing_default(SAMPLE_RATE_HZ as f32),
-        calibration.counts_scale(),
-    )
-    .expect("the firmware's configuration");
+    let weighing = e2e::firmware_weighing_config().expect("firmware/weighing.toml");
+    let mut scale = e2e::configured_scale(&weighing, calibration.counts_scale())
+        .expect("the firmware's configuration");
     let mut commands = Commands::new(CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32));
     let mut script = CommandScript::new();
     let mut adc = load_cell::command_scene_with_seed(seed);
@@ -611,20 +609,20 @@ fn finish_calibration(
     sample: u32,
     result: Result<Calibration, CalibrationFailure>,
     store: &mut RamStore,
-    scale: &mut Scale<8>,
+    scale: &mut estimator_core::Scale<impl ScaleEstimator>,
 ) -> String {
     let measured = match result {
         Ok(measured) => measured,
         Err(failure) => return format!("command sample={sample} calibrate=failed ({failure:?})"),
     };
     match command::store_calibration(store, &measured) {
-        Ok(stored) => match scale.recalibrate(stored.counts_scale()) {
-            Ok(()) => format!(
+        Ok(stored) => {
+            scale.recalibrate(stored.counts_scale());
+            format!(
                 "command sample={sample} calibrate=done counts_per_gram={} zero_counts={} (stored, read back, applied)",
                 stored.counts_per_gram, stored.zero_counts
-            ),
-            Err(error) => format!("command sample={sample} calibrate=failed ({error:?})"),
-        },
+            )
+        }
         Err(failure) => format!("command sample={sample} calibrate=failed (Store({failure:?}))"),
     }
 }

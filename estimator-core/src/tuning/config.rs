@@ -137,6 +137,20 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
         Self::with_method(config, &config.method, zero_counts)
     }
 
+    /// The configured method as a scale runs it ([`crate::scale::ScaleEstimator`]): for
+    /// samples in counts with the zero removed, answering in counts (gain 1, so a new
+    /// calibration of the scale does not rebuild it), with no range limit (the scale's ADC
+    /// flags its rails as saturated samples itself, and its zero moves with tracking). The
+    /// bias-compensated method keeps the configured noise variance: counts², which the gain
+    /// does not change.
+    pub fn in_counts(config: &WeighingConfig) -> Result<Self, ConfigError> {
+        let mut in_counts = *config;
+        in_counts.counts_per_gram = 1.0;
+        in_counts.onset.rail_low = f64::NEG_INFINITY;
+        in_counts.onset.rail_high = f64::INFINITY;
+        Self::with_method(&in_counts, &config.method, 0.0)
+    }
+
     /// Any method with the constants of `config` (calibration uses it to try candidates).
     pub fn with_method(
         config: &WeighingConfig,

@@ -11,10 +11,11 @@ use defmt_semihosting as _;
 
 #[rtic::app(device = firmware::mps2_an386, peripherals = false)]
 mod app {
-    use estimator_core::{Command, Scale};
+    use estimator_core::Command;
     use firmware::mps2_an386::{CmsdkTimer, CmsdkUart, Interrupt, SYSTEM_CLOCK_HZ};
     use firmware::pipeline::{
-        self, Pipeline, Readout, SampleMessage, SampleQueue, QUEUE_CAPACITY, SAMPLE_RATE_HZ,
+        self, EstimatorStorage, Pipeline, Readout, SampleMessage, SampleQueue, QUEUE_CAPACITY,
+        SAMPLE_RATE_HZ,
     };
     use firmware::qemu::{self, load_cell, RamCalibrationStore, Scene, SimulatedConverter};
     use heapless::spsc::{Consumer, Producer};
@@ -50,10 +51,15 @@ mod app {
         scene_samples: u32,
     }
 
-    #[init(local = [queue: SampleQueue = SampleQueue::new()])]
+    #[init(local = [
+        queue: SampleQueue = SampleQueue::new(),
+        estimator: EstimatorStorage = EstimatorStorage::uninit(),
+    ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         // The factory calibration (known mass, empty pan) on the simulated chain, stored as
         // a record and read back through the same CRC-checked decoder as flash on hardware.
+        #[cfg(feature = "bench")]
+        bench::paint_stack();
         defmt::println!("factory calibration: 6 s of the simulated cell, empty then 200 g...");
         let defaults = load_cell::nominal_calibration();
         let record = match load_cell::factory_calibration() {
@@ -72,23 +78,24 @@ mod app {
             source
         );
 
-        let config = pipeline::scale_config();
-        let scale = match Scale::new(config, calibration.counts_scale()) {
+        let scale = match pipeline::scale(calibration.counts_scale(), cx.local.estimator) {
             Ok(scale) => scale,
             Err(error) => {
-                defmt::error!("scale configuration refused: {}", error);
+                defmt::error!("weighing configuration refused: {}", error);
                 qemu::exit(false)
             }
         };
-        defmt::println!(
-            "config order={=usize} decimation={=u16} sample_rate_hz={=u32}",
-            config.order,
-            config.decimation,
-            SAMPLE_RATE_HZ
-        );
+        pipeline::log_config();
+        let pipeline = Pipeline::new(scale);
 
+        // The benchmarks replay a scene through the application's own pipeline and then
+        // restart it: a second one would need a second estimator (20 KB for a model bank).
         #[cfg(feature = "bench")]
-        run_benchmarks(cx.core.SYST, Pipeline::new(scale.clone()));
+        let pipeline = {
+            let mut pipeline = pipeline;
+            run_benchmarks(cx.core.SYST, &mut pipeline);
+            pipeline
+        };
         #[cfg(not(feature = "bench"))]
         let _ = cx.core;
 
@@ -120,7 +127,7 @@ mod app {
         (
             Shared {
                 latest: None,
-                pipeline: Pipeline::new(scale),
+                pipeline,
             },
             Local {
                 timer,
@@ -228,7 +235,9 @@ mod app {
     /// the estimator task's work, replayed on the same functions the tasks call, so each
     /// figure is one long measurement instead of many one-tick ones.
     #[cfg(feature = "bench")]
-    fn run_benchmarks(mut syst: cortex_m::peripheral::SYST, mut pipeline: Pipeline) {
+    /// They run on the application's pipeline and restart it at the end.
+    #[inline(never)]
+    fn run_benchmarks(mut syst: cortex_m::peripheral::SYST, pipeline: &mut Pipeline) {
         use estimator_core::{AdcSource, RawSample};
         use firmware::pipeline::SampleMessage;
 
@@ -253,10 +262,12 @@ mod app {
         defmt::println!("bench handoff ticks={=u64} events={=u32}", ticks, events);
 
         let mut converter = SimulatedConverter::new(load_cell::demo_scene());
+        // 100 ms of samples per measurement: small enough to sit on the init stack next to a
+        // model bank's scale (20 KB) and the converter.
         let mut chunk = [SampleMessage {
             sequence: 0,
             sample: RawSample::Lost,
-        }; 2000];
+        }; 400];
         let mut sequence = 0u32;
         let mut ticks = 0u64;
         let mut model_ticks = 0u64;
@@ -273,7 +284,7 @@ mod app {
                 sequence += 1;
             }
             model_ticks += bench::since(model_start) as u64;
-            let work = bench::measure_pipeline(&mut pipeline, &chunk);
+            let work = bench::measure_pipeline(pipeline, &chunk);
             let overhead = bench::measure_loop_overhead(&chunk);
             ticks += work.saturating_sub(overhead);
         }
@@ -288,5 +299,35 @@ mod app {
             sequence,
             pipeline.dropped()
         );
+
+        // A restart (what a load change or a lost sample costs once): the sample after a
+        // lost one resets the estimator before it is pushed. Timed on the samples that
+        // follow the scene, the same push without the reset is not subtracted (it is a few
+        // hundred instructions against the reset's thousands for a bank).
+        let mut restart_ticks = 0u64;
+        let restarts = 8u32;
+        for _ in 0..restarts {
+            pipeline.samples_lost(1);
+            let sample = match converter.read() {
+                Ok(code) => RawSample::Counts(code as i32),
+                Err(_) => RawSample::Lost,
+            };
+            converter.convert();
+            let message = [SampleMessage { sequence, sample }];
+            sequence += 1;
+            let work = bench::measure_pipeline(pipeline, &message);
+            restart_ticks += work.saturating_sub(bench::measure_loop_overhead(&message));
+        }
+        defmt::println!(
+            "bench restart ticks={=u64} events={=u32}",
+            restart_ticks,
+            restarts
+        );
+        pipeline.restart();
+
+        // The deepest the stack went since `init` began: the factory calibration, building
+        // the configured scale, the replay above.
+        let (used, size) = bench::stack_used();
+        defmt::println!("bench stack used={=u32} size={=u32}", used, size);
     }
 }

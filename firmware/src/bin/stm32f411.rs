@@ -12,13 +12,14 @@ use defmt_rtt as _;
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
 mod app {
     use cortex_m::peripheral::DWT;
-    use estimator_core::{Command, KeyDebouncer, KeyPress, RawSample, Scale};
+    use estimator_core::{Command, KeyDebouncer, KeyPress, RawSample};
     use firmware::pipeline::{
-        self, Pipeline, Readout, SampleMessage, SampleQueue, QUEUE_CAPACITY, SAMPLE_RATE_HZ,
+        self, EstimatorStorage, Pipeline, Readout, SampleMessage, SampleQueue, QUEUE_CAPACITY,
+        SAMPLE_RATE_HZ,
     };
     use firmware::stm32f411::{
-        FlashCalibrationStore, DMA_BLOCK, KEY_DEBOUNCE_MS, KEY_LONG_PRESS_MS, KEY_POLL_HZ,
-        REFERENCE_MASS_G, SYSCLK_HZ,
+        FlashCalibrationStore, DMA_BLOCK, FRONT_END, KEY_DEBOUNCE_MS, KEY_LONG_PRESS_MS,
+        KEY_POLL_HZ, REFERENCE_MASS_G, SYSCLK_HZ,
     };
     use heapless::spsc::{Consumer, Producer};
     use stm32f4xx_hal::{
@@ -74,6 +75,7 @@ mod app {
         first: [u16; DMA_BLOCK] = [0; DMA_BLOCK],
         second: [u16; DMA_BLOCK] = [0; DMA_BLOCK],
         third: [u16; DMA_BLOCK] = [0; DMA_BLOCK],
+        estimator: EstimatorStorage = EstimatorStorage::uninit(),
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let mut device = cx.device;
@@ -93,11 +95,22 @@ mod app {
             calibration.zero_counts,
             source
         );
-        let config = pipeline::scale_config();
-        let scale = match Scale::new(config, calibration.counts_scale()) {
+        let scale = match pipeline::scale(calibration.counts_scale(), cx.local.estimator) {
             Ok(scale) => scale,
-            Err(error) => defmt::panic!("scale configuration refused: {}", error),
+            Err(error) => defmt::panic!("weighing configuration refused: {}", error),
         };
+        pipeline::log_config();
+        // The config's counts (noise variance, rails) are those of the chain it was
+        // calibrated on; this board's converter is 12 bits. The method and the model carry
+        // over, the bias-compensated method's noise variance does not.
+        let config_max_code = pipeline::config::WEIGHING.onset.rail_high;
+        if config_max_code != ((1u32 << FRONT_END.adc_bits) - 1) as f64 {
+            defmt::println!(
+                "config note: calibrated on a converter with max code {=f32}, this board's is {=u32}: recalibrate with drops of this board (firmware/README.md)",
+                config_max_code as f32,
+                (1u32 << FRONT_END.adc_bits) - 1
+            );
+        }
 
         // INA114 output on PA1 (ADC1_IN1), converted on every TIM2 update. (PA0 is the
         // Black Pill's KEY button.)

@@ -113,14 +113,94 @@ pub fn e2e_test() -> Result<()> {
 }
 
 /// `cargo xtask bench`, firmware part: instructions in the hand-off and in the estimator
-/// per sample (QEMU, `-icount shift=0`), and flash/RAM of both images.
+/// per sample (QEMU, `-icount shift=0`) for the configured method (`firmware/weighing.toml`)
+/// and for the model bank on the same calibration, and flash/RAM of the images.
 pub fn bench() -> Result<()> {
     let qemu_elf = build(Board::Qemu, false)?;
     let qemu_size = image_size(&qemu_elf)?;
     let stm32_elf = build(Board::Stm32f411, false)?;
     let stm32_size = image_size(&stm32_elf)?;
     let bench_elf = build(Board::Qemu, true)?;
-    let run = run_firmware(&bench_elf, &ICOUNT_FAST, false, None)?;
+    println!("firmware on QEMU mps2-an386, -icount shift=0, the configured method (firmware/weighing.toml):");
+    bench_run(&bench_elf, true)?;
+    println!("image sizes (release, as `cargo size` counts them):");
+    println!(
+        "  {QEMU_BIN:<20} flash {:>7} B  RAM {:>6} B (static; the stack takes the rest)",
+        qemu_size.flash, qemu_size.ram
+    );
+    println!(
+        "  {STM32_BIN:<20} flash {:>7} B  RAM {:>6} B; STM32F411CE flash free: {:.1} % of {} KiB, RAM free {:.1} % of {} KiB",
+        stm32_size.flash,
+        stm32_size.ram,
+        100.0 * (1.0 - stm32_size.flash as f64 / STM32F411_FLASH_BYTES as f64),
+        STM32F411_FLASH_BYTES / 1024,
+        100.0 * (1.0 - stm32_size.ram as f64 / STM32F411_RAM_BYTES as f64),
+        STM32F411_RAM_BYTES / 1024,
+    );
+
+    // The model bank, on the shipped file's calibration (model, noise, constants), built as
+    // a config of its own and benched the same way.
+    let bank_config = model_bank_config()?;
+    let result = (|| -> Result<()> {
+        let bank_elf = build_with_config(Board::Qemu, true, Some(&bank_config))?;
+        let bank_stm32 = image_size(&build_with_config(
+            Board::Stm32f411,
+            false,
+            Some(&bank_config),
+        )?)?;
+        println!(
+            "the model bank instead ({}, built with {WEIGHING_CONFIG_VAR}={}):",
+            BANK_METHOD_SPEC,
+            bank_config.display()
+        );
+        bench_run(&bank_elf, false)?;
+        println!(
+            "  {STM32_BIN:<20} with the bank: flash {:>7} B  RAM {:>6} B (static)",
+            bank_stm32.flash, bank_stm32.ram
+        );
+        Ok(())
+    })();
+    // Leave the images as the shipped config builds them.
+    build(Board::Qemu, true)?;
+    result
+}
+
+/// The variable `firmware/build.rs` reads a weighing configuration's path from.
+const WEIGHING_CONFIG_VAR: &str = "FIRMWARE_WEIGHING_CONFIG";
+/// The bank the bench runs: the candidate calibration ends its list with.
+const BANK_METHOD_SPEC: &str = "model bank D=8 K=33 over 0.68-1.30 of the identified resonance";
+
+/// The shipped weighing configuration with the method replaced by the model bank
+/// (`tuning::BankCandidate::REFERENCE`, what calibration offers), written under the target
+/// directory (a build input, regenerated on every bench).
+fn model_bank_config() -> Result<PathBuf> {
+    use estimator_core::tuning::{BankCandidate, WeighingMethod};
+    let shipped = crate::util::workspace_root().join("firmware/weighing.toml");
+    let (config, precision) = host_sim::calibrate::load_config(&shipped)?;
+    let bank = BankCandidate::REFERENCE;
+    let config = estimator_core::tuning::WeighingConfig {
+        method: WeighingMethod::ModelBank {
+            decimation: bank.decimation,
+            candidates: bank.candidates,
+            ratio_min: bank.ratio_min,
+            ratio_max: bank.ratio_max,
+        },
+        ..config
+    };
+    let dir = target_dir().join("xtask");
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let path = dir.join("weighing-model-bank.toml");
+    let text = format!(
+        "# The shipped firmware/weighing.toml with the model bank as its method (cargo xtask bench).\n{}",
+        host_sim::calibrate::config_toml(&config, precision)
+    );
+    std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+    Ok(path)
+}
+
+/// Run a bench image and print its figures (the hand-off only when `handoff`).
+fn bench_run(bench_elf: &Path, handoff: bool) -> Result<()> {
+    let run = run_firmware(bench_elf, &ICOUNT_FAST, false, None)?;
     if !run.exited_successfully {
         bail!(
             "the bench firmware did not finish:\n{}",
@@ -135,7 +215,7 @@ pub fn bench() -> Result<()> {
         bail!("SysTick did not advance over the calibration loop (is -icount on?)");
     }
     let instructions_per_tick = instructions / calibration_ticks;
-    let handoff = find_fields(&run, "bench handoff")?;
+    let handoff_fields = find_fields(&run, "bench handoff")?;
     let estimator = find_fields(&run, "bench estimator")?;
     if field(&estimator, "dropped")? != 0 {
         bail!("the estimator replay lost samples; its count would mean nothing");
@@ -152,39 +232,42 @@ pub fn bench() -> Result<()> {
         .iter()
         .find(|line| line.starts_with("config "))
         .cloned()
-        .unwrap_or_default();
-    println!("firmware on QEMU mps2-an386, -icount shift=0 ({config}):");
+        .ok_or_else(|| anyhow!("the bench firmware printed no `config` line"))?;
+    println!("  {config}");
     println!("  SysTick: {instructions_per_tick:.2} instructions per tick (calibrated on a loop of {instructions:.0} instructions)");
+    if handoff {
+        println!(
+            "  sample hand-off:   {:>7.1} instructions per sample incl. acknowledge and pend (goal <= 200; {} hand-offs)",
+            per_event(&handoff_fields)?,
+            field(&handoff_fields, "events")?
+        );
+    }
     println!(
-        "  sample hand-off:   {:>7.1} instructions per sample incl. acknowledge and pend (goal <= 200; {} hand-offs)",
-        per_event(&handoff)?,
-        field(&handoff, "events")?
-    );
-    println!(
-        "  estimator + scale: {:>7.1} instructions per 4 kHz sample, amortised (goal <= 1,000; {} samples)",
+        "  estimator + scale: {:>7.1} instructions per 4 kHz sample, amortised over the demo scene incl. its restarts (goal <= 1,000; {} samples)",
         per_event(&estimator)?,
         field(&estimator, "events")?
     );
-    if let Ok(model) = find_fields(&run, "bench model") {
+    if let Ok(restart) = find_fields(&run, "bench restart") {
         println!(
-            "  (the QEMU board's simulated analogue chain, host-sim's model in soft f64, not firmware: {:.0} instructions per sample)",
-            per_event(&model)?
+            "  one restart (a load change: the estimator's reset): {:.0} instructions",
+            per_event(&restart)?
         );
     }
-    println!("image sizes (release, as `cargo size` counts them):");
-    println!(
-        "  {QEMU_BIN:<20} flash {:>7} B  RAM {:>6} B (static; the stack takes the rest)",
-        qemu_size.flash, qemu_size.ram
-    );
-    println!(
-        "  {STM32_BIN:<20} flash {:>7} B  RAM {:>6} B; STM32F411CE flash free: {:.1} % of {} KiB, RAM free {:.1} % of {} KiB",
-        stm32_size.flash,
-        stm32_size.ram,
-        100.0 * (1.0 - stm32_size.flash as f64 / STM32F411_FLASH_BYTES as f64),
-        STM32F411_FLASH_BYTES / 1024,
-        100.0 * (1.0 - stm32_size.ram as f64 / STM32F411_RAM_BYTES as f64),
-        STM32F411_RAM_BYTES / 1024,
-    );
+    if let Ok(stack) = find_fields(&run, "bench stack") {
+        println!(
+            "  stack: {} of {} B used at most (boot, factory calibration, building the scale, the replay)",
+            field(&stack, "used")?,
+            field(&stack, "size")?
+        );
+    }
+    if handoff {
+        if let Ok(model) = find_fields(&run, "bench model") {
+            println!(
+                "  (the QEMU board's simulated analogue chain, host-sim's model in soft f64, not firmware: {:.0} instructions per sample)",
+                per_event(&model)?
+            );
+        }
+    }
     Ok(())
 }
 
@@ -196,7 +279,16 @@ enum Board {
 
 /// Build one firmware image in release and return its ELF.
 fn build(board: Board, bench: bool) -> Result<PathBuf> {
+    build_with_config(board, bench, None)
+}
+
+/// [`build`] with the weighing configuration `config` instead of `firmware/weighing.toml`
+/// (passed to `firmware/build.rs` as `FIRMWARE_WEIGHING_CONFIG`).
+fn build_with_config(board: Board, bench: bool, config: Option<&Path>) -> Result<PathBuf> {
     let mut command = cargo();
+    if let Some(config) = config {
+        command.env(WEIGHING_CONFIG_VAR, config);
+    }
     command.args([
         "build",
         "--release",
