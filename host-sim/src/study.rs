@@ -10,14 +10,17 @@
 //! were over all of them (a method not yet valid in every run says so instead).
 
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result};
 
+use estimator_core::tuning::WeighingConfig;
+
+use crate::calibrate;
 use crate::chart;
-use crate::method::Method;
-use crate::montecarlo::{self, SetupStats, Study, StudyResult};
+use crate::method::{IdentifiedModel, Method, ModelSpec};
+use crate::montecarlo::{self, Precision, SetupStats, Study, StudyResult};
 use crate::scene::Scene;
 
 /// The SNRs of the study, dB (thesis eq. 4.39).
@@ -47,15 +50,47 @@ fn entry(name: &str, spec: &str) -> Entry {
     }
 }
 
-/// The firmware's default estimator (firmware/README.md: n = 7, D = 16, f32).
-pub const FIRMWARE_DEFAULT: &str = "step:n=7,D=16,precision=f32";
+/// The weighing configuration the firmware is built with (`host-sim calibrate` wrote it; the
+/// firmware's build script reads it): the study's "firmware default" is whatever it names.
+pub fn firmware_config_path() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../firmware/weighing.toml")
+}
+
+/// The firmware's configured method in f32 (as the firmware runs it) and the configuration
+/// it comes from (its identified model is the study's identified-model bank).
+pub fn firmware_default() -> Result<(Method, WeighingConfig)> {
+    let path = firmware_config_path();
+    let (config, _) = calibrate::load_config(&path)?;
+    Ok((calibrate::method_spec(&config, Precision::F32), config))
+}
+
 /// The thesis's plain configuration.
 pub const PLAIN_THESIS: &str = "step:n=7,D=1";
 
-/// The methods of the study, in table order. A new estimator joins with one line here.
-pub fn default_entries() -> Vec<Entry> {
-    vec![
-        entry("firmware default", FIRMWARE_DEFAULT),
+/// The methods of the study, in table order; the first is the firmware default (from
+/// `firmware/weighing.toml`). A new estimator joins with one line here.
+pub fn default_entries() -> Result<Vec<Entry>> {
+    let (firmware, config) = firmware_default()?;
+    // The bank the firmware would run on the model calibration identified from the drops in
+    // `firmware/weighing.toml`: the core's physical bank over 0.68–1.3× the calibrated
+    // resonance (0.3×–3× the calibration mass of the reference cell), D = 8, K = 33.
+    let identified = Method::Model(ModelSpec {
+        decimation: 8,
+        candidates: 33,
+        span: (0.68, 1.3),
+        calibration_g: config.calibration_mass_g,
+        precision: Precision::F64,
+        identified: Some(IdentifiedModel {
+            natural_frequency_hz: config.model.natural_frequency_hz,
+            damping_ratio: config.model.damping_ratio,
+            filter_cutoff_hz: config.model.filter_cutoff_hz,
+        }),
+    });
+    Ok(vec![
+        Entry {
+            name: "firmware default (firmware/weighing.toml)".to_string(),
+            method: firmware,
+        },
         entry("plain thesis configuration", PLAIN_THESIS),
         // The best of the n × D sweep of `host-sim table` (README results).
         entry("best decimated step (f64)", "step:n=7,D=12"),
@@ -63,6 +98,10 @@ pub fn default_entries() -> Vec<Entry> {
             "covariance form in f32",
             "covariance:n=7,D=16,precision=f32",
         ),
+        Entry {
+            name: "model bank on the identified model (firmware/weighing.toml)".to_string(),
+            method: identified,
+        },
         entry("model bank, true model at 200 g calibration", "model"),
         entry("settled average (baseline)", "settled"),
         entry("moving average (baseline)", "moving"),
@@ -71,7 +110,7 @@ pub fn default_entries() -> Vec<Entry> {
             "bias-compensated, σ² metered at tare (n=7, D=16)",
             "bc:n=7,D=16",
         ),
-    ]
+    ])
 }
 
 /// The study's results at every SNR, in the order of the entries.
@@ -177,18 +216,21 @@ impl SpeedStudy {
         rows
     }
 
-    fn row(&self, spec: &str, snr_db: f64) -> Option<Row> {
-        let method: Method = spec.parse().ok()?;
+    fn row(&self, method: &Method, snr_db: f64) -> Option<Row> {
         self.rows()
             .into_iter()
             .find(|r| r.snr_db == snr_db && r.spec == method.to_string())
     }
 
-    /// The three goals of the firmware default at 50 dB, measured in this run.
+    /// The three goals of the firmware default (the first entry) at 50 dB, measured in this
+    /// run.
     pub fn goals(&self) -> Vec<Goal> {
+        let plain: Method = PLAIN_THESIS.parse().expect("the study's own spec parses");
         let (Some(default), Some(plain)) = (
-            self.row(FIRMWARE_DEFAULT, GOAL_SNR_DB),
-            self.row(PLAIN_THESIS, GOAL_SNR_DB),
+            self.entries
+                .first()
+                .and_then(|entry| self.row(&entry.method, GOAL_SNR_DB)),
+            self.row(&plain, GOAL_SNR_DB),
         ) else {
             return Vec::new();
         };
@@ -428,7 +470,12 @@ pub fn write_markdown(study: &SpeedStudy, command: &str, out: &mut impl Write) -
     markdown_by_snr(&rows, out)?;
     writeln!(
         out,
-        "### Goals of the firmware default (`{FIRMWARE_DEFAULT}`) at {GOAL_SNR_DB} dB\n"
+        "### Goals of the firmware default (`{}`) at {GOAL_SNR_DB} dB\n",
+        study
+            .entries
+            .first()
+            .map(|e| e.method.to_string())
+            .unwrap_or_default()
     )?;
     for goal in study.goals() {
         writeln!(
@@ -457,7 +504,7 @@ pub fn speed_command(
     out: &Path,
 ) -> Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-    let mut entries = default_entries();
+    let mut entries = default_entries()?;
     entries.extend(extra.into_iter().map(|method| Entry {
         name: method.label(),
         method,
@@ -493,7 +540,12 @@ pub fn speed_command(
     if snrs_db.contains(&GOAL_SNR_DB) {
         markdown_at(&rows, GOAL_SNR_DB, &mut stdout)?;
     }
-    println!("firmware default `{FIRMWARE_DEFAULT}` at {GOAL_SNR_DB} dB ({runs} runs; an RMS over {runs} runs is known to about {:.1}%, 1/sqrt(2N)):", 100.0 / (2.0 * runs as f64).sqrt());
+    println!(
+        "firmware default `{}` ({}) at {GOAL_SNR_DB} dB ({runs} runs; an RMS over {runs} runs is known to about {:.1}%, 1/sqrt(2N)):",
+        study.entries[0].method,
+        "firmware/weighing.toml",
+        100.0 / (2.0 * runs as f64).sqrt()
+    );
     for goal in study.goals() {
         println!(
             "  {}: {}",

@@ -545,11 +545,16 @@ fn speed_study_is_reproducible_across_thread_counts() {
     let csv = &outputs[0].0;
     assert_eq!(
         csv.lines().count(),
-        1 + host_sim::study::default_entries().len()
+        1 + host_sim::study::default_entries().unwrap().len()
     );
-    assert!(csv
-        .lines()
-        .nth(1)
-        .unwrap()
-        .starts_with("firmware default,step:n=7 D=16 precision=f32,50,16,"));
+    // The first row is the method firmware/weighing.toml configures, in f32.
+    let (firmware, _) = host_sim::study::firmware_default().unwrap();
+    let first = csv.lines().nth(1).unwrap();
+    assert!(
+        first.starts_with(&format!(
+            "firmware default (firmware/weighing.toml),{},50,16,",
+            firmware.to_string().replace(',', " ")
+        )),
+        "{first}"
+    );
 }
