@@ -541,9 +541,8 @@ pub fn speed_command(
         markdown_at(&rows, GOAL_SNR_DB, &mut stdout)?;
     }
     println!(
-        "firmware default `{}` ({}) at {GOAL_SNR_DB} dB ({runs} runs; an RMS over {runs} runs is known to about {:.1}%, 1/sqrt(2N)):",
+        "firmware default `{}` (firmware/weighing.toml) at {GOAL_SNR_DB} dB ({runs} runs; an RMS over {runs} runs is known to about {:.1}%, 1/sqrt(2N)):",
         study.entries[0].method,
-        "firmware/weighing.toml",
         100.0 / (2.0 * runs as f64).sqrt()
     );
     for goal in study.goals() {
