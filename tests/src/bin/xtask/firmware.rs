@@ -138,26 +138,25 @@ pub fn bench() -> Result<()> {
         STM32F411_RAM_BYTES / 1024,
     );
 
-    // The model bank, on the shipped file's calibration (model, noise, constants), built as
-    // a config of its own and benched the same way.
-    let bank_config = model_bank_config()?;
+    // Other methods on the shipped file's calibration (model, noise, constants), each built as
+    // a config of its own and benched the same way: the step estimator at n = 7, D = 16 (the
+    // order issue 4's goal names, and the firmware's earlier default) and the model bank.
     let result = (|| -> Result<()> {
-        let bank_elf = build_with_config(Board::Qemu, true, Some(&bank_config))?;
-        let bank_stm32 = image_size(&build_with_config(
-            Board::Stm32f411,
-            false,
-            Some(&bank_config),
-        )?)?;
-        println!(
-            "the model bank instead ({}, built with {WEIGHING_CONFIG_VAR}={}):",
-            BANK_METHOD_SPEC,
-            bank_config.display()
-        );
-        bench_run(&bank_elf, false)?;
-        println!(
-            "  {STM32_BIN:<20} with the bank: flash {:>7} B  RAM {:>6} B (static)",
-            bank_stm32.flash, bank_stm32.ram
-        );
+        for variant in bench_variants() {
+            let config = variant_config(&variant)?;
+            let elf = build_with_config(Board::Qemu, true, Some(&config))?;
+            let stm32 = image_size(&build_with_config(Board::Stm32f411, false, Some(&config))?)?;
+            println!(
+                "{} instead (built with {WEIGHING_CONFIG_VAR}={}):",
+                variant.label,
+                config.display()
+            );
+            bench_run(&elf, false)?;
+            println!(
+                "  {STM32_BIN:<20} with it: flash {:>7} B  RAM {:>6} B (static)",
+                stm32.flash, stm32.ram
+            );
+        }
         Ok(())
     })();
     // Leave the images as the shipped config builds them.
@@ -167,31 +166,57 @@ pub fn bench() -> Result<()> {
 
 /// The variable `firmware/build.rs` reads a weighing configuration's path from.
 const WEIGHING_CONFIG_VAR: &str = "FIRMWARE_WEIGHING_CONFIG";
-/// The bank the bench runs: the candidate calibration ends its list with.
-const BANK_METHOD_SPEC: &str = "model bank D=8 K=33 over 0.68-1.30 of the identified resonance";
 
-/// The shipped weighing configuration with the method replaced by the model bank
-/// (`tuning::BankCandidate::REFERENCE`, what calibration offers), written under the target
-/// directory (a build input, regenerated on every bench).
-fn model_bank_config() -> Result<PathBuf> {
+/// A method benched in place of the shipped one.
+struct BenchVariant {
+    /// What the bench prints.
+    label: &'static str,
+    /// The config file's stem under `target/xtask`.
+    stem: &'static str,
+    /// The method.
+    method: estimator_core::tuning::WeighingMethod,
+}
+
+/// The step estimator at n = 7, D = 16 and the model bank calibration offers
+/// (`tuning::BankCandidate::REFERENCE`).
+fn bench_variants() -> [BenchVariant; 2] {
     use estimator_core::tuning::{BankCandidate, WeighingMethod};
+    let bank = BankCandidate::REFERENCE;
+    [
+        BenchVariant {
+            label: "the step estimator at n = 7, D = 16",
+            stem: "weighing-step-n7-d16",
+            // `ScaleConfig::DEFAULT_METHOD`: the step default the decisions were measured on.
+            method: estimator_core::ScaleConfig::DEFAULT_METHOD,
+        },
+        BenchVariant {
+            label: "the model bank (D = 8, K = 33 over 0.68-1.30 of the identified resonance)",
+            stem: "weighing-model-bank",
+            method: WeighingMethod::ModelBank {
+                decimation: bank.decimation,
+                candidates: bank.candidates,
+                ratio_min: bank.ratio_min,
+                ratio_max: bank.ratio_max,
+            },
+        },
+    ]
+}
+
+/// The shipped weighing configuration with the method replaced by `variant`'s, written under
+/// the target directory (a build input, regenerated on every bench).
+fn variant_config(variant: &BenchVariant) -> Result<PathBuf> {
     let shipped = crate::util::workspace_root().join("firmware/weighing.toml");
     let (config, precision) = host_sim::calibrate::load_config(&shipped)?;
-    let bank = BankCandidate::REFERENCE;
     let config = estimator_core::tuning::WeighingConfig {
-        method: WeighingMethod::ModelBank {
-            decimation: bank.decimation,
-            candidates: bank.candidates,
-            ratio_min: bank.ratio_min,
-            ratio_max: bank.ratio_max,
-        },
+        method: variant.method,
         ..config
     };
     let dir = target_dir().join("xtask");
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    let path = dir.join("weighing-model-bank.toml");
+    let path = dir.join(format!("{}.toml", variant.stem));
     let text = format!(
-        "# The shipped firmware/weighing.toml with the model bank as its method (cargo xtask bench).\n{}",
+        "# The shipped firmware/weighing.toml with {} as its method (cargo xtask bench).\n{}",
+        variant.label,
         host_sim::calibrate::config_toml(&config, precision)
     );
     std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
