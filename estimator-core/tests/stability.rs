@@ -327,6 +327,7 @@ fn the_settled_average_in_f32_keeps_the_precision_of_its_deviations() {
         gain: COUNTS_PER_GRAM,
         block: 80,
         stable_band: 0.5,
+        noise_reference: None,
     })
     .unwrap();
     let mut b = Baseline::<f32, 10>::new(BaselineConfig {
@@ -334,6 +335,7 @@ fn the_settled_average_in_f32_keeps_the_precision_of_its_deviations() {
         gain: COUNTS_PER_GRAM as f32,
         block: 80,
         stable_band: 0.5,
+        noise_reference: None,
     })
     .unwrap();
     let (mut last64, mut last32) = (None, None);
