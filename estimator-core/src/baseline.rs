@@ -8,7 +8,19 @@
 //!   that moment on (the classic "wait, then average" scale);
 //! - [`BaselineMode::MovingAverage`]: report the mean of the last `K` blocks (a boxcar
 //!   low-pass of length `K·block`) while it is stable.
+//!
+//! ## The band and the noise (found by the stability map)
+//! A fixed band is loose when the noise is low: at 80 dB the 0.5 g band of the defaults is
+//! 300 block-mean standard deviations, so the pan is called stable while it still rings, and
+//! the settled average keeps that ringing (13–14× the Cramér–Rao bound at 1.5 s). Given the
+//! noise metered at tare ([`BaselineConfig::noise_reference`], at `D = block`), the `K` block
+//! means must also be consistent with a constant load: their sample variance over the block
+//! means' noise variance must stay below the threshold of `crate::consistency` (the F
+//! quantile at `K − 1` and the reference's degrees of freedom, times its allowance).
+//! Within the band but beyond the noise, the reading is `Invalid(ModelMismatch)` (not
+//! latched) instead of a number.
 
+use crate::consistency::{mismatch_threshold, NoiseReference};
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
 use crate::real::Real;
 
@@ -34,6 +46,9 @@ pub struct BaselineConfig<T> {
     pub block: u16,
     /// Largest spread of the last `K` block means (estimate's unit) that counts as stable.
     pub stable_band: T,
+    /// The noise measured at tare at `D = block` (`None`: the band alone decides): the block
+    /// means must also be consistent with it to count as stable (see the module docs).
+    pub noise_reference: Option<NoiseReference<T>>,
 }
 
 /// A stability-detecting baseline estimator keeping `K` block means.
@@ -52,6 +67,9 @@ pub struct Baseline<T: Real, const K: usize> {
     settled_sum: T,
     settled_origin: T,
     settled_count: u32,
+    /// The noise variance of one block mean (estimate's unit²) and the largest ratio of the
+    /// block means' sample variance to it that is consistent with a constant load.
+    noise: Option<(T, T)>,
     samples: u32,
     fault: Option<InvalidReason>,
     state: State,
@@ -70,6 +88,21 @@ impl<T: Real, const K: usize> Baseline<T, K> {
         if !(config.stable_band > T::ZERO) || !config.stable_band.is_finite() {
             return Err(ConfigError::Model);
         }
+        let noise = match &config.noise_reference {
+            Some(reference) => {
+                reference.validate()?;
+                let inv_gain = T::ONE / config.gain;
+                let block_variance =
+                    reference.variance * inv_gain * inv_gain / T::from_u32(u32::from(config.block));
+                let degrees = T::from_u32(K as u32 - 1);
+                let reference_degrees = T::from_f64(2.0 / 3.0) * T::from_u32(reference.differences);
+                Some((
+                    block_variance,
+                    mismatch_threshold(degrees, reference_degrees),
+                ))
+            }
+            None => None,
+        };
         Ok(Self {
             config,
             inv_gain: T::ONE / config.gain,
@@ -81,11 +114,33 @@ impl<T: Real, const K: usize> Baseline<T, K> {
             settled_sum: T::ZERO,
             settled_origin: T::ZERO,
             settled_count: 0,
+            noise,
             samples: 0,
             fault: None,
             state: State::WarmingUp,
             estimate: None,
         })
+    }
+
+    /// The sample variance of the stored block means over their noise variance from the
+    /// reference (≈ 1 for a constant load); `None` without a reference or before `K` blocks.
+    pub fn spread_ratio(&self) -> Option<T> {
+        let (block_variance, _) = self.noise?;
+        if self.blocks_filled < K {
+            return None;
+        }
+        let (_, mean) = self.spread_and_mean();
+        Some(self.sample_variance(mean) / block_variance)
+    }
+
+    /// `Σ (b − mean)² / (K − 1)` over the stored block means.
+    fn sample_variance(&self, mean: T) -> T {
+        let mut sum = T::ZERO;
+        for &b in &self.blocks {
+            let d = b - mean;
+            sum += d * d;
+        }
+        sum / T::from_u32(K as u32 - 1)
     }
 
     fn reading(&self) -> Reading<T> {
@@ -153,7 +208,17 @@ impl<T: Real, const K: usize> Estimator<T> for Baseline<T, K> {
             return self.reading();
         }
         let (spread, mean) = self.spread_and_mean();
-        if spread <= self.config.stable_band {
+        let consistent = match self.noise {
+            Some((block_variance, threshold)) => {
+                !(self.sample_variance(mean) > threshold * block_variance)
+            }
+            None => true,
+        };
+        if spread <= self.config.stable_band && !consistent {
+            // Within the band, but the means still move beyond the noise: not a number yet.
+            self.state = State::Invalid(InvalidReason::ModelMismatch);
+            self.estimate = None;
+        } else if spread <= self.config.stable_band {
             self.state = State::Estimating;
             self.estimate = Some(mean);
             if self.config.mode == BaselineMode::SettledAverage {
@@ -201,6 +266,7 @@ mod tests {
             gain: 2.0,
             block: 40,
             stable_band: 0.1,
+            noise_reference: None,
         };
         let mut baseline = Baseline::<f64, 10>::new(config).unwrap();
         for k in 0..20_000 {
@@ -229,6 +295,7 @@ mod tests {
             gain: 1.0,
             block: 4,
             stable_band: 1.0,
+            noise_reference: None,
         };
         let mut baseline = Baseline::<f32, 4>::new(config).unwrap();
         assert_eq!(

@@ -80,6 +80,7 @@
 //!   magnitude better than either variant at full rate; keep IV and BCLS for
 //!   well-excited, low-order sensors like the thesis scene, or as a bias check. The tests
 //!   in `tests/eiv.rs` pin each of these statements.
+use crate::consistency::{difference_correlation, difference_noise_gain, ResidualCheck};
 use crate::factor::Factor;
 use crate::input::{check_sample, Decimator, DifferenceWindow};
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
@@ -137,6 +138,9 @@ pub struct BiasCompensatedStepEstimator<T: Real, const N: usize> {
     /// The latest compensated solution `(ℓ, u)`, for the next row's a-priori residual.
     solution: Option<([T; N], T)>,
     identifiability: T,
+    /// The consistency check, when configured with a noise reference (on the compensated
+    /// fit's a-posteriori residuals).
+    check: Option<ResidualCheck<T>>,
     samples: u32,
     fault: Option<InvalidReason>,
     state: State,
@@ -167,6 +171,7 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
             offset: T::ZERO,
             solution: None,
             identifiability: T::ZERO,
+            check: step.residual_check(),
             samples: 0,
             fault: None,
             state: State::WarmingUp,
@@ -326,6 +331,25 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
         // property of the current data, not a corrupted state: flag, don't latch.
         if !(weight > threshold) || !step.is_finite() || !lead[..n].iter().all(|v| v.is_finite()) {
             self.invalidate(InvalidReason::IllConditioned);
+            return;
+        }
+        // The consistency check on what the compensated fit leaves of this row (a-posteriori,
+        // as in `IvStepEstimator`: no standardising weight for the compensated equations).
+        let mismatch = match self.check.as_mut() {
+            Some(check) => {
+                let mut prediction = step;
+                for i in 0..n {
+                    prediction += phi[i] * lead[i];
+                }
+                let residual = x - prediction;
+                check.push(residual * residual, difference_noise_gain::<T, 1>(&lead, n));
+                check.mismatch(|| difference_correlation::<T, 1>(&lead, n))
+            }
+            None => false,
+        };
+        if mismatch {
+            // Not latched.
+            self.invalidate(InvalidReason::ModelMismatch);
             return;
         }
         self.residual = prior_residual;

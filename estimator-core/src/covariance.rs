@@ -23,6 +23,7 @@
 //!   estimate (`offset`): kept as the load itself, in `f32` it stalled over long runs (22×
 //!   the steady-state bound after 10⁶ samples at λ = 1, D = 1, against 3.5× in `f64`).
 
+use crate::consistency::{difference_correlation, difference_noise_gain, ResidualCheck};
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
 use crate::real::Real;
 use crate::step::{identifiability_floor, StepConfig};
@@ -46,6 +47,8 @@ pub struct CovarianceStepEstimator<T: Real, const N: usize, const P: usize> {
     prior_weight: T,
     /// The origin of the targets: `theta[n]` is the step level minus this.
     offset: T,
+    /// The consistency check, when configured with a noise reference.
+    check: Option<ResidualCheck<T>>,
     samples: u32,
     block_sum: T,
     block_len: u16,
@@ -79,6 +82,7 @@ impl<T: Real, const N: usize, const P: usize> CovarianceStepEstimator<T, N, P> {
             effective_rows: T::ZERO,
             prior_weight: prior_information,
             offset: T::ZERO,
+            check: config.residual_check(),
             samples: 0,
             block_sum: T::ZERO,
             block_len: 0,
@@ -203,6 +207,12 @@ impl<T: Real, const N: usize, const P: usize> CovarianceStepEstimator<T, N, P> {
             prediction += phi[i] * self.theta[i];
         }
         let error = (x - self.offset) - prediction;
+        if let (Some(check), true) = (self.check.as_mut(), self.rows as usize >= p) {
+            // λ/(λ + φᵀΨφ)·e² is the row's increment of the weighted residual sum of squares
+            // (the factored form's w·e²); ℓ before the update, as the residual used it.
+            let noise_gain = difference_noise_gain::<T, 1>(&self.theta[..n], n);
+            check.push(lambda / denom * error * error, noise_gain);
+        }
         for i in 0..p {
             self.theta[i] += psi_phi[i] / denom * error;
         }
@@ -235,15 +245,28 @@ impl<T: Real, const N: usize, const P: usize> CovarianceStepEstimator<T, N, P> {
             self.residual = None;
             return;
         }
-        self.state = State::Estimating;
-        self.residual = self.estimate.map(|_| error);
-        self.estimate = Some(u);
+        let theta = self.theta;
+        let mismatch = self
+            .check
+            .as_ref()
+            .is_some_and(|check| check.mismatch(|| difference_correlation::<T, 1>(&theta[..n], n)));
+        let had_estimate = self.estimate.is_some();
         // Move the origin to the estimate (exact difference of the stored origins, as in
         // `step::recentre`); only the step unknown changes.
         let origin = self.offset + (u - self.offset);
         let applied = origin - self.offset;
         self.theta[n] -= applied;
         self.offset = origin;
+        if mismatch {
+            // Not latched, as in `StepEstimator`.
+            self.state = State::Invalid(InvalidReason::ModelMismatch);
+            self.estimate = None;
+            self.residual = None;
+            return;
+        }
+        self.state = State::Estimating;
+        self.residual = had_estimate.then_some(error);
+        self.estimate = Some(u);
     }
 }
 

@@ -54,6 +54,7 @@
 //! variance (1.3–1.6× the LS RMS). A delay of `2n + 1` helps at D = 1 (median error 0.38 g
 //! against 1.1 g) and hurts at D = 12.
 
+use crate::consistency::{difference_correlation, difference_noise_gain, ResidualCheck};
 use crate::factor::{apply, rotation};
 use crate::input::{check_sample, Decimator};
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
@@ -304,6 +305,9 @@ pub struct IvStepEstimator<T: Real, const N: usize> {
     /// The latest determined solution `[ℓ; u]`, for the next row's a-priori residual.
     solution: Option<Column<T, N>>,
     identifiability: T,
+    /// The consistency check, when configured with a noise reference (on the a-posteriori
+    /// residuals: IV has no standardising row weight).
+    check: Option<ResidualCheck<T>>,
     samples: u32,
     fault: Option<InvalidReason>,
     state: State,
@@ -326,6 +330,7 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
             offset: T::ZERO,
             solution: None,
             identifiability: T::ZERO,
+            check: config.step.residual_check(),
             samples: 0,
             fault: None,
             state: State::WarmingUp,
@@ -456,6 +461,27 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
             || !step.is_finite()
         {
             self.invalidate(InvalidReason::IllConditioned);
+            return;
+        }
+        // The consistency check on the a-posteriori residual of this row: its mean square is
+        // the noise model's times (1 − leverage) for a correct model, so the check errs
+        // towards not flagging while few rows are in.
+        let mismatch = match self.check.as_mut() {
+            Some(check) => {
+                let mut prediction = step;
+                for i in 0..n {
+                    prediction += phi[i] * solved.theta.lead[i];
+                }
+                let residual = x - prediction;
+                let lead = &solved.theta.lead;
+                check.push(residual * residual, difference_noise_gain::<T, 1>(lead, n));
+                check.mismatch(|| difference_correlation::<T, 1>(lead, n))
+            }
+            None => false,
+        };
+        if mismatch {
+            // Not latched; the origin stays where it was (the next solve starts from it).
+            self.invalidate(InvalidReason::ModelMismatch);
             return;
         }
         self.residual = prior_residual;

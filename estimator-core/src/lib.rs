@@ -27,6 +27,7 @@ mod baseline;
 pub mod bias_compensated;
 pub mod calibration;
 pub mod command;
+mod consistency;
 mod covariance;
 pub mod expm;
 mod factor;
@@ -52,6 +53,7 @@ pub use command::{
     CalibrationFailure, CalibrationStore, Command, CommandConfig, CommandOutcome, CommandRefusal,
     Commands, KeyDebouncer, KeyPress, StoreFailure,
 };
+pub use consistency::{NoiseReference, MISMATCH_ALLOWANCE, MISMATCH_FALSE_ALARM};
 pub use covariance::CovarianceStepEstimator;
 pub use identify::{identify, Identified, IdentifyConfig, IdentifyError};
 pub use iv::{max_instrument_delay, IvConfig, IvStepEstimator, DEFAULT_MIN_IDENTIFIABILITY};

@@ -15,6 +15,7 @@
 //! LTI sensor; the intercept needs τ, calibrated with a reference mass (`lag_s`). The same
 //! recursive engine as the step estimator solves it, with `[t, 1]` as trailing columns.
 
+use crate::consistency::{difference_correlation, difference_noise_gain, ResidualCheck};
 use crate::factor::Factor;
 use crate::input::{check_sample, Decimator, DifferenceWindow};
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
@@ -25,7 +26,8 @@ use crate::step::StepConfig;
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct RampConfig<T> {
-    /// Order, gain, forgetting, decimation and valid range, as for the step estimator.
+    /// Order, gain, forgetting, decimation, valid range and noise reference, as for the step
+    /// estimator (the consistency check on second differences, `crate::consistency`).
     pub regression: StepConfig<T>,
     /// Time between raw samples, in seconds: the slope is per second.
     pub sample_period_s: T,
@@ -46,6 +48,10 @@ pub struct RampEstimator<T: Real, const N: usize> {
     decimated_samples: u32,
     rows: u32,
     effective_rows: T,
+    /// The consistency check, when configured with a noise reference.
+    check: Option<ResidualCheck<T>>,
+    /// `Σc²` of the latest solution (second differences).
+    noise_gain: T,
     samples: u32,
     fault: Option<InvalidReason>,
     line: Option<(T, T)>,
@@ -73,6 +79,8 @@ impl<T: Real, const N: usize> RampEstimator<T, N> {
             decimated_samples: 0,
             rows: 0,
             effective_rows: T::ZERO,
+            check: config.regression.residual_check(),
+            noise_gain: T::ONE,
             samples: 0,
             fault: None,
             line: None,
@@ -122,6 +130,7 @@ impl<T: Real, const N: usize> RampEstimator<T, N> {
             self.factor.forget(n, lambda);
         }
         self.effective_rows = self.effective_rows * lambda + T::ONE;
+        let determined_before = self.rows as usize > n + 1;
         let folded = self
             .factor
             .fold(n, self.differences.window(), [t, T::ONE], x);
@@ -134,12 +143,29 @@ impl<T: Real, const N: usize> RampEstimator<T, N> {
         if (self.rows as usize) < n + 2 {
             return;
         }
+        let mismatch = match self.check.as_mut() {
+            Some(check) => {
+                if determined_before {
+                    let residual = folded.residual;
+                    check.push(folded.row_weight * residual * residual, self.noise_gain);
+                }
+                let (lead, _) = self.factor.solution(n);
+                self.noise_gain = difference_noise_gain::<T, 2>(&lead, n);
+                check.mismatch(|| difference_correlation::<T, 2>(&lead, n))
+            }
+            None => false,
+        };
         let threshold = T::from_f64(100.0) * T::EPSILON * self.effective_rows;
         let [w_t, w_1] = self.factor.tail_weight();
         // The time column's weight grows like rows·t², so compare it on that scale.
         let t_scale = t * t;
         if !(w_1 > threshold && w_t > threshold * t_scale) {
             self.invalidate(InvalidReason::IllConditioned);
+            return;
+        }
+        if mismatch {
+            // Not latched, as in `StepEstimator`.
+            self.invalidate(InvalidReason::ModelMismatch);
             return;
         }
         self.line = Some((slope, c0 + slope * self.config.lag_s));

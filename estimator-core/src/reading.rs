@@ -24,13 +24,23 @@ pub enum InvalidReason {
     /// (single-precision rounding on ill-conditioned data): its gain and estimate are no
     /// longer those of any least-squares problem. Found by the stability map; latches.
     LostDefiniteness,
+    /// What the fit leaves unexplained is more than the noise measured at tare can explain
+    /// ([`crate::NoiseReference`], opt-in): the model does not describe the data (an order
+    /// below the sensor's, a model off its load, a pan still moving), so the estimate may be
+    /// biased far beyond its noise. Like ill-conditioning it describes the data so far and
+    /// clears when the fit explains them again; not latched.
+    ModelMismatch,
 }
 
 impl InvalidReason {
-    /// True for the faults that latch until `reset()`: all but [`Self::IllConditioned`] and
-    /// [`Self::OutsideModelRange`], which describe the data so far and may clear.
+    /// True for the faults that latch until `reset()`: all but [`Self::IllConditioned`],
+    /// [`Self::OutsideModelRange`] and [`Self::ModelMismatch`], which describe the data so
+    /// far and may clear.
     pub fn latches(self) -> bool {
-        !matches!(self, Self::IllConditioned | Self::OutsideModelRange)
+        !matches!(
+            self,
+            Self::IllConditioned | Self::OutsideModelRange | Self::ModelMismatch
+        )
     }
 }
 
@@ -96,6 +106,11 @@ pub enum ConfigError {
     Range,
     /// A model parameter (other estimators) is outside its domain.
     Model,
+    /// The noise reference of the consistency check is not a finite, positive variance.
+    NoiseReference,
+    /// A weighing configuration outside the valid region the stability map measured
+    /// (`tuning::WeighingConfig::check_region` says why).
+    OutsideValidRegion,
 }
 
 impl core::fmt::Display for ConfigError {
@@ -112,6 +127,12 @@ impl core::fmt::Display for ConfigError {
             }
             ConfigError::Range => f.write_str("valid range must be non-empty and not NaN"),
             ConfigError::Model => f.write_str("model parameter outside its domain"),
+            ConfigError::NoiseReference => {
+                f.write_str("noise reference must be a finite, positive variance")
+            }
+            ConfigError::OutsideValidRegion => {
+                f.write_str("configuration outside the valid region of the stability map")
+            }
         }
     }
 }

@@ -28,11 +28,18 @@
 //!   after 10⁶ samples at λ = 1, D = 1). The targets are therefore folded relative to an
 //!   origin that follows the estimate (`offset`), so the factor holds deviations, not the
 //!   load (`Factor::shift_target`); the reading adds the origin back.
+//! - Silent without a noise reference: the bias of an order below the sensor's (n = 1, 2 at
+//!   D = 16). Given the noise metered at tare ([`StepConfig::with_noise_reference`]), the
+//!   estimator compares what its fit leaves unexplained with what that noise would leave
+//!   and flags `Invalid(ModelMismatch)` beyond chance (`crate::consistency`).
 //! - Not detectable here, and so stated: the errors-in-variables bias of the fast-sampled
-//!   regression (D = 1), and the bias of an order below the sensor's (n = 1, 2 at D = 16).
-//!   Both leave the residuals unremarkable; calibration must choose a configuration inside
-//!   the map's valid region.
+//!   regression (D = 1): the fit absorbs the regressors' noise, so its residuals are smaller
+//!   than the noise model's, not larger. Calibration must choose a configuration inside the
+//!   map's valid region (`tuning::WeighingConfig::check_region`).
 
+use crate::consistency::{
+    difference_correlation, difference_noise_gain, NoiseReference, ResidualCheck,
+};
 use crate::factor::Factor;
 use crate::input::{check_sample, Decimator, DifferenceWindow};
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
@@ -78,10 +85,14 @@ pub struct StepConfig<T> {
     pub valid_min: T,
     /// See `valid_min`.
     pub valid_max: T,
+    /// The noise measured at tare, for the consistency check (`None`: no check, the
+    /// default). With it, a fit that leaves more unexplained than this noise can explain is
+    /// flagged `Invalid(ModelMismatch)` (see `crate::consistency`).
+    pub noise_reference: Option<NoiseReference<T>>,
 }
 
 impl<T: Real> StepConfig<T> {
-    /// Order `n`, gain `G`, growing window, full rate, no range limit.
+    /// Order `n`, gain `G`, growing window, full rate, no range limit, no consistency check.
     pub fn new(order: usize, gain: T) -> Self {
         Self {
             order,
@@ -90,7 +101,15 @@ impl<T: Real> StepConfig<T> {
             decimation: 1,
             valid_min: T::from_f64(f64::NEG_INFINITY),
             valid_max: T::from_f64(f64::INFINITY),
+            noise_reference: None,
         }
+    }
+
+    /// Check the fit's residuals against the noise metered at tare (raw units², at this
+    /// configuration's `D`; see [`NoiseReference`]).
+    pub fn with_noise_reference(mut self, reference: NoiseReference<T>) -> Self {
+        self.noise_reference = Some(reference);
+        self
     }
 
     /// Set the forgetting factor λ.
@@ -133,7 +152,23 @@ impl<T: Real> StepConfig<T> {
         if !(self.valid_min < self.valid_max) {
             return Err(ConfigError::Range);
         }
+        if let Some(reference) = &self.noise_reference {
+            reference.validate()?;
+        }
         Ok(())
+    }
+
+    /// The consistency check this configuration asks for, over residuals in the estimate's
+    /// unit (raw units over the gain).
+    pub(crate) fn residual_check(&self) -> Option<ResidualCheck<T>> {
+        self.noise_reference.as_ref().map(|reference| {
+            ResidualCheck::new(
+                reference,
+                T::ONE / self.gain,
+                self.decimation,
+                self.forgetting,
+            )
+        })
     }
 }
 
@@ -156,6 +191,10 @@ pub struct StepEstimator<T: Real, const N: usize> {
     /// The origin of the targets folded into `factor` (see the module docs): the factor's
     /// step level is the estimate minus this.
     offset: T,
+    /// The consistency check, when configured with a noise reference.
+    check: Option<ResidualCheck<T>>,
+    /// `Σc²` of the latest solution: the next residual's noise in block-mean variances.
+    noise_gain: T,
     samples: u32,
     /// A fault that broke the data stream or the state; latched until `reset()`.
     fault: Option<InvalidReason>,
@@ -177,6 +216,8 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
             rows: 0,
             effective_rows: T::ZERO,
             offset: T::ZERO,
+            check: config.residual_check(),
+            noise_gain: T::ONE,
             samples: 0,
             fault: None,
             state: State::WarmingUp,
@@ -188,6 +229,13 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
     /// The configuration in use.
     pub fn config(&self) -> &StepConfig<T> {
         &self.config
+    }
+
+    /// The consistency check's residual ratio: the weighted mean square of the residuals
+    /// over what the noise reference predicts for them (≈ 1 when the fit leaves only
+    /// noise); `None` without a reference or before the first determined row.
+    pub fn residual_ratio(&self) -> Option<T> {
+        self.check.as_ref().and_then(ResidualCheck::ratio)
     }
 
     /// The capacity `N`: the largest order this instance accepts.
@@ -255,6 +303,7 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         }
         self.effective_rows = self.effective_rows * lambda + T::ONE;
         let had_estimate = self.estimate.is_some();
+        let determined_before = self.rows as usize > n;
         let folded = self
             .factor
             .fold(n, self.differences.window(), [T::ONE], x - self.offset);
@@ -269,6 +318,18 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         if (self.rows as usize) < n + 1 {
             return;
         }
+        let mismatch = match self.check.as_mut() {
+            Some(check) => {
+                if determined_before {
+                    let residual = folded.residual;
+                    check.push(folded.row_weight * residual * residual, self.noise_gain);
+                }
+                let (lead, _) = self.factor.solution(n);
+                self.noise_gain = difference_noise_gain::<T, 1>(&lead, n);
+                check.mismatch(|| difference_correlation::<T, 1>(&lead, n))
+            }
+            None => false,
+        };
         // weight / effective_rows is the squared sine of the angle between the constant
         // column and the span of the difference columns; near zero, u is not identifiable.
         // Not latched: right after warm-up a fast-sampled Hankel system can be too
@@ -281,6 +342,12 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
             self.invalidate(InvalidReason::IllConditioned);
             return;
         }
+        self.offset = recentre(&mut self.factor, n, self.offset, step);
+        if mismatch {
+            // Not latched: the data so far do not fit; more rows may (or a reset will).
+            self.invalidate(InvalidReason::ModelMismatch);
+            return;
+        }
         self.residual = if had_estimate {
             Some(folded.residual)
         } else {
@@ -288,7 +355,6 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         };
         self.state = State::Estimating;
         self.estimate = Some(step);
-        self.offset = recentre(&mut self.factor, n, self.offset, step);
     }
 }
 

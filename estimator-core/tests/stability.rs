@@ -6,11 +6,14 @@
 
 mod support;
 
+use estimator_core::tuning::{
+    LoadCoverage, OnsetConfig, Prediction, RegionError, WeighingConfig, WeighingMethod,
+};
 use estimator_core::{
     Baseline, BaselineConfig, BaselineMode, BiasCompensatedConfig, BiasCompensatedStepEstimator,
-    CovarianceStepEstimator, Estimator, InvalidReason, IvConfig, IvStepEstimator, ModelBank,
-    ModelConfig, ModelEstimator, SensorModel, State, StepConfig, StepEstimator,
-    MIN_IDENTIFIABILITY,
+    CovarianceStepEstimator, Estimator, InvalidReason, IvConfig, IvStepEstimator, LoadCellModel,
+    ModelBank, ModelConfig, ModelEstimator, NoiseMeter, NoiseReference, Real, SensorModel, State,
+    StepConfig, StepEstimator, MIN_IDENTIFIABILITY,
 };
 use nalgebra::DMatrix;
 use support::*;
@@ -327,6 +330,7 @@ fn the_settled_average_in_f32_keeps_the_precision_of_its_deviations() {
         gain: COUNTS_PER_GRAM,
         block: 80,
         stable_band: 0.5,
+        noise_reference: None,
     })
     .unwrap();
     let mut b = Baseline::<f32, 10>::new(BaselineConfig {
@@ -334,6 +338,7 @@ fn the_settled_average_in_f32_keeps_the_precision_of_its_deviations() {
         gain: COUNTS_PER_GRAM as f32,
         block: 80,
         stable_band: 0.5,
+        noise_reference: None,
     })
     .unwrap();
     let (mut last64, mut last32) = (None, None);
@@ -345,4 +350,297 @@ fn the_settled_average_in_f32_keeps_the_precision_of_its_deviations() {
     let statistical = sigma_counts / COUNTS_PER_GRAM / (samples as f64).sqrt();
     println!("f64 {last64:.7} g, f32 {last32:.7} g, statistical error {statistical:.2e} g");
     assert!((last32 - last64).abs() < 0.1 * statistical);
+}
+
+// ---------------------------------------------------------------------------------------
+// The consistency check against the noise metered at tare (`InvalidReason::ModelMismatch`,
+// `NoiseReference`) and the valid region (`WeighingConfig::check_region`): the silent modes
+// of the map. host-sim/tests/stability.rs holds the valid region's false-alarm test (with
+// vibration and mains) and the modes that stay silent.
+
+/// The noise of an empty pan at `snr_db` (the drop's σ), metered by `NoiseMeter` at `D`
+/// over 1,200 samples (0.3 s, as host-sim's studies and a tare meter it).
+fn tare_reference<T: Real>(snr_db: f64, decimation: u16, seed: u64) -> NoiseReference<T> {
+    let (empty, _) = noisy(&vec![0.0; 1200], snr_db, seed);
+    let mut meter = NoiseMeter::<f64>::new(decimation).unwrap();
+    for sample in empty {
+        meter.push(sample).unwrap();
+    }
+    NoiseReference::new(
+        T::from_f64(meter.noise_variance().unwrap()),
+        meter.differences(),
+    )
+}
+
+fn is_mismatch<T>(reading: &estimator_core::Reading<T>) -> bool {
+    reading.state == State::Invalid(InvalidReason::ModelMismatch)
+}
+
+#[test]
+fn an_order_below_the_sensors_is_flagged_model_mismatch() {
+    // The map: n = 1 from 30 dB and n = 2 from 50 dB at D = 16 gave valid readings 21–4,000×
+    // the Cramér–Rao bound, silently. With the tare's noise as the reference, at 60 dB, 8
+    // seeds of 1.5 s: every reading from 100 ms to the end is ModelMismatch, in f64 and in
+    // f32 alike; the unchecked estimator on the same data is more than 10× off the error
+    // of n = 7 (the map's valid order), which the check leaves alone.
+    let clean = drop_counts(6000);
+    let (snr_db, decimation, at_100_ms) = (60.0, 16u16, 400);
+    let mut squared = [0.0f64; 3];
+    for seed in 0..8u64 {
+        let (y, _) = noisy(&clean, snr_db, 300 + seed);
+        for (slot, order) in [1usize, 2, 7].into_iter().enumerate() {
+            let config = |reference| {
+                StepConfig::new(order, COUNTS_PER_GRAM)
+                    .with_decimation(decimation)
+                    .with_noise_reference(reference)
+            };
+            let mut checked =
+                StepEstimator::<f64, 8>::new(config(tare_reference(snr_db, decimation, seed)))
+                    .unwrap();
+            let config32 = StepConfig::new(order, COUNTS_PER_GRAM as f32)
+                .with_decimation(decimation)
+                .with_noise_reference(tare_reference::<f32>(snr_db, decimation, seed));
+            let mut single = StepEstimator::<f32, 8>::new(config32).unwrap();
+            let mut unchecked = StepEstimator::<f64, 8>::new(
+                StepConfig::new(order, COUNTS_PER_GRAM).with_decimation(decimation),
+            )
+            .unwrap();
+            for (k, &sample) in y.iter().enumerate() {
+                let (a, b, c) = (
+                    checked.push(sample),
+                    single.push(sample as f32),
+                    unchecked.push(sample),
+                );
+                assert_eq!(
+                    is_mismatch(&a),
+                    is_mismatch(&b),
+                    "n={order} seed {seed} k={k}"
+                );
+                if k >= at_100_ms {
+                    assert_eq!(
+                        is_mismatch(&a),
+                        order < 3,
+                        "n={order} seed {seed} k={k}: {:?}, ratio {:?}",
+                        a.state,
+                        checked.residual_ratio()
+                    );
+                }
+                if k == at_100_ms {
+                    squared[slot] += (c.estimate.unwrap() - MASS_G).powi(2);
+                }
+            }
+        }
+    }
+    let rms = squared.map(|s| (s / 8.0).sqrt());
+    println!("RMS error at 100 ms, unchecked, n = 1, 2, 7: {rms:?} g");
+    assert!(rms[0] > 10.0 * rms[2] && rms[1] > 10.0 * rms[2], "{rms:?}");
+}
+
+#[test]
+fn a_single_model_off_its_load_is_flagged_model_mismatch() {
+    // The map: one model at the calibration mass (K = 1) used at another load, ×0.9–×1.5 of
+    // its resonance, from 50 dB: 13–10⁴× the bound, silent. Here the model of resonance
+    // ratio 1 at D = 8, 50 dB, 8 seeds: on drops at 0.9 and 1.1 every reading from 100 ms on
+    // is ModelMismatch; on its own load not one in 1.5 s (the check's design, white block
+    // means: 8 runs × 750 readings × 1e-5 = 0.06 expected).
+    let model = load_cell_at(1.0);
+    let gain = model_gain(&model);
+    for (truth, off) in [(0.9, true), (1.1, true), (1.0, false)] {
+        let clean = model_drop(&load_cell_at(truth), 6000);
+        for seed in 0..8u64 {
+            let (y, _) = add_noise(&clean, gain * MASS_G, 50.0, 500 + seed);
+            let (empty, _) = add_noise(&[0.0; 1200], gain * MASS_G, 50.0, 900 + seed);
+            let mut meter = NoiseMeter::<f64>::new(8).unwrap();
+            empty.iter().for_each(|&s| meter.push(s).unwrap());
+            let reference =
+                NoiseReference::new(meter.noise_variance().unwrap(), meter.differences());
+            let config = ModelConfig::new(model)
+                .with_decimation(8)
+                .with_noise_reference(reference);
+            let mut estimator = ModelEstimator::new(config).unwrap();
+            for (k, &sample) in y.iter().enumerate() {
+                let reading = estimator.push(sample);
+                if off && k >= 400 {
+                    assert!(is_mismatch(&reading), "×{truth} seed {seed} k={k}");
+                }
+                if !off {
+                    assert!(!is_mismatch(&reading), "×{truth} seed {seed} k={k}");
+                }
+            }
+            println!(
+                "×{truth} seed {seed}: residual ratio at 1.5 s {:.3e}",
+                estimator.residual_ratio().unwrap()
+            );
+        }
+    }
+}
+
+/// The static gain of a discrete model: its settled response to `MASS_G`, per gram (the
+/// slowest pole decays as e^(−ζω t), 0.21 s: 15 s are settled to 1e-31).
+fn model_gain(model: &SensorModel<f64, 5>) -> f64 {
+    *model_drop(model, 60_000).last().unwrap() / MASS_G
+}
+
+/// The noise-free response of `model` to a step of `MASS_G` from rest.
+fn model_drop(model: &SensorModel<f64, 5>, samples: usize) -> Vec<f64> {
+    let mut state = [0.0; 5];
+    (0..samples)
+        .map(|_| {
+            let out: f64 = (0..5).map(|i| model.c[i] * state[i]).sum();
+            let next: [f64; 5] = core::array::from_fn(|i| {
+                (0..5).map(|j| model.a[i][j] * state[j]).sum::<f64>() + model.b[i] * MASS_G
+            });
+            state = next;
+            out
+        })
+        .collect()
+}
+
+#[test]
+fn a_full_rate_regression_is_refused_by_configuration() {
+    // The map: at D = 1 least squares is biased by errors in variables, > 10× the bound
+    // from 20 dB (215× at n = 7, 50 dB), silently. Its residuals stay near the noise once
+    // the transient is over (host-sim's test of the silent modes: flagged at 100 ms, not at
+    // 1.5 s), so a configuration with D below what the model's bandwidth needs is refused
+    // instead. Here, 60 dB, 4 seeds: at 1.5 s the checked D = 1 reading is valid and its
+    // error more than 10× that of D = 16 on the same data; `check_region` refuses D = 1
+    // for the load cell (100 Hz filter, 4 kHz: D ≥ 8) and accepts D = 16.
+    let clean = drop_counts(6000);
+    let mut squared = [0.0f64; 2];
+    for seed in 0..4u64 {
+        let (y, _) = noisy(&clean, 60.0, 700 + seed);
+        for (slot, decimation) in [1u16, 16].into_iter().enumerate() {
+            let mut estimator = StepEstimator::<f64, 8>::new(
+                StepConfig::new(7, COUNTS_PER_GRAM)
+                    .with_decimation(decimation)
+                    .with_noise_reference(tare_reference(60.0, decimation, seed)),
+            )
+            .unwrap();
+            let last = y.iter().map(|&s| estimator.push(s)).last().unwrap();
+            assert_eq!(
+                last.state,
+                State::Estimating,
+                "D = {decimation} seed {seed}"
+            );
+            squared[slot] += (last.estimate.unwrap() - MASS_G).powi(2);
+        }
+    }
+    let rms = squared.map(|s| (s / 4.0).sqrt());
+    println!("RMS error at 1.5 s, D = 1 and D = 16, both checked: {rms:?} g");
+    assert!(rms[0] > 10.0 * rms[1], "{rms:?}");
+
+    let config = |decimation| {
+        weighing_config(WeighingMethod::Step {
+            order: 7,
+            decimation,
+            forgetting: 1.0,
+        })
+    };
+    assert_eq!(
+        config(1).check_region(),
+        Err(RegionError::Decimation {
+            decimation: 1,
+            minimum: 8
+        })
+    );
+    assert_eq!(config(16).check_region(), Ok(()));
+    let low_order = weighing_config(WeighingMethod::Step {
+        order: 2,
+        decimation: 16,
+        forgetting: 1.0,
+    });
+    assert_eq!(
+        low_order.check_region(),
+        Err(RegionError::Order {
+            order: 2,
+            minimum: 3
+        })
+    );
+}
+
+/// A weighing configuration of `method` for the load cell of `support` (4 kHz, 25 Hz,
+/// 100 Hz 3rd-order Butterworth), the calibration mass its only load.
+fn weighing_config(method: WeighingMethod) -> WeighingConfig {
+    let prediction = Prediction {
+        runs: 0,
+        planned_runs: 0,
+        valid_runs: 0,
+        within_target_runs: 0,
+        detection_failures: 0,
+        bias_g: 0.0,
+        rms_g: 0.0,
+        p95_g: 0.0,
+        p95_upper_g: 0.0,
+    };
+    WeighingConfig {
+        method,
+        counts_per_gram: COUNTS_PER_GRAM,
+        zero_counts: 0.0,
+        noise_variance_counts2: 1.0,
+        raw_noise_variance_counts2: 1.0,
+        onset: OnsetConfig::new(4000.0),
+        detection_lag_samples: 0.0,
+        model: LoadCellModel {
+            natural_frequency_hz: 25.0,
+            damping_ratio: 0.03,
+            filter_order: 3,
+            filter_cutoff_hz: 100.0,
+            counts_per_gram: COUNTS_PER_GRAM,
+            sample_rate_hz: 4000.0,
+        },
+        identified_counts_per_gram: COUNTS_PER_GRAM,
+        calibration_mass_g: MASS_G,
+        readout_s: 0.1,
+        target_relative: 0.001,
+        prediction,
+        recorded_drops: 0,
+        recorded_worst_error_g: 0.0,
+        loads: LoadCoverage::calibration_mass_only(MASS_G, prediction),
+    }
+}
+
+#[test]
+fn a_baseline_that_calls_a_ringing_pan_stable_is_flagged() {
+    // The map: the settled average's 0.5 g band at 80 dB is 300 block-mean standard
+    // deviations, so it settles while the pan still rings and keeps the ring in its average
+    // (13–14× the bound at 1.5 s), silently. With the tare's noise as the reference the block
+    // means must also be consistent with a constant load. 80 dB, 6 seeds of 4 s: at 1.5 s
+    // the unchecked average is valid and the checked one is not (ModelMismatch, or not yet
+    // stable); by 4 s the ring is below the noise and the checked average reads, closer to
+    // the truth than the unchecked one.
+    let clean = drop_counts(16_000);
+    let config = |reference| BaselineConfig {
+        mode: BaselineMode::SettledAverage,
+        gain: COUNTS_PER_GRAM,
+        block: 80,
+        stable_band: 0.5,
+        noise_reference: reference,
+    };
+    let (mut checked_error2, mut unchecked_error2) = (0.0, 0.0);
+    for seed in 0..6u64 {
+        let (y, _) = noisy(&clean, 80.0, 1100 + seed);
+        let mut checked =
+            Baseline::<f64, 10>::new(config(Some(tare_reference(80.0, 80, seed)))).unwrap();
+        let mut unchecked = Baseline::<f64, 10>::new(config(None)).unwrap();
+        let mut flagged = false;
+        for (k, &sample) in y.iter().enumerate() {
+            let (a, b) = (checked.push(sample), unchecked.push(sample));
+            flagged |= is_mismatch(&a);
+            if k == 5999 {
+                assert!(b.estimate.is_some(), "seed {seed}: unchecked not stable");
+                assert_eq!(a.estimate, None, "seed {seed}: checked valid at 1.5 s");
+            }
+            if k + 1 == y.len() {
+                checked_error2 += (a.estimate.expect("stable by 4 s") - MASS_G).powi(2);
+                unchecked_error2 += (b.estimate.unwrap() - MASS_G).powi(2);
+            }
+        }
+        assert!(flagged, "seed {seed}: never flagged");
+    }
+    let (checked, unchecked) = (
+        (checked_error2 / 6.0).sqrt(),
+        (unchecked_error2 / 6.0).sqrt(),
+    );
+    println!("settled average at 4 s, 80 dB: checked {checked:.2e} g, unchecked {unchecked:.2e} g");
+    assert!(checked < unchecked, "{checked} vs {unchecked}");
 }

@@ -21,7 +21,7 @@ use std::time::Instant;
 use anyhow::{anyhow, bail, Context, Result};
 use estimator_core::tuning::{
     self, Calibrated, CalibrationError, CalibrationSettings, CandidateGrid, CandidateScore,
-    DropError, LoadCoverage, LoadScene, LoadScore, OnsetConfig, Prediction, RunSlot,
+    DropError, LoadCoverage, LoadScene, LoadScore, OnsetConfig, Prediction, RegionError, RunSlot,
     WeighingConfig, WeighingEstimator, WeighingMethod, MAX_SCENES,
 };
 use estimator_core::{IdentifyError, LoadCellModel, Real};
@@ -333,6 +333,17 @@ pub fn score_line(score: &CandidateScore, mass_g: f64, target_relative: f64) -> 
     let scored = score.loads.iter().flatten().count();
     let verdict = if score.meets {
         format!("MEETS at all {scored} loads")
+    } else if let (Some(region), None, Some(check)) =
+        (&score.outside_region, &score.failed_load, &score.recorded)
+    {
+        if check.failing == 0 {
+            format!("met the target, but outside the valid region: {region}")
+        } else {
+            format!(
+                "recorded drop {} outside ({:+.4} g); outside the valid region: {region}",
+                check.worst_drop, check.errors_g[check.worst_drop as usize]
+            )
+        }
     } else if let Some(failed) = &score.failed_load {
         let f = &failed.prediction;
         if failed.scene.mass_g == mass_g && failed.scene.frequency_ratio == 1.0 {
@@ -1277,6 +1288,20 @@ pub fn parse_config(path: &Path, text: &str) -> Result<(WeighingConfig, Precisio
                 &format!("`{written}` (what the other method keys say), found `{spec}`"),
             ));
         }
+    }
+    // Inside the stability map's valid region: a failure outside it is not flagged at run
+    // time (estimator-core `WeighingConfig::check_region`).
+    if let Err(region) = config.check_region() {
+        let key = match region {
+            RegionError::Decimation { .. } => "method.decimation",
+            RegionError::Order { .. } => "method.order",
+            RegionError::BankSpan { .. } => "method.ratio_min",
+            RegionError::Model => "model",
+        };
+        return Err(anyhow!(
+            "weighing config {}: key `{key}`: outside the valid region: {region}",
+            path.display()
+        ));
     }
     // The values must make the configured method.
     configured_estimator(&config, precision, config.zero_counts)

@@ -21,6 +21,7 @@ pub fn state_name(state: State) -> &'static str {
         State::Invalid(InvalidReason::MissingSample) => "invalid_missing_sample",
         State::Invalid(InvalidReason::OutsideModelRange) => "invalid_outside_model_range",
         State::Invalid(InvalidReason::LostDefiniteness) => "invalid_lost_definiteness",
+        State::Invalid(InvalidReason::ModelMismatch) => "invalid_model_mismatch",
     }
 }
 

@@ -44,6 +44,15 @@
 //! `noise_var` is the white-noise variance of one raw sample in raw units² as measured at
 //! tare ([`estimator_core::NoiseMeter`] at the method's D); without it the build context's
 //! `tare_noise_variance` is used, and without that the spec is refused.
+//!
+//! ## The consistency check
+//! With [`BuildContext::noise_check`] and a tare variance, every method that has residuals
+//! (step, covariance, iv, bc, ramp, model, and the baselines' block means) gets the tare as
+//! its [`NoiseReference`] and flags `invalid_model_mismatch` when its fit leaves more than
+//! that noise explains (`estimator_core`'s `consistency` module). The tare must then be
+//! metered at the method's own D ([`Method::reference_decimation`]), as the stability map
+//! does; `montecarlo` and `study speed` run the methods without it (they measure accuracy,
+//! the map measures flags).
 
 use std::fmt;
 use std::str::FromStr;
@@ -52,8 +61,8 @@ use anyhow::{anyhow, bail, Result};
 use estimator_core::{
     max_instrument_delay, Baseline, BaselineConfig, BaselineMode, BiasCompensatedConfig,
     BiasCompensatedStepEstimator, CovarianceStepEstimator, Estimator, InitialState, IvConfig,
-    IvStepEstimator, LoadCellModel, ModelBank, ModelConfig, NoiseMeter, RampConfig, RampEstimator,
-    Reading, Real, SensorModel, StepConfig, StepEstimator, MAX_DECIMATION,
+    IvStepEstimator, LoadCellModel, ModelBank, ModelConfig, NoiseMeter, NoiseReference, RampConfig,
+    RampEstimator, Reading, Real, SensorModel, StepConfig, StepEstimator, MAX_DECIMATION,
 };
 
 use crate::montecarlo::{Precision, Setup, CAPACITY};
@@ -218,8 +227,15 @@ pub struct BuildContext {
     /// The sensor chain, for the methods that use a model of it (`model`).
     pub chain: SensorChain,
     /// Noise variance of one raw sample as measured at tare, raw units² (for
-    /// bias-compensated methods; `None` when no tare was measured).
+    /// bias-compensated methods, and the consistency check's reference with `noise_check`;
+    /// `None` when no tare was measured).
     pub tare_noise_variance: Option<f64>,
+    /// The differences of block means `tare_noise_variance` was metered over
+    /// ([`NoiseMeter::differences`]): the reference's own uncertainty; 0: known exactly.
+    pub tare_differences: u32,
+    /// Give every method with residuals the tare as its consistency check's reference
+    /// (see the module docs); without a tare variance there is no check.
+    pub noise_check: bool,
     /// Samples (tare removed) outside this range are refused as `OutOfRange`: the ADC's
     /// rails, where a drop's overshoot clips (`None`: no range, e.g. recorded data of
     /// unknown origin). The baselines take no range.
@@ -233,7 +249,31 @@ impl BuildContext {
             gain,
             chain,
             tare_noise_variance: None,
+            tare_differences: 0,
+            noise_check: false,
             valid_range: None,
+        }
+    }
+
+    /// The consistency check's reference, when the context asks for the check and has a tare.
+    pub fn noise_reference<T: Real>(&self) -> Option<NoiseReference<T>> {
+        match (self.noise_check, self.tare_noise_variance) {
+            (true, Some(variance)) => Some(NoiseReference::new(
+                T::from_f64(variance),
+                self.tare_differences,
+            )),
+            _ => None,
+        }
+    }
+
+    /// The same with the tare metered over `record` at block length `decimation`
+    /// ([`measured_tare_reference`]; no tare when the record is too short).
+    pub fn with_tare(self, record: &[f64], decimation: u16) -> Self {
+        let measured = measured_tare_reference(record, decimation);
+        Self {
+            tare_noise_variance: measured.map(|(variance, _)| variance),
+            tare_differences: measured.map_or(0, |(_, differences)| differences),
+            ..self
         }
     }
 
@@ -280,6 +320,20 @@ impl Method {
         }
     }
 
+    /// The block length a tare must be metered at to be this method's consistency-check
+    /// reference (its `D`, or a baseline's block), `None` for none (every method has one).
+    pub fn reference_decimation(&self) -> Option<u16> {
+        match self {
+            Method::Step(setup)
+            | Method::Covariance { setup, .. }
+            | Method::InstrumentalVariable { setup, .. }
+            | Method::BiasCompensated { setup, .. } => Some(setup.decimation),
+            Method::Ramp(spec) => Some(spec.setup.decimation),
+            Method::Model(spec) => Some(spec.decimation),
+            Method::Settled(spec) | Method::Moving(spec) => Some(spec.block),
+        }
+    }
+
     /// A comma-free name for CSV columns and legends: a step method as the `--config` form
     /// always printed (`n=7 D=12 f32`), the others as their spec with spaces for commas.
     pub fn label(&self) -> String {
@@ -304,7 +358,9 @@ impl Method {
     ) -> Result<Box<dyn Estimator<T> + Send>> {
         let gain = T::from_f64(context.gain);
         let core = |e: estimator_core::ConfigError| anyhow!("{e}");
-        let step_config = |setup: &Setup, gain: T| ranged(step_config(setup, gain), context);
+        let step_config =
+            |setup: &Setup, gain: T| referenced(ranged(step_config(setup, gain), context), context);
+        let reference = context.noise_reference::<T>();
         let (valid_min, valid_max) = context
             .valid_range
             .unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
@@ -352,8 +408,12 @@ impl Method {
                     .map_err(core)?,
                 )
             }
-            Method::Settled(spec) => baseline::<T>(spec, BaselineMode::SettledAverage, gain)?,
-            Method::Moving(spec) => baseline::<T>(spec, BaselineMode::MovingAverage, gain)?,
+            Method::Settled(spec) => {
+                baseline::<T>(spec, BaselineMode::SettledAverage, gain, reference)?
+            }
+            Method::Moving(spec) => {
+                baseline::<T>(spec, BaselineMode::MovingAverage, gain, reference)?
+            }
             Method::Model(ModelSpec {
                 identified: Some(identified),
                 ..
@@ -375,16 +435,20 @@ impl Method {
                     counts_per_gram: context.gain,
                     sample_rate_hz: context.chain.sample_rate_hz,
                 };
-                identified_bank::<T>(&model, candidates, span, decimation)?
+                identified_bank::<T>(&model, candidates, span, decimation, reference)?
             }
             Method::Model(spec) => {
                 let configs: Vec<ModelConfig<T, STATES>> =
                     model_candidates(&context.chain, context.gain, spec)?
                         .iter()
                         .map(|model| {
-                            ModelConfig::new(convert_model(model))
+                            let config = ModelConfig::new(convert_model(model))
                                 .with_decimation(spec.decimation)
-                                .with_valid_range(T::from_f64(valid_min), T::from_f64(valid_max))
+                                .with_valid_range(T::from_f64(valid_min), T::from_f64(valid_max));
+                            match reference {
+                                Some(reference) => config.with_noise_reference(reference),
+                                None => config,
+                            }
                         })
                         .collect();
                 model_bank::<T>(&configs)?
@@ -397,11 +461,25 @@ impl Method {
 /// `record` (tare removed or not) at block length `decimation`, as the firmware meters it
 /// before a weighing; `None` when the record is too short for two differences.
 pub fn measured_tare_variance(record: &[f64], decimation: u16) -> Option<f64> {
+    measured_tare_reference(record, decimation).map(|(variance, _)| variance)
+}
+
+/// [`measured_tare_variance`] and the differences of block means it was metered over (its
+/// uncertainty, for the consistency check's [`NoiseReference`]).
+pub fn measured_tare_reference(record: &[f64], decimation: u16) -> Option<(f64, u32)> {
     let mut meter = NoiseMeter::<f64>::new(decimation).ok()?;
     for &sample in record {
         meter.push(sample).ok()?;
     }
-    meter.noise_variance()
+    Some((meter.noise_variance()?, meter.differences()))
+}
+
+/// `config` with the context's consistency-check reference, if it asks for one.
+pub(crate) fn referenced<T: Real>(config: StepConfig<T>, context: &BuildContext) -> StepConfig<T> {
+    match context.noise_reference() {
+        Some(reference) => config.with_noise_reference(reference),
+        None => config,
+    }
 }
 
 /// `config` with the context's valid range, if it has one.
@@ -435,12 +513,14 @@ fn baseline<T: Real + Send + 'static>(
     spec: &BaselineSpec,
     mode: BaselineMode,
     gain: T,
+    noise_reference: Option<NoiseReference<T>>,
 ) -> Result<Box<dyn Estimator<T> + Send>> {
     let config = BaselineConfig {
         mode,
         gain,
         block: spec.block,
         stable_band: T::from_f64(spec.band_g),
+        noise_reference,
     };
     let core = |e: estimator_core::ConfigError| anyhow!("{e}");
     Ok(dispatch_const!(
@@ -472,6 +552,7 @@ fn identified_bank<T: Real + Send + 'static>(
     candidates: usize,
     span: (f64, f64),
     decimation: u16,
+    noise_reference: Option<NoiseReference<T>>,
 ) -> Result<Box<dyn Estimator<T> + Send>> {
     let core = |e: estimator_core::ConfigError| anyhow!("{e}");
     Ok(dispatch_const!(
@@ -481,7 +562,11 @@ fn identified_bank<T: Real + Send + 'static>(
         |K| {
             let configs = model
                 .bank_configs::<T, STATES, K>(span.0, span.1, decimation, InitialState::Unknown)
-                .map_err(core)?;
+                .map_err(core)?
+                .map(|config| match noise_reference {
+                    Some(reference) => config.with_noise_reference(reference),
+                    None => config,
+                });
             Box::new(ModelBank::<T, STATES, K>::new(configs).map_err(core)?)
         }
     ))

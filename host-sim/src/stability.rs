@@ -43,9 +43,7 @@ use rayon::prelude::*;
 use crate::chart;
 use crate::crlb;
 use crate::estimate::state_name;
-use crate::method::{
-    measured_tare_variance, ranged, step_config, BoxedEstimator, BuildContext, Method,
-};
+use crate::method::{ranged, referenced, step_config, BoxedEstimator, BuildContext, Method};
 use crate::montecarlo::{self, tare_record, Precision, CAPACITY};
 use crate::scene::Scene;
 use crate::simulated::{run_seed, LoadEvent, Script};
@@ -451,12 +449,18 @@ impl Tracked {
         Ok(match method {
             Method::Step(setup) => match setup.precision {
                 Precision::F64 => Tracked::Step64(Box::new(
-                    StepEstimator::new(ranged(step_config(setup, context.gain), context))
-                        .map_err(named)?,
+                    StepEstimator::new(referenced(
+                        ranged(step_config(setup, context.gain), context),
+                        context,
+                    ))
+                    .map_err(named)?,
                 )),
                 Precision::F32 => Tracked::Step32(Box::new(
-                    StepEstimator::new(ranged(step_config(setup, context.gain as f32), context))
-                        .map_err(named)?,
+                    StepEstimator::new(referenced(
+                        ranged(step_config(setup, context.gain as f32), context),
+                        context,
+                    ))
+                    .map_err(named)?,
                 )),
             },
             Method::Covariance {
@@ -466,7 +470,7 @@ impl Tracked {
                 Precision::F64 => Tracked::Covariance64(
                     Box::new(
                         CovarianceStepEstimator::new(
-                            ranged(step_config(setup, context.gain), context),
+                            referenced(ranged(step_config(setup, context.gain), context), context),
                             *prior_information,
                         )
                         .map_err(named)?,
@@ -476,7 +480,10 @@ impl Tracked {
                 Precision::F32 => Tracked::Covariance32(
                     Box::new(
                         CovarianceStepEstimator::new(
-                            ranged(step_config(setup, context.gain as f32), context),
+                            referenced(
+                                ranged(step_config(setup, context.gain as f32), context),
+                                context,
+                            ),
                             *prior_information as f32,
                         )
                         .map_err(named)?,
@@ -601,7 +608,7 @@ fn run_probe(
 // Cells and their classes.
 
 /// Every reason the core flags, in a fixed order (for counts and columns).
-pub const REASONS: [InvalidReason; 7] = [
+pub const REASONS: [InvalidReason; 8] = [
     InvalidReason::NonFiniteInput,
     InvalidReason::OutOfRange,
     InvalidReason::IllConditioned,
@@ -609,6 +616,7 @@ pub const REASONS: [InvalidReason; 7] = [
     InvalidReason::MissingSample,
     InvalidReason::LostDefiniteness,
     InvalidReason::OutsideModelRange,
+    InvalidReason::ModelMismatch,
 ];
 
 fn reason_index(reason: InvalidReason) -> usize {
@@ -621,6 +629,7 @@ fn reason_index(reason: InvalidReason) -> usize {
         InvalidReason::MissingSample => 4,
         InvalidReason::LostDefiniteness => 5,
         InvalidReason::OutsideModelRange => 6,
+        InvalidReason::ModelMismatch => 7,
     }
 }
 
@@ -829,15 +838,20 @@ pub fn run_slice(
     runs: usize,
     seed: u64,
 ) -> Result<SliceResult> {
-    let needs_tare = probes.iter().any(|p| p.method.tare_decimation().is_some());
+    // Every method with residuals checks them against its own tare (the consistency check,
+    // `estimator_core`'s `InvalidReason::ModelMismatch`), metered at its own D.
+    let needs_tare = probes
+        .iter()
+        .any(|p| p.method.reference_decimation().is_some());
     let contexts: Vec<BuildContext> = conditions
         .iter()
-        .map(|c| {
-            BuildContext::new(c.scene.chain, c.scene.chain.counts_per_gram())
+        .map(|c| BuildContext {
+            noise_check: true,
+            ..BuildContext::new(c.scene.chain, c.scene.chain.counts_per_gram())
                 .with_adc_rails(c.scene.chain.zero_code())
         })
         .collect();
-    // Refuse impossible methods before spending time (bc validated with a variance of 1).
+    // Refuse impossible methods before spending time (validated with a variance of 1).
     for probe in &probes {
         let context = BuildContext {
             tare_noise_variance: Some(1.0),
@@ -868,11 +882,8 @@ pub fn run_slice(
             let result = probes
                 .iter()
                 .map(|probe| {
-                    let context = match (probe.method.tare_decimation(), &tare) {
-                        (Some(decimation), Some(tare)) => BuildContext {
-                            tare_noise_variance: measured_tare_variance(tare, decimation),
-                            ..contexts[c]
-                        },
+                    let context = match (probe.method.reference_decimation(), &tare) {
+                        (Some(decimation), Some(tare)) => contexts[c].with_tare(tare, decimation),
                         _ => contexts[c],
                     };
                     run_probe(
@@ -1157,12 +1168,13 @@ pub fn run_long_slice(base: &Scene, samples: usize, seed: u64) -> Result<LongRes
     let runs: Vec<Result<LongRun>> = probes
         .par_iter()
         .map(|probe| {
-            let context = BuildContext {
-                tare_noise_variance: probe
-                    .method
-                    .tare_decimation()
-                    .and_then(|d| measured_tare_variance(&tare, d)),
+            let base = BuildContext {
+                noise_check: true,
                 ..BuildContext::new(chain, gain).with_adc_rails(chain.zero_code())
+            };
+            let context = match probe.method.reference_decimation() {
+                Some(decimation) => base.with_tare(&tare, decimation),
+                None => base,
             };
             let run = run_long(probe, &context, &codes, chain.zero_code(), raw_variance_g2);
             progress.inc(1);

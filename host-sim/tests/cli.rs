@@ -283,6 +283,7 @@ fn estimate_with_every_method_equals_the_core() {
         gain,
         block: 80,
         stable_band: 0.5,
+        noise_reference: None,
     };
     let cases: Vec<(&str, Vec<Reading<f64>>)> = vec![
         (
@@ -356,6 +357,7 @@ fn estimate_with_every_method_equals_the_core() {
                     gain: g32,
                     block: 80,
                     stable_band: 0.5,
+                    noise_reference: None,
                 })
                 .unwrap(),
             ),

@@ -5,6 +5,29 @@
 //! The config is a plain `no_std` struct of numbers and enums, so a build script can turn
 //! host-sim's TOML into a `const WeighingConfig` and the firmware build
 //! `WeighingEstimator::<f32, N, 5, K>::new(&CONFIG, zero)` from it: no parsing on target.
+//!
+//! ## The valid region ([`WeighingConfig::check_region`])
+//! Some failures of the stability map (host-sim `study stability`) leave nothing to see in
+//! the data at run time, so a configuration that invites them is refused before it runs
+//! ([`RegionError`]): by [`WeighingEstimator::new`] and [`WeighingEstimator::in_counts`]
+//! (what the firmware and `estimate --config` build), and calibration never chooses one.
+//! Each rule is the map's measured boundary on the reference cell:
+//! - **Decimation**: a data-driven method needs its decimated Nyquist frequency
+//!   `f_s/(2D)` at most [`MAX_NYQUIST_OVER_BANDWIDTH`] times the model's bandwidth (the
+//!   higher of the filter's cut-off and the resonance). At full rate the one-sample
+//!   differences drown in noise and least squares is biased by errors in variables (200–500×
+//!   the Cramér–Rao bound at 1.5 s, 50–80 dB), while its residuals stay near the noise
+//!   after the first 0.1 s, so the run-time check cannot see it then. Measured at n = 7,
+//!   100 ms: D = 4 (Nyquist 5× the 100 Hz cut-off) 17× the bound at 60 dB and 85× at
+//!   80 dB; D = 8 (2.5×) at most 9.3×; D = 16: 1.3–1.5×.
+//! - **Order**: a data-driven order of at least [`MIN_DATA_DRIVEN_ORDER`] for a sensor with
+//!   a mechanical mode and a filter (n = 2 at D = 16 was 21–4,000× the bound from 50 dB;
+//!   n = 3 within 10× from 10 to 80 dB), 2 for a mechanical mode alone (whose bandwidth is
+//!   then its resonance). The run-time check flags n ≤ 2 too, from 40–50 dB.
+//! - **Bank span**: a model bank's candidates must cover the resonances of the configured
+//!   load range with one candidate to spare at each end (a best fit on the edge is flagged
+//!   `OutsideModelRange`), and a single model (`K = 1`) serves only its calibration mass
+//!   (13–10⁴× the bound at ×0.9–×1.5 of its resonance, from 50 dB).
 
 use crate::bias_compensated::{BiasCompensatedConfig, BiasCompensatedStepEstimator};
 use crate::iv::{IvConfig, IvStepEstimator};
@@ -13,6 +36,7 @@ use crate::model::{InitialState, ModelBank};
 use crate::reading::{ConfigError, Estimator, Reading};
 use crate::real::Real;
 use crate::step::{StepConfig, StepEstimator};
+use core::fmt;
 
 use super::candidates::WeighingMethod;
 use super::loads::LoadCoverage;
@@ -91,7 +115,152 @@ pub struct WeighingConfig {
     pub loads: LoadCoverage,
 }
 
+/// A data-driven method's decimated Nyquist frequency may be at most this many times the
+/// model's bandwidth (see the module docs: D ≥ 8 on the reference chain at 4 kHz).
+pub const MAX_NYQUIST_OVER_BANDWIDTH: f64 = 2.5;
+/// The lowest data-driven order for a sensor with a mechanical mode and a filter (module
+/// docs); a mechanical mode alone (`filter_order = 0`) takes 2.
+pub const MIN_DATA_DRIVEN_ORDER: usize = 3;
+
+/// Why a weighing configuration lies outside the region the stability map measured as valid
+/// (see the module docs): a failure there would not be flagged at run time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum RegionError {
+    /// The block length is below what the model's bandwidth needs (errors-in-variables bias).
+    Decimation {
+        /// The configured `D`.
+        decimation: u16,
+        /// The smallest `D` with `f_s/(2D)` ≤ [`MAX_NYQUIST_OVER_BANDWIDTH`] × the bandwidth.
+        minimum: u16,
+    },
+    /// The order is below what the sensor needs.
+    Order {
+        /// The configured order.
+        order: usize,
+        /// The smallest order accepted.
+        minimum: usize,
+    },
+    /// The bank's candidates do not cover the resonances of the configured loads with one
+    /// candidate to spare at each end (or a single model serves more than its calibration
+    /// mass).
+    BankSpan {
+        /// The lowest and highest frequency ratio the loads need.
+        needed: (f64, f64),
+        /// The lowest and highest ratio covered with a candidate to spare.
+        covered: (f64, f64),
+    },
+    /// A number the rules need is not finite and positive (sample rate, bandwidth, masses).
+    Model,
+}
+
+impl fmt::Display for RegionError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            RegionError::Decimation {
+                decimation,
+                minimum,
+            } => write!(
+                f,
+                "decimation D = {decimation} is below {minimum}: the decimated Nyquist frequency must be at most {MAX_NYQUIST_OVER_BANDWIDTH}x the model's bandwidth, or least squares is biased by errors in variables (not detectable at run time)"
+            ),
+            RegionError::Order { order, minimum } => write!(
+                f,
+                "order n = {order} is below {minimum}, the lowest that describes a load cell with its filter"
+            ),
+            RegionError::BankSpan { needed, covered } => write!(
+                f,
+                "the bank covers resonance ratios {:.4}-{:.4} with a candidate to spare, the loads need {:.4}-{:.4}",
+                covered.0, covered.1, needed.0, needed.1
+            ),
+            RegionError::Model => {
+                f.write_str("sample rate, bandwidth or load range not finite and positive")
+            }
+        }
+    }
+}
+
 impl WeighingConfig {
+    /// Refuse a configuration outside the stability map's valid region (see the module
+    /// docs): a data-driven method with too small a `D` or too low an order, a bank that
+    /// does not cover the load range.
+    pub fn check_region(&self) -> Result<(), RegionError> {
+        match self.method {
+            WeighingMethod::Step {
+                order, decimation, ..
+            }
+            | WeighingMethod::BiasCompensated { order, decimation }
+            | WeighingMethod::InstrumentalVariable { order, decimation } => {
+                let filtered = self.model.filter_order > 0;
+                let bandwidth_hz = if filtered {
+                    self.model
+                        .filter_cutoff_hz
+                        .max(self.model.natural_frequency_hz)
+                } else {
+                    self.model.natural_frequency_hz
+                };
+                let rate_hz = self.model.sample_rate_hz;
+                if !(bandwidth_hz > 0.0 && rate_hz > 0.0 && rate_hz.is_finite()) {
+                    return Err(RegionError::Model);
+                }
+                // f_s/(2D) ≤ k·bandwidth ⇔ D ≥ f_s/(2k·bandwidth).
+                let minimum =
+                    libm::ceil(rate_hz / (2.0 * MAX_NYQUIST_OVER_BANDWIDTH * bandwidth_hz));
+                let minimum = minimum.clamp(1.0, f64::from(u16::MAX)) as u16;
+                if decimation < minimum {
+                    return Err(RegionError::Decimation {
+                        decimation,
+                        minimum,
+                    });
+                }
+                // A mechanical mode alone (no filter) is of order 2.
+                let minimum = if filtered { MIN_DATA_DRIVEN_ORDER } else { 2 };
+                if order < minimum {
+                    return Err(RegionError::Order { order, minimum });
+                }
+                Ok(())
+            }
+            WeighingMethod::ModelBank {
+                candidates,
+                ratio_min,
+                ratio_max,
+                ..
+            } => {
+                let needed = self.needed_ratios().ok_or(RegionError::Model)?;
+                // One candidate to spare at each end: the covered span is one grid step in.
+                let covered = if candidates >= 2 && ratio_max > ratio_min && ratio_min > 0.0 {
+                    let step = libm::pow(ratio_max / ratio_min, 1.0 / (candidates - 1) as f64);
+                    (ratio_min * step, ratio_max / step)
+                } else {
+                    // A single model: its own ratio only (the geometric centre).
+                    let centre = libm::sqrt(ratio_min * ratio_max);
+                    (centre, centre)
+                };
+                // A relative tolerance for the rounding of ratios computed from masses.
+                let slack = 1e-9;
+                if needed.0 < covered.0 * (1.0 - slack) || needed.1 > covered.1 * (1.0 + slack) {
+                    return Err(RegionError::BankSpan { needed, covered });
+                }
+                Ok(())
+            }
+        }
+    }
+
+    /// The lowest and highest resonance ratio (relative to the calibration mass's) of the
+    /// configured load range: with the platform mass unknown, the widest it can be (a
+    /// platform of no mass, the end calibration also scores).
+    fn needed_ratios(&self) -> Option<(f64, f64)> {
+        let loads = &self.loads;
+        let calibration = self.calibration_mass_g;
+        let platform = loads.platform_mass_g.unwrap_or(0.0);
+        let ratio = |mass_g: f64| {
+            crate::loadcell::LoadCellModel::frequency_ratio_for_mass(calibration, platform, mass_g)
+        };
+        let (a, b) = (ratio(loads.max_g), ratio(loads.min_g));
+        let (low, high) = (a.min(b).min(1.0), a.max(b).max(1.0));
+        (low > 0.0 && high.is_finite()).then_some((low, high))
+    }
+
     /// The sample rate of the method, Hz (that of the identified model).
     pub fn sample_rate_hz(&self) -> f64 {
         self.model.sample_rate_hz
@@ -133,7 +302,13 @@ pub enum WeighingEstimator<T: Real, const N: usize, const S: usize, const K: usi
 impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<T, N, S, K> {
     /// The configured method for samples `code − zero_counts`; codes at or beyond the
     /// config's rails (`onset.rail_low`, `onset.rail_high`) are flagged `OutOfRange`.
+    ///
+    /// A configuration outside the valid region ([`WeighingConfig::check_region`], which
+    /// says why) is refused as [`ConfigError::OutsideValidRegion`].
     pub fn new(config: &WeighingConfig, zero_counts: f64) -> Result<Self, ConfigError> {
+        config
+            .check_region()
+            .map_err(|_| ConfigError::OutsideValidRegion)?;
         Self::with_method(config, &config.method, zero_counts)
     }
 
@@ -144,6 +319,9 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
     /// bias-compensated method keeps the configured noise variance: counts², which the gain
     /// does not change.
     pub fn in_counts(config: &WeighingConfig) -> Result<Self, ConfigError> {
+        config
+            .check_region()
+            .map_err(|_| ConfigError::OutsideValidRegion)?;
         let mut in_counts = *config;
         in_counts.counts_per_gram = 1.0;
         in_counts.onset.rail_low = f64::NEG_INFINITY;
@@ -151,7 +329,8 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
         Self::with_method(&in_counts, &config.method, 0.0)
     }
 
-    /// Any method with the constants of `config` (calibration uses it to try candidates).
+    /// Any method with the constants of `config` (calibration uses it to try candidates),
+    /// without the valid-region check.
     pub fn with_method(
         config: &WeighingConfig,
         method: &WeighingMethod,
@@ -342,13 +521,13 @@ mod tests {
                 .with_valid_range(low as f32, high as f32)
         };
         let method = WeighingMethod::Step {
-            order: 2,
+            order: 3,
             decimation: 32,
             forgetting: 0.9,
         };
         same(
             WeighingEstimator::<f32, 8, 5, 3>::new(&config(method), zero).unwrap(),
-            StepEstimator::<f32, 8>::new(step(2, 32, 0.9)).unwrap(),
+            StepEstimator::<f32, 8>::new(step(3, 32, 0.9)).unwrap(),
         );
         let method = WeighingMethod::BiasCompensated {
             order: 3,
@@ -363,22 +542,24 @@ mod tests {
             .unwrap(),
         );
         let method = WeighingMethod::InstrumentalVariable {
-            order: 2,
+            order: 3,
             decimation: 24,
         };
         same(
             WeighingEstimator::<f32, 8, 5, 3>::new(&config(method), zero).unwrap(),
-            IvStepEstimator::<f32, 8>::new(IvConfig::new(step(2, 24, 1.0))).unwrap(),
+            IvStepEstimator::<f32, 8>::new(IvConfig::new(step(3, 24, 1.0))).unwrap(),
         );
+        // Three candidates 11% apart: the middle one (at 1, with one to spare at each end)
+        // covers the calibration mass, the only load of this config.
         let method = WeighingMethod::ModelBank {
             decimation: 8,
             candidates: 3,
             ratio_min: 0.9,
-            ratio_max: 1.1,
+            ratio_max: 1.0 / 0.9,
         };
         let configs = config(method)
             .model
-            .bank_configs::<f32, 5, 3>(0.9, 1.1, 8, InitialState::Unknown)
+            .bank_configs::<f32, 5, 3>(0.9, 1.0 / 0.9, 8, InitialState::Unknown)
             .unwrap()
             .map(|c| c.with_valid_range(low as f32, high as f32));
         same(
@@ -399,13 +580,15 @@ mod tests {
     #[test]
     fn a_code_at_a_rail_is_flagged() {
         let method = WeighingMethod::Step {
-            order: 2,
-            decimation: 1,
+            order: 3,
+            decimation: 8,
             forgetting: 1.0,
         };
         let zero = 16_764.0;
         let mut estimator = WeighingEstimator::<f64, 8, 5, 1>::new(&config(method), zero).unwrap();
-        assert_eq!(estimator.push(65_534.0 - zero).state, State::WarmingUp);
+        for _ in 0..7 {
+            assert_eq!(estimator.push(65_534.0 - zero).state, State::WarmingUp);
+        }
         assert_eq!(
             estimator.push(65_535.0 - zero).state,
             State::Invalid(InvalidReason::OutOfRange)
@@ -415,5 +598,99 @@ mod tests {
             estimator.push(0.0 - zero).state,
             State::Invalid(InvalidReason::OutOfRange)
         );
+    }
+
+    #[test]
+    fn a_configuration_outside_the_valid_region_is_refused() {
+        let step = |order, decimation| WeighingMethod::Step {
+            order,
+            decimation,
+            forgetting: 1.0,
+        };
+        // 4 kHz and a 100 Hz filter: D ≥ 4000/(2·2.5·100) = 8.
+        assert_eq!(config(step(5, 8)).check_region(), Ok(()));
+        assert_eq!(
+            config(step(7, 4)).check_region(),
+            Err(RegionError::Decimation {
+                decimation: 4,
+                minimum: 8
+            })
+        );
+        assert_eq!(
+            config(WeighingMethod::InstrumentalVariable {
+                order: 7,
+                decimation: 1
+            })
+            .check_region(),
+            Err(RegionError::Decimation {
+                decimation: 1,
+                minimum: 8
+            })
+        );
+        assert_eq!(
+            config(step(2, 16)).check_region(),
+            Err(RegionError::Order {
+                order: 2,
+                minimum: 3
+            })
+        );
+        // A slower filter needs more decimation: 50 Hz → D ≥ 16.
+        let mut slow = config(step(5, 8));
+        slow.model.filter_cutoff_hz = 50.0;
+        assert_eq!(
+            slow.check_region(),
+            Err(RegionError::Decimation {
+                decimation: 8,
+                minimum: 16
+            })
+        );
+        // What the constructors say.
+        assert_eq!(
+            WeighingEstimator::<f64, 8, 5, 1>::new(&config(step(2, 16)), 0.0).err(),
+            Some(ConfigError::OutsideValidRegion)
+        );
+        assert_eq!(
+            WeighingEstimator::<f32, 8, 5, 1>::in_counts(&config(step(7, 1))).err(),
+            Some(ConfigError::OutsideValidRegion)
+        );
+        assert!(
+            WeighingEstimator::<f64, 8, 5, 1>::with_method(&config(step(7, 1)), &step(7, 1), 0.0)
+                .is_ok(),
+            "calibration may still try it"
+        );
+
+        // The bank: the loads 100–300 g on a platform of 120 g with the calibration at
+        // 138.32 g need ratios √(258.32/420) = 0.7843 … √(258.32/220) = 1.0836.
+        let bank = |candidates, ratio_min, ratio_max| WeighingMethod::ModelBank {
+            decimation: 8,
+            candidates,
+            ratio_min,
+            ratio_max,
+        };
+        let ranged = |method| {
+            let mut c = config(method);
+            c.loads.min_g = 100.0;
+            c.loads.max_g = 300.0;
+            c.loads.platform_mass_g = Some(120.0);
+            c
+        };
+        assert_eq!(ranged(bank(33, 0.68, 1.3)).check_region(), Ok(()));
+        match ranged(bank(33, 0.8, 1.3)).check_region() {
+            Err(RegionError::BankSpan { needed, covered }) => {
+                assert!((needed.0 - 0.7843).abs() < 1e-4 && (needed.1 - 1.0836).abs() < 1e-4);
+                assert!(covered.0 > 0.8 && covered.0 < 0.82, "{covered:?}");
+            }
+            other => panic!("{other:?}"),
+        }
+        // One model serves its calibration mass only.
+        assert!(ranged(bank(1, 1.0, 1.0)).check_region().is_err());
+        assert_eq!(config(bank(1, 1.0, 1.0)).check_region(), Ok(()));
+        // The platform mass unknown: the widest ratios (no platform), √(138.32/300) = 0.679.
+        let mut unknown = ranged(bank(33, 0.68, 1.3));
+        unknown.loads.platform_mass_g = None;
+        assert!(matches!(
+            unknown.check_region(),
+            Err(RegionError::BankSpan { .. })
+        ));
     }
 }

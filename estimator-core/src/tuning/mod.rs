@@ -45,8 +45,10 @@
 //!    gain and the noise, so this is a consistency check (it catches a sensor the identified
 //!    model does not describe), not an independent test.
 //! 7. **Choice**: candidates in the order of [`candidates`] (smallest model first); the first
-//!    that meets both is chosen, and the larger ones are not needed (not even evaluated,
-//!    unless asked). If none meets the target the error names the best one (the most scenes
+//!    that meets both and lies inside the stability map's valid region
+//!    ([`WeighingConfig::check_region`]: a data-driven `D` for the model's bandwidth, an
+//!    order of at least 3, a bank covering the loads) is chosen, and the larger ones are not
+//!    needed (not even evaluated, unless asked). If none meets the target the error names the best one (the most scenes
 //!    met), where it failed, and the noise floor there.
 //!
 //! Cost: the detection runs once per scene and run (`scenes × R`); each candidate then runs
@@ -73,7 +75,10 @@ pub mod onset;
 pub mod synthetic;
 
 pub use candidates::{BankCandidate, CandidateGrid, WeighingMethod, STANDARD_DECIMATIONS};
-pub use config::{Prediction, WeighingConfig, WeighingEstimator};
+pub use config::{
+    Prediction, RegionError, WeighingConfig, WeighingEstimator, MAX_NYQUIST_OVER_BANDWIDTH,
+    MIN_DATA_DRIVEN_ORDER,
+};
 pub use loads::{
     platform_mass_from_resonances, LoadCoverage, LoadScene, LoadScore, DEFAULT_LOADS,
     DEFAULT_RANGE_RELATIVE, MAX_LOADS, MAX_SCENES,
@@ -222,8 +227,12 @@ pub struct CandidateScore {
     pub failed_load: Option<LoadScore>,
     /// The recorded drops' figures (only for a method the Monte Carlo accepted).
     pub recorded: Option<RecordedCheck>,
-    /// Meets the target: in the Monte Carlo at every scene and on every recorded drop.
+    /// Meets the target: in the Monte Carlo at every scene and on every recorded drop, and
+    /// lies inside the valid region.
     pub meets: bool,
+    /// Why the method lies outside the stability map's valid region
+    /// ([`WeighingConfig::check_region`]); such a method is never chosen, whatever it scored.
+    pub outside_region: Option<RegionError>,
 }
 
 impl CandidateScore {
@@ -805,7 +814,12 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
                 target * mass_g,
             )
         });
-        let meets = matches!(recorded, Some(check) if check.failing == 0);
+        // Never choose a configuration outside the stability map's valid region, whatever it
+        // scored: its failures there would not be flagged at run time
+        // (`WeighingConfig::check_region`).
+        let outside_region = candidate.check_region().err();
+        let meets =
+            matches!(recorded, Some(check) if check.failing == 0) && outside_region.is_none();
         let scored = CandidateScore {
             index,
             method,
@@ -815,6 +829,7 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
             failed_load,
             recorded,
             meets,
+            outside_region,
         };
         report(&scored);
         if best.is_none_or(|b| scored.rank(target) < b.rank(target)) {
@@ -1217,11 +1232,14 @@ mod tests {
         assert_eq!(calibrated.config.prediction, scores[1].prediction);
         // Every candidate before the choice failed at some scene (or on the recorded drops);
         // a failing one names where.
+        // (or lies outside the valid region, e.g. n = 2, whatever it scored).
         for score in seen[..count - 1].iter().flatten() {
             assert!(!score.meets);
             match score.failed_load {
                 Some(failed) => assert!(failed.bound_over_target(0.002) > 1.0),
-                None => assert!(score.recorded.is_some_and(|c| c.failing > 0)),
+                None => assert!(
+                    score.recorded.is_some_and(|c| c.failing > 0) || score.outside_region.is_some()
+                ),
             }
         }
         // More scenes to meet can only keep or raise the choice: the calibration mass is

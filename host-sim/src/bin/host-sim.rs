@@ -75,9 +75,19 @@ enum Command {
         /// The scene whose sensor chain the `model` method takes its dynamics from.
         #[arg(long, default_value = "reference-step")]
         scene: String,
-        /// Noise variance of one raw sample measured at tare, raw units² (for `bc`).
+        /// Noise variance of one raw sample measured at tare, raw units² (for `bc`, and the
+        /// reference of `--check-residuals`), metered at the method's D.
         #[arg(long)]
         tare_variance: Option<f64>,
+        /// The differences of block means the tare variance was metered over (its own
+        /// uncertainty, for `--check-residuals`; default: known exactly).
+        #[arg(long, default_value_t = 0, requires = "check_residuals")]
+        tare_differences: u32,
+        /// Flag a fit whose residuals exceed what the tare's noise explains
+        /// (`invalid_model_mismatch`; estimator-core's consistency check). Needs
+        /// `--tare-variance`.
+        #[arg(long, requires = "tare_variance", conflicts_with = "config")]
+        check_residuals: bool,
     },
     /// Calibration as one command: from recorded drops of a known mass (CSVs with a column
     /// `y`: an empty-pan stretch, then the drop), choose the smallest method that meets the
@@ -344,6 +354,8 @@ fn main() -> Result<()> {
             zero,
             scene,
             tare_variance,
+            tare_differences,
+            check_residuals,
         } => {
             let method = match (method, order) {
                 (Some(method), _) => method,
@@ -359,6 +371,8 @@ fn main() -> Result<()> {
             let zero = zero.unwrap_or(0.0);
             let context = BuildContext {
                 tare_noise_variance: tare_variance,
+                tare_differences,
+                noise_check: check_residuals,
                 ..BuildContext::new(Scene::load(&scene)?.chain, gain)
             };
             let file =
