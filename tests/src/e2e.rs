@@ -671,7 +671,9 @@ pub fn host_replay<E: estimator_core::ScaleEstimator>(
 #[cfg(test)]
 mod host_replay_tests {
     use super::*;
-    use estimator_core::tuning::{WeighingConfig, WeighingEstimator, WeighingMethod};
+    use estimator_core::tuning::{
+        BankCandidate, WeighingConfig, WeighingEstimator, WeighingMethod,
+    };
     use estimator_core::{
         AdcSource, CountsScale, Estimator, RawSample, Scale, ScaleConfig, ScaleEstimator, StepScale,
     };
@@ -733,15 +735,12 @@ mod host_replay_tests {
             },
             // The bank calibration builds for the shipped load range (up to 341.7 g:
             // resonance ratio 0.636 with the platform mass unknown, a candidate to spare at
-            // each end, as `WeighingConfig::check_region` requires), as `host-sim calibrate
-            // … --target-pct 0.1 --all` on the shipped drops scores it (meets 0.1 % at all
-            // 7 loads; firmware/README.md).
-            WeighingMethod::ModelBank {
-                decimation: 8,
-                candidates: host_sim::calibrate::BANK_CANDIDATES,
-                ratio_min: 0.6267010007281795,
-                ratio_max: 1.0151879147699774,
-            },
+            // each end, as `WeighingConfig::check_region` requires): ratios 0.627–1.015, as
+            // `host-sim calibrate … --target-pct 0.1 --all` on the shipped drops scores it
+            // (meets 0.1 % at all 7 loads; firmware/README.md).
+            shipped
+                .bank_covering_loads(BankCandidate::REFERENCE)
+                .expect("the shipped load range"),
         ] {
             if method != shipped.method {
                 kinds.push((method.to_string(), with(method)));

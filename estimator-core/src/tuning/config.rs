@@ -246,6 +246,21 @@ impl WeighingConfig {
         }
     }
 
+    /// The model bank `bank` widened as calibration widens its bank candidates, to cover
+    /// this configuration's load range with a candidate to spare at each end (what
+    /// [`Self::check_region`] requires); `None` when the load range gives no ratios.
+    pub fn bank_covering_loads(&self, bank: super::BankCandidate) -> Option<WeighingMethod> {
+        let (low, high) = self.needed_ratios()?;
+        let (mut ratio_min, mut ratio_max) = (bank.ratio_min, bank.ratio_max);
+        super::cover_ratios(bank.candidates, &mut ratio_min, &mut ratio_max, low, high);
+        Some(WeighingMethod::ModelBank {
+            decimation: bank.decimation,
+            candidates: bank.candidates,
+            ratio_min,
+            ratio_max,
+        })
+    }
+
     /// The lowest and highest resonance ratio (relative to the calibration mass's) of the
     /// configured load range: with the platform mass unknown, the widest it can be (a
     /// platform of no mass, the end calibration also scores).

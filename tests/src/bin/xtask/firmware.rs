@@ -142,8 +142,9 @@ pub fn bench() -> Result<()> {
     // a config of its own and benched the same way: the step estimator at n = 7, D = 16 (the
     // order issue 4's goal names, and the firmware's earlier default) and the model bank.
     let result = (|| -> Result<()> {
-        for variant in bench_variants() {
-            let config = variant_config(&variant)?;
+        let shipped = shipped_config()?;
+        for variant in bench_variants(&shipped)? {
+            let config = variant_config(&shipped, &variant)?;
             let elf = build_with_config(Board::Qemu, true, Some(&config))?;
             let stm32 = image_size(&build_with_config(Board::Stm32f411, false, Some(&config))?)?;
             println!(
@@ -167,6 +168,15 @@ pub fn bench() -> Result<()> {
 /// The variable `firmware/build.rs` reads a weighing configuration's path from.
 const WEIGHING_CONFIG_VAR: &str = "FIRMWARE_WEIGHING_CONFIG";
 
+/// The shipped `firmware/weighing.toml` and its precision.
+fn shipped_config() -> Result<(
+    estimator_core::tuning::WeighingConfig,
+    host_sim::montecarlo::Precision,
+)> {
+    let shipped = crate::util::workspace_root().join("firmware/weighing.toml");
+    host_sim::calibrate::load_config(&shipped)
+}
+
 /// A method benched in place of the shipped one.
 struct BenchVariant {
     /// What the bench prints.
@@ -178,11 +188,19 @@ struct BenchVariant {
 }
 
 /// The step estimator at n = 7, D = 16 and the model bank calibration offers
-/// (`tuning::BankCandidate::REFERENCE`).
-fn bench_variants() -> [BenchVariant; 2] {
-    use estimator_core::tuning::{BankCandidate, WeighingMethod};
-    let bank = BankCandidate::REFERENCE;
-    [
+/// (`tuning::BankCandidate::REFERENCE`), widened as calibration widens it to cover the
+/// shipped load range (`WeighingConfig::bank_covering_loads`).
+fn bench_variants(
+    (shipped, _): &(
+        estimator_core::tuning::WeighingConfig,
+        host_sim::montecarlo::Precision,
+    ),
+) -> Result<[BenchVariant; 2]> {
+    use estimator_core::tuning::BankCandidate;
+    let bank = shipped
+        .bank_covering_loads(BankCandidate::REFERENCE)
+        .context("the shipped load range gives no resonance ratios for a bank")?;
+    Ok([
         BenchVariant {
             label: "the step estimator at n = 7, D = 16",
             stem: "weighing-step-n7-d16",
@@ -190,27 +208,27 @@ fn bench_variants() -> [BenchVariant; 2] {
             method: estimator_core::ScaleConfig::DEFAULT_METHOD,
         },
         BenchVariant {
-            label: "the model bank (D = 8, K = 33 over 0.68-1.30 of the identified resonance)",
+            label: "the model bank (D = 8, K = 33, covering the shipped loads' resonances)",
             stem: "weighing-model-bank",
-            method: WeighingMethod::ModelBank {
-                decimation: bank.decimation,
-                candidates: bank.candidates,
-                ratio_min: bank.ratio_min,
-                ratio_max: bank.ratio_max,
-            },
+            method: bank,
         },
-    ]
+    ])
 }
 
 /// The shipped weighing configuration with the method replaced by `variant`'s, written under
 /// the target directory (a build input, regenerated on every bench).
-fn variant_config(variant: &BenchVariant) -> Result<PathBuf> {
-    let shipped = crate::util::workspace_root().join("firmware/weighing.toml");
-    let (config, precision) = host_sim::calibrate::load_config(&shipped)?;
+fn variant_config(
+    (config, precision): &(
+        estimator_core::tuning::WeighingConfig,
+        host_sim::montecarlo::Precision,
+    ),
+    variant: &BenchVariant,
+) -> Result<PathBuf> {
     let config = estimator_core::tuning::WeighingConfig {
         method: variant.method,
-        ..config
+        ..*config
     };
+    let precision = *precision;
     let dir = target_dir().join("xtask");
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let path = dir.join(format!("{}.toml", variant.stem));
