@@ -80,7 +80,9 @@
 //!   magnitude better than either variant at full rate; keep IV and BCLS for
 //!   well-excited, low-order sensors like the thesis scene, or as a bias check. The tests
 //!   in `tests/eiv.rs` pin each of these statements.
-use crate::consistency::{difference_correlation, difference_noise_gain, ResidualCheck};
+use crate::consistency::{
+    difference_correlation, difference_noise_gain, NoiseReference, ResidualCheck,
+};
 use crate::factor::Factor;
 use crate::input::{check_sample, Decimator, DifferenceWindow};
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
@@ -183,6 +185,19 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
     /// The configuration in use.
     pub fn config(&self) -> &BiasCompensatedConfig<T> {
         &self.config
+    }
+
+    /// Check the runs after the next [`Estimator::reset`] against `reference` (`None`: no
+    /// check), as [`crate::StepEstimator::set_noise_reference`].
+    pub fn set_noise_reference(
+        &mut self,
+        reference: Option<NoiseReference<T>>,
+    ) -> Result<(), ConfigError> {
+        if let Some(reference) = &reference {
+            reference.validate()?;
+        }
+        self.config.step.noise_reference = reference;
+        Ok(())
     }
 
     /// The capacity `N`: the largest order this instance accepts.

@@ -54,7 +54,9 @@
 //! variance (1.3–1.6× the LS RMS). A delay of `2n + 1` helps at D = 1 (median error 0.38 g
 //! against 1.1 g) and hurts at D = 12.
 
-use crate::consistency::{difference_correlation, difference_noise_gain, ResidualCheck};
+use crate::consistency::{
+    difference_correlation, difference_noise_gain, NoiseReference, ResidualCheck,
+};
 use crate::factor::{apply, rotation};
 use crate::input::{check_sample, Decimator};
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
@@ -342,6 +344,19 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
     /// The configuration in use.
     pub fn config(&self) -> &IvConfig<T> {
         &self.config
+    }
+
+    /// Check the runs after the next [`Estimator::reset`] against `reference` (`None`: no
+    /// check), as [`crate::StepEstimator::set_noise_reference`].
+    pub fn set_noise_reference(
+        &mut self,
+        reference: Option<NoiseReference<T>>,
+    ) -> Result<(), ConfigError> {
+        if let Some(reference) = &reference {
+            reference.validate()?;
+        }
+        self.config.step.noise_reference = reference;
+        Ok(())
     }
 
     /// The capacity `N`: the largest order this instance accepts.

@@ -284,6 +284,19 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
         })
     }
 
+    /// Check the runs after the next [`Estimator::reset`] against `reference` (`None`: no
+    /// check), as [`crate::StepEstimator::set_noise_reference`].
+    pub fn set_noise_reference(
+        &mut self,
+        reference: Option<NoiseReference<T>>,
+    ) -> Result<(), ConfigError> {
+        if let Some(reference) = &reference {
+            reference.validate()?;
+        }
+        self.config.noise_reference = reference;
+        Ok(())
+    }
+
     /// The residual sum of squares of the fit so far (raw units², of block means).
     pub fn residual_sum(&self) -> T {
         self.residual_sum
@@ -424,7 +437,11 @@ impl<T: Real, const S: usize> Estimator<T> for ModelEstimator<T, S> {
 
     fn reset(&mut self) {
         if let Ok(fresh) = Self::new(self.config) {
-            *self = fresh;
+            // A bank's candidate stays one that does not flag its own reading.
+            *self = Self {
+                flags_mismatch: self.flags_mismatch,
+                ..fresh
+            };
         }
     }
 }
@@ -478,6 +495,21 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
             }),
             samples: 0,
         })
+    }
+
+    /// Check the runs after the next [`Estimator::reset`] against `reference` (`None`: no
+    /// check): every candidate takes it, and only a bank of one flags (see the type's docs).
+    pub fn set_noise_reference(
+        &mut self,
+        reference: Option<NoiseReference<T>>,
+    ) -> Result<(), ConfigError> {
+        if let Some(reference) = &reference {
+            reference.validate()?;
+        }
+        for model in self.models.iter_mut() {
+            model.set_noise_reference(reference)?;
+        }
+        Ok(())
     }
 
     /// Block length `D` of the candidates (they share it: one block mean is one row of
@@ -605,5 +637,47 @@ impl<T: Real, const S: usize, const K: usize> Estimator<T> for ModelBank<T, S, K
             model.reset();
         }
         self.samples = 0;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A first-order lag with pole `pole` and unit static gain.
+    fn lag(pole: f64) -> ModelConfig<f64, 1> {
+        ModelConfig::new(SensorModel {
+            a: [[pole]],
+            b: [1.0 - pole],
+            c: [1.0],
+        })
+    }
+
+    #[test]
+    fn a_noise_reference_set_on_a_bank_takes_effect_at_the_reset_and_keeps_the_grid_silent() {
+        let mut bank = ModelBank::new([lag(0.8), lag(0.9), lag(0.95)]).unwrap();
+        assert!(bank
+            .set_noise_reference(Some(NoiseReference::exact(0.0)))
+            .is_err());
+        let reference = NoiseReference::new(4.0, 49);
+        bank.set_noise_reference(Some(reference)).unwrap();
+        // Not before the reset: the run in progress keeps the check it started with.
+        assert!(bank.models.iter().all(|m| m.check.is_none()));
+        bank.reset();
+        for model in &bank.models {
+            assert_eq!(model.config.noise_reference, Some(reference));
+            assert!(model.check.is_some());
+            // A grid's candidates judge no reading of their own, after a reset too.
+            assert!(!model.flags_mismatch);
+        }
+        // A single model flags its own, after a reset too.
+        let mut single = ModelBank::new([lag(0.9)]).unwrap();
+        single.set_noise_reference(Some(reference)).unwrap();
+        single.reset();
+        assert!(single.models[0].flags_mismatch);
+        // And `None` turns the check off again at the next reset.
+        bank.set_noise_reference(None).unwrap();
+        bank.reset();
+        assert!(bank.models.iter().all(|m| m.check.is_none()));
     }
 }

@@ -231,6 +231,20 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         &self.config
     }
 
+    /// Check the runs after the next [`Estimator::reset`] against `reference` (`None`: no
+    /// check); the current run keeps the check it started with. A reference that is not
+    /// finite and positive is refused and nothing changes.
+    pub fn set_noise_reference(
+        &mut self,
+        reference: Option<NoiseReference<T>>,
+    ) -> Result<(), ConfigError> {
+        if let Some(reference) = &reference {
+            reference.validate()?;
+        }
+        self.config.noise_reference = reference;
+        Ok(())
+    }
+
     /// The consistency check's residual ratio: the weighted mean square of the residuals
     /// over what the noise reference predicts for them (≈ 1 when the fit leaves only
     /// noise); `None` without a reference or before the first determined row.
