@@ -786,6 +786,13 @@ impl<E: ScaleEstimator> Scale<E> {
         }
     }
 
+    /// Forget the metered noise and any metering in progress, as at boot: no run is checked
+    /// from the next restart on until the empty pan is metered again.
+    pub fn forget_noise_reference(&mut self) {
+        self.noise.interrupt();
+        self.noise.reference = None;
+    }
+
     /// Start a new estimator run: a load changed, or the data stream broke.
     fn restart(&mut self) {
         // Refused only when not finite and positive, which the metering never hands over;
@@ -1468,6 +1475,14 @@ mod tests {
         let last = readings.last().unwrap();
         assert_eq!((last.state, last.load_changes), (ScaleState::Stable, 1));
         assert!((last.mass_g.unwrap() - 138.32).abs() < 0.14, "{last:?}");
+        // The reference is in counts: a new gain keeps it; forgetting it is as at boot.
+        scale.recalibrate(CountsScale {
+            counts_per_gram: 2.0 * CPG,
+            zero_counts: ZERO,
+        });
+        assert_eq!(scale.noise_reference(), Some(reference));
+        scale.forget_noise_reference();
+        assert_eq!(scale.noise_reference(), None);
     }
 
     #[test]

@@ -120,12 +120,19 @@ impl Pipeline {
     /// Start over as at boot, with the same scale configuration and the calibration in use
     /// (the bench replays a scene through the application's pipeline first: a second one
     /// would need another 20 KB of stack for a model bank). The restart counts as a load
-    /// change.
+    /// change; the noise metered on the empty pan is forgotten, as at boot.
     pub fn restart(&mut self) {
+        self.scale.forget_noise_reference();
         self.scale.recalibrate(self.scale.counts_scale());
         self.commands = Commands::new(CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32));
         self.next_sequence = 0;
         self.dropped = 0;
+    }
+
+    /// Whether the runs from the next load change on are checked against a metered noise
+    /// reference (the consistency check, `estimator_core::scale`).
+    pub fn noise_checked(&self) -> bool {
+        self.scale.noise_reference().is_some()
     }
 
     /// Samples lost since boot.

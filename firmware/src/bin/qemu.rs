@@ -325,6 +325,46 @@ mod app {
         );
         pipeline.restart();
 
+        // The consistency check live: the demo after 2 s more of empty pan, so the drops land
+        // after a metered empty period; timed from the first drop (2.3 s) on, the checked
+        // runs.
+        converter = SimulatedConverter::new(load_cell::demo_scene_with_empty_start(2.0));
+        // The restarted pipeline counts sequence numbers from zero again.
+        sequence = 0;
+        let first_drop_chunk = (23 * SAMPLE_RATE_HZ / 10) as usize / chunk.len();
+        let mut checked_ticks = 0u64;
+        let mut checked_events = 0u32;
+        let mut metered = false;
+        for index in 0..(6 * SAMPLE_RATE_HZ) as usize / chunk.len() {
+            for message in chunk.iter_mut() {
+                let sample = match converter.read() {
+                    Ok(code) if converter.is_saturated(code) => RawSample::Saturated,
+                    Ok(code) => RawSample::Counts(code as i32),
+                    Err(_) => RawSample::Lost,
+                };
+                converter.convert();
+                *message = SampleMessage { sequence, sample };
+                sequence += 1;
+            }
+            if index + 1 == first_drop_chunk {
+                metered = pipeline.noise_checked();
+            }
+            let work = bench::measure_pipeline(pipeline, &chunk);
+            if index >= first_drop_chunk {
+                let overhead = bench::measure_loop_overhead(&chunk);
+                checked_ticks += work.saturating_sub(overhead);
+                checked_events += chunk.len() as u32;
+            }
+        }
+        defmt::println!(
+            "bench checked ticks={=u64} events={=u32} metered={=u32} dropped={=u32}",
+            checked_ticks,
+            checked_events,
+            metered as u32,
+            pipeline.dropped()
+        );
+        pipeline.restart();
+
         // The deepest the stack went since `init` began: the factory calibration, building
         // the configured scale, the replay above.
         let (used, size) = bench::stack_used();

@@ -114,6 +114,25 @@ pub fn demo_scene() -> LoadCell {
     )
 }
 
+/// The demo scene with the empty pan held `empty_s` longer at the start: the first drop
+/// then lands after a metered empty period, so the consistency check is live on the runs
+/// after it (the bench's figure for it).
+pub fn demo_scene_with_empty_start(empty_s: f64) -> LoadCell {
+    let mut script = Script::new(host_sim::simulated::REFERENCE_DEMO_END_S + empty_s);
+    for event in host_sim::simulated::REFERENCE_DEMO_EVENTS {
+        let _ = script.push(LoadEvent {
+            time_s: event.time_s + empty_s,
+            ..event
+        });
+    }
+    SimulatedAdc::new(
+        SensorChain::reference(),
+        script,
+        reference_disturbances(),
+        DEMO_SEED,
+    )
+}
+
 /// The chain's nominal gain and zero: the fallback if the stored record is unusable.
 pub fn nominal_calibration() -> Calibration {
     let chain = SensorChain::reference();

@@ -290,6 +290,18 @@ fn bench_run(bench_elf: &Path, handoff: bool) -> Result<()> {
         per_event(&estimator)?,
         field(&estimator, "events")?
     );
+    if let Ok(checked) = find_fields(&run, "bench checked") {
+        if field(&checked, "metered")? == 0 || field(&checked, "dropped")? != 0 {
+            bail!(
+                "the checked replay was not checked or lost samples; its count would mean nothing"
+            );
+        }
+        println!(
+            "  with the consistency check live (the demo after 2 s more empty pan, from its first drop on): {:>7.1} instructions per 4 kHz sample ({} samples)",
+            per_event(&checked)?,
+            field(&checked, "events")?
+        );
+    }
     if let Ok(restart) = find_fields(&run, "bench restart") {
         println!(
             "  one restart (a load change: the estimator's reset): {:.0} instructions",
