@@ -61,7 +61,9 @@
 //!   the tare on which the check's allowance was measured, `crate::consistency`). A
 //!   complete window becomes the reference once the pan stayed empty and stable for
 //!   `noise_guard_samples` more (50 ms: a load landing in the window's last samples is
-//!   detected by then, 18–24 ms for the demo's drops, and the demo allows 50 ms); anything
+//!   detected by then, 18–24 ms for the demo's drops, and the demo allows 50 ms; a drop
+//!   2 ms or more before the end already ends stability, and so the window, on the test
+//!   cell: the guard is for the last millisecond and for slower detections); anything
 //!   else (a load change, a flag, a sample lost, leaving the empty band) drops the window in
 //!   progress and one waiting out its guard. A load in a window could only inflate the
 //!   reference (fewer flags, never more); the settling and the guard keep it out.
@@ -1508,6 +1510,48 @@ mod tests {
         assert!(
             (reference.variance / truth - 1.0).abs() < allowed,
             "{reference:?} against {truth}"
+        );
+    }
+
+    #[test]
+    fn a_load_landing_at_the_end_of_a_window_is_kept_out_by_the_guard() {
+        // Where the first window completes, and what it meters, on a twin of the scene.
+        let (completes, clean) = {
+            let mut scale = new_scale();
+            let mut cell = Cell::new(0.4);
+            let completes = (0..20_000)
+                .position(|_| {
+                    scale.push(cell.sample());
+                    scale.noise.pending.is_some()
+                })
+                .expect("a window completes");
+            (completes, scale.noise.pending.unwrap())
+        };
+        // 138.32 g lands 1 ms (4 samples) before that: the estimate leaves the stability band
+        // only at its next update (a drop 2 ms or more before the end drops the window
+        // then), so the window completes with the onset in its last block.
+        let scene = |config: ScaleConfig| {
+            let estimator = StepScale::<8>::step_estimator(7, 16, 1.0).unwrap();
+            let mut scale = Scale::new(config, estimator, calibration());
+            let mut cell = Cell::new(0.4);
+            run(&mut scale, &mut cell, completes - 4);
+            cell.load_g = 138.32;
+            let readings = run(&mut scale, &mut cell, 4000);
+            assert_eq!(readings.last().unwrap().load_changes, 1);
+            scale.noise_reference()
+        };
+        let config = ScaleConfig::weighing_default(FS);
+        assert_eq!(scene(config), None, "the guard dropped the window");
+        // Without the guard the window is taken, the onset in it, above the clean one.
+        let unguarded = scene(ScaleConfig {
+            noise_guard_samples: 0,
+            ..config
+        })
+        .expect("taken without a guard");
+        assert_eq!(unguarded.differences, clean.differences);
+        assert!(
+            unguarded.variance > clean.variance,
+            "{unguarded:?} vs {clean:?}"
         );
     }
 
