@@ -98,7 +98,16 @@ pub enum Scene {
     /// The command path's end-to-end scene: tare, refused tare, calibration, with the
     /// harness typing the commands on UART 0 (`tests::commands`).
     Commands,
+    /// The demo after [`CHECKED_DEMO_EMPTY_S`] more of empty pan: the scale meters the
+    /// empty pan's noise before the first drop, so every run after it is checked by the
+    /// consistency check (`estimator_core::scale`), which the demo's short empty periods
+    /// never allow.
+    CheckedDemo,
 }
+
+/// How much longer the checked demo holds the empty pan before the demo's events, s: the
+/// metering needs 1.5 s settled plus a 0.3 s window and its 50 ms guard.
+pub const CHECKED_DEMO_EMPTY_S: f64 = 2.0;
 
 impl Scene {
     /// The scene QEMU was asked for; the demo when there is no argument (or semihosting
@@ -117,6 +126,7 @@ impl Scene {
         {
             None | Some(b"demo") => Ok(Self::Demo),
             Some(b"commands") => Ok(Self::Commands),
+            Some(b"checked-demo") => Ok(Self::CheckedDemo),
             Some(_) => Err(UnknownScene),
         }
     }
@@ -126,6 +136,7 @@ impl Scene {
         match self {
             Self::Demo => load_cell::demo_scene(),
             Self::Commands => load_cell::command_scene(),
+            Self::CheckedDemo => load_cell::demo_scene_with_empty_start(CHECKED_DEMO_EMPTY_S),
         }
     }
 }

@@ -51,6 +51,18 @@ impl Scene {
         }
     }
 
+    /// The demo after 2 s more of empty pan (the firmware's `checked-demo` scene,
+    /// `qemu::CHECKED_DEMO_EMPTY_S`): the scale meters the empty pan before the first drop,
+    /// so the consistency check is live on every run after it.
+    pub fn checked_demo() -> Self {
+        let mut scene = Self::demo();
+        for (time_s, _) in scene.loads.iter_mut().skip(1) {
+            *time_s += 2.0;
+        }
+        scene.end_s += 2.0;
+        scene
+    }
+
     /// The sample at which a change at `time_s` takes effect.
     pub fn change_sample(time_s: f64) -> u32 {
         (time_s * SAMPLE_RATE_HZ).round() as u32

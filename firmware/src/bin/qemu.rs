@@ -209,12 +209,17 @@ mod app {
     /// The readout task: 20 lines a second; the commands' regular work after each (a fresh
     /// tare refined, a calibration in progress carried on: stored, read back and applied
     /// once the known mass has settled); the end-of-scene summary and exit.
-    #[task(binds = Uart1Rx, priority = 1, local = [store, scene_samples], shared = [latest, pipeline])]
+    #[task(binds = Uart1Rx, priority = 1, local = [store, scene_samples, noise_told: bool = false], shared = [latest, pipeline])]
     fn readout(mut cx: readout::Context) {
         let Some(readout) = cx.shared.latest.lock(|latest| latest.take()) else {
             return;
         };
         pipeline::log_readout(&readout);
+        // Once: from here on every new run is checked against the metered empty pan.
+        if !*cx.local.noise_told && cx.shared.pipeline.lock(|pipeline| pipeline.noise_checked()) {
+            defmt::println!("noise metered sample={=u32}", readout.sample);
+            *cx.local.noise_told = true;
+        }
         if let Some(result) = cx.shared.pipeline.lock(|pipeline| pipeline.poll_commands()) {
             let shared_pipeline = &mut cx.shared.pipeline;
             pipeline::finish_calibration(result, cx.local.store, |work| {
