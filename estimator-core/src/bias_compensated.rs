@@ -193,11 +193,7 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
         &mut self,
         reference: Option<NoiseReference<T>>,
     ) -> Result<(), ConfigError> {
-        if let Some(reference) = &reference {
-            reference.validate()?;
-        }
-        self.config.step.noise_reference = reference;
-        Ok(())
+        NoiseReference::replace(&mut self.config.step.noise_reference, reference)
     }
 
     /// The capacity `N`: the largest order this instance accepts.

@@ -132,6 +132,19 @@ impl<T: Real> NoiseReference<T> {
         }
     }
 
+    /// Put `reference` in `slot` (an estimator's configured reference, used from its next
+    /// reset) if it is valid ([`Self::validate`]); a refused one leaves `slot` as it was.
+    pub(crate) fn replace(
+        slot: &mut Option<Self>,
+        reference: Option<Self>,
+    ) -> Result<(), ConfigError> {
+        if let Some(reference) = &reference {
+            reference.validate()?;
+        }
+        *slot = reference;
+        Ok(())
+    }
+
     /// The reference's degrees of freedom `2M/3`, or 0 when exact.
     fn degrees_of_freedom(&self) -> T {
         T::from_f64(2.0 / 3.0) * T::from_u32(self.differences)
@@ -187,6 +200,25 @@ impl<T: Real> ResidualCheck<T> {
         self.sum = self.sum * beta + quotient;
         self.weight = self.weight * beta + T::ONE;
         self.weight2 = self.weight2 * beta * beta + T::ONE;
+    }
+
+    /// One row of a data-driven regression whose a-priori residual the fit standardises
+    /// before the update (`StepEstimator`, `RampEstimator`, `ORDER` their difference
+    /// order): `standardised` (`w·e²`, `None` while the fit was not yet determined) is
+    /// judged with `noise_gain`, the gain of the coefficients that predicted it, which then
+    /// moves to the updated coefficients `lead` (of order `n`). True on a mismatch.
+    pub(crate) fn push_a_priori_row<const ORDER: usize>(
+        &mut self,
+        standardised: Option<T>,
+        noise_gain: &mut T,
+        lead: &[T],
+        n: usize,
+    ) -> bool {
+        if let Some(standardised) = standardised {
+            self.push(standardised, *noise_gain);
+        }
+        *noise_gain = difference_noise_gain::<T, ORDER>(lead, n);
+        self.mismatch(|| difference_correlation::<T, ORDER>(lead, n))
     }
 
     /// The residual ratio `r` (≈ 1 when the fit leaves only noise); `None` before a row.

@@ -290,11 +290,7 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
         &mut self,
         reference: Option<NoiseReference<T>>,
     ) -> Result<(), ConfigError> {
-        if let Some(reference) = &reference {
-            reference.validate()?;
-        }
-        self.config.noise_reference = reference;
-        Ok(())
+        NoiseReference::replace(&mut self.config.noise_reference, reference)
     }
 
     /// The residual sum of squares of the fit so far (raw units², of block means).

@@ -15,7 +15,7 @@
 //! LTI sensor; the intercept needs τ, calibrated with a reference mass (`lag_s`). The same
 //! recursive engine as the step estimator solves it, with `[t, 1]` as trailing columns.
 
-use crate::consistency::{difference_correlation, difference_noise_gain, ResidualCheck};
+use crate::consistency::ResidualCheck;
 use crate::factor::Factor;
 use crate::input::{check_sample, Decimator, DifferenceWindow};
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
@@ -145,13 +145,11 @@ impl<T: Real, const N: usize> RampEstimator<T, N> {
         }
         let mismatch = match self.check.as_mut() {
             Some(check) => {
-                if determined_before {
-                    let residual = folded.residual;
-                    check.push(folded.row_weight * residual * residual, self.noise_gain);
-                }
+                let residual = folded.residual;
+                let standardised =
+                    determined_before.then(|| folded.row_weight * residual * residual);
                 let (lead, _) = self.factor.solution(n);
-                self.noise_gain = difference_noise_gain::<T, 2>(&lead, n);
-                check.mismatch(|| difference_correlation::<T, 2>(&lead, n))
+                check.push_a_priori_row::<2>(standardised, &mut self.noise_gain, &lead, n)
             }
             None => false,
         };

@@ -37,9 +37,7 @@
 //!   than the noise model's, not larger. Calibration must choose a configuration inside the
 //!   map's valid region (`tuning::WeighingConfig::check_region`).
 
-use crate::consistency::{
-    difference_correlation, difference_noise_gain, NoiseReference, ResidualCheck,
-};
+use crate::consistency::{NoiseReference, ResidualCheck};
 use crate::factor::Factor;
 use crate::input::{check_sample, Decimator, DifferenceWindow};
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
@@ -238,11 +236,7 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         &mut self,
         reference: Option<NoiseReference<T>>,
     ) -> Result<(), ConfigError> {
-        if let Some(reference) = &reference {
-            reference.validate()?;
-        }
-        self.config.noise_reference = reference;
-        Ok(())
+        NoiseReference::replace(&mut self.config.noise_reference, reference)
     }
 
     /// The consistency check's residual ratio: the weighted mean square of the residuals
@@ -334,13 +328,11 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         }
         let mismatch = match self.check.as_mut() {
             Some(check) => {
-                if determined_before {
-                    let residual = folded.residual;
-                    check.push(folded.row_weight * residual * residual, self.noise_gain);
-                }
+                let residual = folded.residual;
+                let standardised =
+                    determined_before.then(|| folded.row_weight * residual * residual);
                 let (lead, _) = self.factor.solution(n);
-                self.noise_gain = difference_noise_gain::<T, 1>(&lead, n);
-                check.mismatch(|| difference_correlation::<T, 1>(&lead, n))
+                check.push_a_priori_row::<1>(standardised, &mut self.noise_gain, &lead, n)
             }
             None => false,
         };
