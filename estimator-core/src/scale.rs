@@ -1312,17 +1312,7 @@ mod tests {
     fn weighing(method: WeighingMethod) -> WeighingConfig {
         use crate::loadcell::LoadCellModel;
         use crate::tuning::{LoadCoverage, OnsetConfig, Prediction};
-        let prediction = Prediction {
-            runs: 0,
-            planned_runs: 0,
-            valid_runs: 0,
-            within_target_runs: 0,
-            detection_failures: 0,
-            bias_g: 0.0,
-            rms_g: 0.0,
-            p95_g: 0.0,
-            p95_upper_g: 0.0,
-        };
+        let prediction = Prediction::default();
         WeighingConfig {
             method,
             counts_per_gram: CPG as f64,

@@ -561,17 +561,7 @@ fn a_full_rate_regression_is_refused_by_configuration() {
 /// A weighing configuration of `method` for the load cell of `support` (4 kHz, 25 Hz,
 /// 100 Hz 3rd-order Butterworth), the calibration mass its only load.
 fn weighing_config(method: WeighingMethod) -> WeighingConfig {
-    let prediction = Prediction {
-        runs: 0,
-        planned_runs: 0,
-        valid_runs: 0,
-        within_target_runs: 0,
-        detection_failures: 0,
-        bias_g: 0.0,
-        rms_g: 0.0,
-        p95_g: 0.0,
-        p95_upper_g: 0.0,
-    };
+    let prediction = Prediction::default();
     WeighingConfig {
         method,
         counts_per_gram: COUNTS_PER_GRAM,

@@ -338,17 +338,33 @@ pub const REFERENCE_SNR_DB: f64 = 50.0;
 /// The window over which the SNR's signal RMS is taken: 6,000 samples (1.5 s) from the drop.
 pub const SNR_WINDOW_SAMPLES: usize = 6000;
 
+/// The demo's script ([`REFERENCE_DEMO_EVENTS`], ending at [`REFERENCE_DEMO_END_S`]) after
+/// `empty_s` more of empty pan at the start (0: the demo itself), in a script of `E` slots.
+pub fn reference_demo_script<const E: usize>(empty_s: f64) -> Script<E> {
+    let mut script = Script::new(REFERENCE_DEMO_END_S + empty_s);
+    for event in REFERENCE_DEMO_EVENTS {
+        // Three events in time order: refused only by a script of fewer than three slots.
+        let _ = script.push(LoadEvent {
+            time_s: event.time_s + empty_s,
+            ..event
+        });
+    }
+    script
+}
+
 impl SimulatedAdc<8> {
     /// The demo scene on the reference chain (16-bit ADC): see [`REFERENCE_DEMO_EVENTS`],
     /// white noise at 50 dB SNR relative to the 138.32 g step (eq. 4.39 over
     /// [`SNR_WINDOW_SAMPLES`]), plus the INA114's own noise.
     pub fn reference_demo(seed: u64) -> Self {
+        Self::reference_demo_with_empty_start(seed, 0.0)
+    }
+
+    /// [`Self::reference_demo`] with the empty pan held `empty_s` longer at the start (the
+    /// same noise), so that the first drop, too, lands after a long empty period.
+    pub fn reference_demo_with_empty_start(seed: u64, empty_s: f64) -> Self {
         let chain = SensorChain::reference();
-        let mut script = Script::new(REFERENCE_DEMO_END_S);
-        for event in REFERENCE_DEMO_EVENTS {
-            // Three events in time order fit in eight slots.
-            let _ = script.push(event);
-        }
+        let script = reference_demo_script(empty_s);
         let mut disturbances = Disturbances::white(white_noise_for_snr(
             &chain,
             REFERENCE_STEP_G,

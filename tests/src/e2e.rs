@@ -701,6 +701,35 @@ mod host_replay_tests {
         }
     }
 
+    /// The worst of a method's demo reports over seeds: time to 0.1 % and largest error after
+    /// each drop (segments 1 and 3), largest empty reading (segments 0 and 2); a drop never
+    /// within 0.1 % or a segment without a reading counts as infinite.
+    #[derive(Default)]
+    struct Worst {
+        time_s: [f64; 2],
+        error_g: [f64; 2],
+        empty_g: f64,
+    }
+
+    impl Worst {
+        fn add(&mut self, report: &Report) {
+            for (slot, segment) in [1usize, 3].iter().enumerate() {
+                let segment = &report.segments[*segment];
+                self.time_s[slot] =
+                    self.time_s[slot].max(segment.time_to_tolerance_s.unwrap_or(f64::INFINITY));
+                self.error_g[slot] =
+                    self.error_g[slot].max(segment.largest_error_g.unwrap_or(f64::INFINITY));
+            }
+            for segment in [0usize, 2] {
+                self.empty_g = self.empty_g.max(
+                    report.segments[segment]
+                        .largest_error_g
+                        .unwrap_or(f64::INFINITY),
+                );
+            }
+        }
+    }
+
     fn replay<E: ScaleEstimator>(seed: u64, build: impl Fn(CountsScale) -> Scale<E>) -> Report {
         let mut adc = SimulatedAdc::reference_demo(seed);
         let mut scale = build(calibration(&adc));
@@ -920,9 +949,7 @@ mod host_replay_tests {
         let seeds = 40;
         for (name, weighing) in method_kinds() {
             let mut passed = 0;
-            let mut worst_time = [0.0f64; 2];
-            let mut worst_error = [0.0f64; 2];
-            let mut worst_empty = 0.0f64;
+            let mut worst = Worst::default();
             let mut failures = Vec::new();
             for seed in 1..=seeds {
                 let report = replay(seed, configured(weighing));
@@ -931,28 +958,15 @@ mod host_replay_tests {
                 } else {
                     failures.push(format!("seed {seed}: {}", report.failures.join("; ")));
                 }
-                for (slot, segment) in [1usize, 3].iter().enumerate() {
-                    let segment = &report.segments[*segment];
-                    worst_time[slot] =
-                        worst_time[slot].max(segment.time_to_tolerance_s.unwrap_or(f64::INFINITY));
-                    worst_error[slot] =
-                        worst_error[slot].max(segment.largest_error_g.unwrap_or(f64::INFINITY));
-                }
-                for segment in [0usize, 2] {
-                    worst_empty = worst_empty.max(
-                        report.segments[segment]
-                            .largest_error_g
-                            .unwrap_or(f64::INFINITY),
-                    );
-                }
+                worst.add(&report);
             }
             println!(
                 "{name:<48} {passed:>2}/{seeds}  worst t(0.1%) {:>5.0} / {:>5.0} ms  worst error after {:.4} / {:.4} g  worst empty {:.4} g",
-                worst_time[0] * 1e3,
-                worst_time[1] * 1e3,
-                worst_error[0],
-                worst_error[1],
-                worst_empty
+                worst.time_s[0] * 1e3,
+                worst.time_s[1] * 1e3,
+                worst.error_g[0],
+                worst.error_g[1],
+                worst.empty_g
             );
             let seeds_with = |what: &str| failures.iter().filter(|f| f.contains(what)).count();
             println!(
@@ -970,31 +984,9 @@ mod host_replay_tests {
     /// as `SimulatedAdc::reference_demo`), so that the first drop, too, lands after a
     /// metered empty period; returns the ADC and the sample count of the scene.
     fn demo_with_empty_start(seed: u64, empty_s: f64) -> (SimulatedAdc<8>, u32) {
-        use host_sim::simulated::{
-            REFERENCE_DEMO_END_S, REFERENCE_DEMO_EVENTS, REFERENCE_SNR_DB, REFERENCE_STEP_G,
-            SNR_WINDOW_SAMPLES,
-        };
-        use host_sim::{white_noise_for_snr, Disturbances, LoadEvent, Script, SensorChain};
-        let chain = SensorChain::reference();
-        let mut script = Script::new(REFERENCE_DEMO_END_S + empty_s);
-        for event in REFERENCE_DEMO_EVENTS {
-            script
-                .push(LoadEvent {
-                    time_s: event.time_s + empty_s,
-                    ..event
-                })
-                .unwrap();
-        }
-        let mut disturbances = Disturbances::white(white_noise_for_snr(
-            &chain,
-            REFERENCE_STEP_G,
-            REFERENCE_SNR_DB,
-            SNR_WINDOW_SAMPLES,
-        ));
-        disturbances.amplifier_noise = true;
-        let samples = Scene::change_sample(REFERENCE_DEMO_END_S + empty_s);
+        let samples = Scene::change_sample(host_sim::simulated::REFERENCE_DEMO_END_S + empty_s);
         (
-            SimulatedAdc::new(chain, script, disturbances, seed),
+            SimulatedAdc::reference_demo_with_empty_start(seed, empty_s),
             samples,
         )
     }
@@ -1150,37 +1142,22 @@ mod host_replay_tests {
         for order in [3usize, 4, 5, 6, 7, 8] {
             for decimation in [1u16, 4, 8, 12, 16] {
                 let mut passed = 0;
-                let mut worst_time = [0.0f64; 2];
-                let mut worst_error = [0.0f64; 2];
-                let mut worst_empty = 0.0f64;
+                let mut worst = Worst::default();
                 let seeds = 10;
                 for seed in 1..=seeds {
                     let report = replay(seed, step_scale(order, decimation));
                     if report.passed() {
                         passed += 1;
                     }
-                    for (slot, segment) in [1usize, 3].iter().enumerate() {
-                        let segment = &report.segments[*segment];
-                        worst_time[slot] = worst_time[slot]
-                            .max(segment.time_to_tolerance_s.unwrap_or(f64::INFINITY));
-                        worst_error[slot] =
-                            worst_error[slot].max(segment.largest_error_g.unwrap_or(f64::INFINITY));
-                    }
-                    for segment in [0usize, 2] {
-                        worst_empty = worst_empty.max(
-                            report.segments[segment]
-                                .largest_error_g
-                                .unwrap_or(f64::INFINITY),
-                        );
-                    }
+                    worst.add(&report);
                 }
                 println!(
                     "{order:>5} {decimation:>5}  {passed:>4}/{seeds:<4}  {:>8.0} {:>8.0}  {:>10.4} {:>10.4}  {:>10.4}",
-                    worst_time[0] * 1e3,
-                    worst_time[1] * 1e3,
-                    worst_error[0],
-                    worst_error[1],
-                    worst_empty
+                    worst.time_s[0] * 1e3,
+                    worst.time_s[1] * 1e3,
+                    worst.error_g[0],
+                    worst.error_g[1],
+                    worst.empty_g
                 );
             }
         }

@@ -43,7 +43,8 @@ use super::loads::LoadCoverage;
 use super::onset::OnsetConfig;
 
 /// What the Monte Carlo of calibration predicts for a method at the readout time.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// `Default`: no runs and every figure zero (a configuration calibration did not score).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Prediction {
     /// Synthetic drops run (fewer than planned when the method was stopped early).
@@ -465,33 +466,10 @@ mod tests {
             calibration_mass_g: 138.32,
             readout_s: 0.1,
             target_relative: 0.001,
-            prediction: Prediction {
-                runs: 0,
-                planned_runs: 0,
-                valid_runs: 0,
-                within_target_runs: 0,
-                detection_failures: 0,
-                bias_g: 0.0,
-                rms_g: 0.0,
-                p95_g: 0.0,
-                p95_upper_g: 0.0,
-            },
+            prediction: Prediction::default(),
             recorded_drops: 0,
             recorded_worst_error_g: 0.0,
-            loads: LoadCoverage::calibration_mass_only(
-                138.32,
-                Prediction {
-                    runs: 0,
-                    planned_runs: 0,
-                    valid_runs: 0,
-                    within_target_runs: 0,
-                    detection_failures: 0,
-                    bias_g: 0.0,
-                    rms_g: 0.0,
-                    p95_g: 0.0,
-                    p95_upper_g: 0.0,
-                },
-            ),
+            loads: LoadCoverage::calibration_mass_only(138.32, Prediction::default()),
         }
     }
 

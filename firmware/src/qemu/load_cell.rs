@@ -101,33 +101,16 @@ pub fn command_scene_with_seed(seed: u64) -> LoadCell {
 /// at 4.0 s, 50 dB SNR. Built as `SimulatedAdc::reference_demo` builds it, in the larger
 /// script (`tests::commands` checks that the codes are the same).
 pub fn demo_scene() -> LoadCell {
-    let mut script = Script::new(host_sim::simulated::REFERENCE_DEMO_END_S);
-    for event in host_sim::simulated::REFERENCE_DEMO_EVENTS {
-        // Three events in time order within the scene fit in sixteen slots.
-        let _ = script.push(event);
-    }
-    SimulatedAdc::new(
-        SensorChain::reference(),
-        script,
-        reference_disturbances(),
-        DEMO_SEED,
-    )
+    demo_scene_with_empty_start(0.0)
 }
 
 /// The demo scene with the empty pan held `empty_s` longer at the start: the first drop
 /// then lands after a metered empty period, so the consistency check is live on the runs
 /// after it (the bench's figure for it).
 pub fn demo_scene_with_empty_start(empty_s: f64) -> LoadCell {
-    let mut script = Script::new(host_sim::simulated::REFERENCE_DEMO_END_S + empty_s);
-    for event in host_sim::simulated::REFERENCE_DEMO_EVENTS {
-        let _ = script.push(LoadEvent {
-            time_s: event.time_s + empty_s,
-            ..event
-        });
-    }
     SimulatedAdc::new(
         SensorChain::reference(),
-        script,
+        host_sim::simulated::reference_demo_script(empty_s),
         reference_disturbances(),
         DEMO_SEED,
     )
