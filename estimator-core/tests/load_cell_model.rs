@@ -9,9 +9,11 @@
 mod support;
 
 use estimator_core::{
-    ConfigError, Estimator, InitialState, InvalidReason, LoadCellModel, ModelBank, ModelConfig,
-    ModelEstimator, State,
+    ConfigError, Estimator, InitialState, InvalidReason, ModelBank, ModelConfig, ModelEstimator,
+    State,
 };
+
+use estimator_core::sensor::LoadCellModel;
 use nalgebra::{DMatrix, DVector};
 use proptest::prelude::*;
 use support::*;

@@ -149,7 +149,7 @@ fn a_bank_over_the_resonance_stays_unbiased_off_calibration() {
 /// The bank's residual is that of its interpolated model (the sample minus the interpolated
 /// prediction), as its estimate is: a truth between two candidates leaves the best one's
 /// own prediction drifting out of phase with the ringing, while the interpolation follows
-/// it. The scale's load-change test runs on this residual (`estimator_core::scale`), where
+/// it. The scale's load-change test runs on this residual (`estimator_core::weighing`), where
 /// the best candidate's own one alarmed on a steady 250 g.
 #[test]
 fn the_bank_residual_is_the_interpolated_models() {

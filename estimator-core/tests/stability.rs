@@ -6,14 +6,15 @@
 
 mod support;
 
-use estimator_core::tuning::{
+use estimator_core::sensor::LoadCellModel;
+use estimator_core::weighing::{
     LoadCoverage, OnsetConfig, Prediction, RegionError, WeighingConfig, WeighingMethod,
 };
 use estimator_core::{
     Baseline, BaselineConfig, BaselineMode, BiasCompensatedConfig, BiasCompensatedStepEstimator,
-    CovarianceStepEstimator, Estimator, InvalidReason, IvConfig, IvStepEstimator, LoadCellModel,
-    ModelBank, ModelConfig, ModelEstimator, NoiseMeter, NoiseReference, Real, SensorModel, State,
-    StepConfig, StepEstimator, MIN_IDENTIFIABILITY,
+    CovarianceStepEstimator, Estimator, InvalidReason, IvConfig, IvStepEstimator, ModelBank,
+    ModelConfig, ModelEstimator, NoiseMeter, NoiseReference, Real, SensorModel, State, StepConfig,
+    StepEstimator, MIN_IDENTIFIABILITY,
 };
 use nalgebra::DMatrix;
 use support::*;

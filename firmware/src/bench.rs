@@ -7,7 +7,7 @@ use core::hint::black_box;
 
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::SYST;
-use estimator_core::{AdcError, AdcSource};
+use estimator_core::sensor::{AdcError, AdcSource};
 
 use crate::pipeline::{self, Pipeline, SampleMessage, SampleQueue, QUEUE_CAPACITY};
 

@@ -4,21 +4,23 @@
 
 use core::mem::MaybeUninit;
 
-use estimator_core::command::{self, CalibrationStore, StoreFailure};
-use estimator_core::tuning::{WeighingEstimator, WeighingMethod};
-use estimator_core::{
-    AdcSource, Calibration, CalibrationFailure, Command, CommandConfig, CommandOutcome,
-    CommandRefusal, Commands, ConfigError, CountsScale, RawSample, Scale, ScaleReading,
+use estimator_core::sensor::AdcSource;
+use estimator_core::weighing::{self, CalibrationStore, StoreFailure};
+use estimator_core::weighing::{
+    Calibration, CalibrationFailure, Command, CommandConfig, CommandOutcome, CommandRefusal,
+    Commands, CountsScale, RawSample, Scale, ScaleReading,
 };
+use estimator_core::weighing::{WeighingEstimator, WeighingMethod};
+use estimator_core::ConfigError;
 
 /// The weighing configuration, generated at build time from `firmware/weighing.toml` (what
 /// `host-sim calibrate` wrote) by `build.rs`: `WEIGHING` and the estimator's sizes.
 pub mod config {
     #![allow(clippy::excessive_precision, clippy::unreadable_literal)]
-    use estimator_core::tuning::{
+    use estimator_core::sensor::LoadCellModel;
+    use estimator_core::weighing::{
         LoadCoverage, LoadScene, LoadScore, OnsetConfig, Prediction, WeighingConfig, WeighingMethod,
     };
-    use estimator_core::LoadCellModel;
     include!(concat!(env!("OUT_DIR"), "/weighing.rs"));
 }
 
@@ -130,7 +132,7 @@ impl Pipeline {
     }
 
     /// Whether the runs from the next load change on are checked against a metered noise
-    /// reference (the consistency check, `estimator_core::scale`).
+    /// reference (the consistency check, `estimator_core::weighing`).
     pub fn noise_checked(&self) -> bool {
         self.scale.noise_reference().is_some()
     }
@@ -345,7 +347,7 @@ pub fn finish_calibration<S>(
             return;
         }
     };
-    let stored = match command::store_calibration(store, &measured) {
+    let stored = match weighing::store_calibration(store, &measured) {
         Ok(stored) => stored,
         Err(failure) => {
             log_store_failure(sample, &failure);

@@ -5,9 +5,9 @@
 use core::convert::Infallible;
 use core::mem::MaybeUninit;
 
-use estimator_core::calibration::{Calibration, CalibrationSource, RECORD_LEN};
-use estimator_core::command::{self, CalibrationStore};
-use estimator_core::{AdcError, AdcSource};
+use estimator_core::sensor::{AdcError, AdcSource};
+use estimator_core::weighing::{self, CalibrationStore};
+use estimator_core::weighing::{Calibration, CalibrationSource, RECORD_LEN};
 
 /// The simulated converter as the hand-off sees it: a data register holding the latest
 /// conversion, read once per timer tick. Stepping the sensor model (`convert`) is the
@@ -68,7 +68,7 @@ impl RamCalibrationStore {
 
     /// The calibration to use at boot: the stored one if valid, else `defaults` + reason.
     pub fn load(&self, defaults: Calibration) -> (Calibration, CalibrationSource) {
-        command::load_calibration(self, defaults)
+        weighing::load_calibration(self, defaults)
     }
 }
 
@@ -100,7 +100,7 @@ pub enum Scene {
     Commands,
     /// The demo after [`CHECKED_DEMO_EMPTY_S`] more of empty pan: the scale meters the
     /// empty pan's noise before the first drop, so every run after it is checked by the
-    /// consistency check (`estimator_core::scale`), which the demo's short empty periods
+    /// consistency check (`estimator_core::weighing`), which the demo's short empty periods
     /// never allow.
     CheckedDemo,
 }

@@ -4,8 +4,8 @@
 //!
 //! None of this has run on hardware yet: CI builds it and checks its size, nothing more.
 
-use estimator_core::calibration::{Calibration, CalibrationSource, FrontEnd, RECORD_LEN};
-use estimator_core::command::{self, CalibrationStore};
+use estimator_core::weighing::{self, CalibrationStore};
+use estimator_core::weighing::{Calibration, CalibrationSource, FrontEnd, RECORD_LEN};
 use stm32f4xx_hal::flash::{self, FlashExt};
 use stm32f4xx_hal::pac::FLASH;
 
@@ -104,7 +104,7 @@ impl FlashCalibrationStore {
     /// The calibration to use at boot: the flash record if valid, else the front end's
     /// nominal values with the reason (erased flash reads `Missing`).
     pub fn load(&self) -> (Calibration, CalibrationSource) {
-        command::load_calibration(self, FRONT_END.nominal_calibration())
+        weighing::load_calibration(self, FRONT_END.nominal_calibration())
     }
 
     /// Flush the ART data cache, which may still hold the sector as it was before the

@@ -1,6 +1,6 @@
 //! `host-sim calibrate`: recorded drops (CSVs with a column `y`, as `simulate` writes them)
 //! in, a weighing configuration (TOML) out, through the core's
-//! [`estimator_core::tuning::calibrate`] (the same call the firmware can make). And the way
+//! [`estimator_core::tuning::tune`] (the same call the firmware can make). And the way
 //! back: [`load_config`] reads the TOML into the core's [`WeighingConfig`], and
 //! [`configured_estimator`] builds the configured method exactly as the firmware does
 //! ([`WeighingEstimator`]).
@@ -19,12 +19,15 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
+use estimator_core::sensor::{IdentifyError, LoadCellModel};
 use estimator_core::tuning::{
-    self, Calibrated, CalibrationError, CalibrationSettings, CandidateGrid, CandidateScore,
-    DropError, LoadCoverage, LoadScene, LoadScore, OnsetConfig, Prediction, RegionError, RunSlot,
-    WeighingConfig, WeighingEstimator, WeighingMethod, MAX_SCENES,
+    self, CandidateGrid, CandidateScore, DropError, RunSlot, Tuned, TuningError, TuningSettings,
 };
-use estimator_core::{IdentifyError, LoadCellModel, Real};
+use estimator_core::weighing::{
+    LoadCoverage, LoadScene, LoadScore, OnsetConfig, Prediction, RegionError, WeighingConfig,
+    WeighingEstimator, WeighingMethod, MAX_SCENES,
+};
+use estimator_core::Real;
 use serde::Deserialize;
 
 use crate::method::{BoxedEstimator, InF32, Method};
@@ -108,8 +111,8 @@ impl Options {
     }
 
     /// The core's settings for these options.
-    pub fn settings(&self) -> CalibrationSettings {
-        let mut settings = CalibrationSettings::new(
+    pub fn settings(&self) -> TuningSettings {
+        let mut settings = TuningSettings::new(
             self.mass_g,
             self.readout_s,
             self.target_relative,
@@ -134,7 +137,7 @@ impl Options {
 #[derive(Clone, Debug)]
 pub struct Outcome {
     /// The core's result.
-    pub calibrated: Calibrated,
+    pub calibrated: Tuned,
     /// Every candidate scored, in order.
     pub scores: Vec<CandidateScore>,
     /// Wall time of the core's call, s.
@@ -284,19 +287,13 @@ pub fn calibrate_samples(
 #[allow(clippy::result_large_err)]
 fn run<T: Real>(
     data: &mut [Vec<T>],
-    settings: &CalibrationSettings,
+    settings: &TuningSettings,
     grid: &CandidateGrid<'_>,
     runs: &mut [RunSlot],
     report: impl FnMut(&CandidateScore),
-) -> Result<Calibrated, CalibrationError> {
+) -> Result<Tuned, TuningError> {
     let mut slices: Vec<&mut [T]> = data.iter_mut().map(|d| d.as_mut_slice()).collect();
-    tuning::calibrate::<T, CAPACITY, STATES, BANK_CANDIDATES>(
-        &mut slices,
-        settings,
-        grid,
-        runs,
-        report,
-    )
+    tuning::tune::<T, CAPACITY, STATES, BANK_CANDIDATES>(&mut slices, settings, grid, runs, report)
 }
 
 /// Calibrate on the CSVs the options name.
@@ -401,7 +398,7 @@ pub fn score_line(score: &CandidateScore, mass_g: f64, target_relative: f64) -> 
 }
 
 /// The core's refusal in words, naming the drop files.
-pub fn describe_error(error: &CalibrationError, names: &[String], options: &Options) -> String {
+pub fn describe_error(error: &TuningError, names: &[String], options: &Options) -> String {
     let name = |drop: &usize| {
         names
             .get(*drop)
@@ -409,15 +406,15 @@ pub fn describe_error(error: &CalibrationError, names: &[String], options: &Opti
             .unwrap_or_else(|| format!("drop {drop}"))
     };
     match error {
-        CalibrationError::Settings(e) => format!("calibration settings: {e}"),
-        CalibrationError::NoDrops => "no drops given".into(),
-        CalibrationError::TooManyDrops { drops } => {
+        TuningError::Settings(e) => format!("calibration settings: {e}"),
+        TuningError::NoDrops => "no drops given".into(),
+        TuningError::TooManyDrops { drops } => {
             format!(
                 "{drops} drops given, at most {} are taken",
                 tuning::MAX_DROPS
             )
         }
-        CalibrationError::Drop { drop, error } => {
+        TuningError::Drop { drop, error } => {
             let what = match error {
                 DropError::TooShort { samples, needed } => format!(
                     "too short: {samples} samples, {needed} needed (the empty stretch, the onset and the readout after it)"
@@ -441,7 +438,7 @@ pub fn describe_error(error: &CalibrationError, names: &[String], options: &Opti
             };
             format!("drop {}: {what}", name(drop))
         }
-        CalibrationError::Identify(e) => match e {
+        TuningError::Identify(e) => match e {
             IdentifyError::TooShort {
                 drop,
                 samples,
@@ -452,7 +449,7 @@ pub fn describe_error(error: &CalibrationError, names: &[String], options: &Opti
             ),
             other => format!("the drops do not identify the load cell's model: {other:?}"),
         },
-        CalibrationError::TooFewRuns { runs, needed } => {
+        TuningError::TooFewRuns { runs, needed } => {
             let scenes = options.settings().max_scenes().max(1);
             format!(
                 "{} Monte Carlo runs per scene ({scenes} scenes): at least {} are needed for the 95%/95% bound",
@@ -460,15 +457,15 @@ pub fn describe_error(error: &CalibrationError, names: &[String], options: &Opti
                 needed / scenes
             )
         }
-        CalibrationError::NoCandidates => "no candidate methods".into(),
-        CalibrationError::Candidate { method, error } => {
+        TuningError::NoCandidates => "no candidate methods".into(),
+        TuningError::Candidate { method, error } => {
             format!("candidate {method} cannot be built: {error}")
         }
-        CalibrationError::LoadSaturates { mass_g, limit_g } => format!(
+        TuningError::LoadSaturates { mass_g, limit_g } => format!(
             "load range: a drop of {mass_g} g overshoots into a rail of the {}-bit converter; the heaviest load it takes is {limit_g:.1} g",
             options.adc_bits
         ),
-        CalibrationError::NoneMeetsTarget {
+        TuningError::NoneMeetsTarget {
             best,
             prediction,
             failed_load,
@@ -752,7 +749,7 @@ pub fn to_toml(outcome: &Outcome, names: &[String], command: &str) -> String {
 }
 
 struct Provenance<'a> {
-    calibrated: &'a Calibrated,
+    calibrated: &'a Tuned,
     scores: &'a [CandidateScore],
     names: &'a [String],
     command: &'a str,
@@ -770,7 +767,10 @@ fn write_toml(
     let p = &config.prediction;
     let w = &mut s;
     // Writing to a String cannot fail.
-    let _ = writeln!(w, "# Weighing configuration, written by `host-sim calibrate` (estimator-core tuning::calibrate).");
+    let _ = writeln!(
+        w,
+        "# Weighing configuration, written by `host-sim calibrate` (estimator-core tuning::tune)."
+    );
     if let Some(prov) = &provenance {
         let _ = writeln!(w, "# Command: {}", prov.command);
         let _ = writeln!(
@@ -1417,7 +1417,7 @@ pub fn firmware_constants(path: &Path, text: &str) -> Result<String> {
 
 /// The configuration as a Rust constant, `pub const WEIGHING: WeighingConfig = ...;`, for a
 /// firmware build script (paths assume `use estimator_core::tuning::*` and
-/// `estimator_core::LoadCellModel` in scope).
+/// `estimator_core::sensor::LoadCellModel` in scope).
 pub fn rust_const(config: &WeighingConfig) -> String {
     let f = |v: f64| -> String {
         if v.is_infinite() {

@@ -4,7 +4,7 @@
 //! the `host-sim` command that runs our estimator on anyone's recorded data.
 //!
 //! Without `std` this crate is the QEMU board's ADC: [`SimulatedAdc`] implements
-//! [`estimator_core::AdcSource`], fixed size, allocation-free and panic-free.
+//! [`estimator_core::sensor::AdcSource`], fixed size, allocation-free and panic-free.
 //!
 //! What it must never do: contain a second implementation of an estimator (every estimate
 //! comes from `estimator-core`), discretise through transfer-function polynomials (at 4 kHz
@@ -38,7 +38,7 @@
 
 /// The matrix exponential lives in the core (one implementation); re-exported for the
 /// simulator's exact ZOH and its tests.
-pub use estimator_core::expm;
+pub use estimator_core::numerics::expm;
 pub mod sensor;
 pub mod simulated;
 

@@ -33,7 +33,7 @@
 //! has to find a resonance 11% below the calibrated one.
 //!
 //! ## The `model` method on an identified model
-//! With `fn_hz` and `zeta` (what calibration identified, [`estimator_core::identify()`]), the
+//! With `fn_hz` and `zeta` (what calibration identified, [`estimator_core::sensor::identify()`]), the
 //! candidates are the core's [`LoadCellModel`] (the mechanical mode in series with the known
 //! 3rd-order Butterworth at `filter_hz`, default the chain's) built by the physical law over
 //! `span` ([`LoadCellModel::bank_configs`]), initial state estimated: exactly the bank the
@@ -58,11 +58,12 @@ use std::fmt;
 use std::str::FromStr;
 
 use anyhow::{anyhow, bail, Result};
+use estimator_core::sensor::LoadCellModel;
 use estimator_core::{
     max_instrument_delay, Baseline, BaselineConfig, BaselineMode, BiasCompensatedConfig,
     BiasCompensatedStepEstimator, CovarianceStepEstimator, Estimator, InitialState, IvConfig,
-    IvStepEstimator, LoadCellModel, ModelBank, ModelConfig, NoiseMeter, NoiseReference, RampConfig,
-    RampEstimator, Reading, Real, SensorModel, StepConfig, StepEstimator, MAX_DECIMATION,
+    IvStepEstimator, ModelBank, ModelConfig, NoiseMeter, NoiseReference, RampConfig, RampEstimator,
+    Reading, Real, SensorModel, StepConfig, StepEstimator, MAX_DECIMATION,
 };
 
 use crate::montecarlo::{Precision, Setup, CAPACITY};

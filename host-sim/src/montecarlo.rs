@@ -24,7 +24,7 @@ use crate::crlb;
 use crate::method::{measured_tare_variance, BuildContext, Method};
 use crate::scene::Scene;
 use crate::simulated::{run_seed, Script, SimulatedAdc};
-use estimator_core::AdcSource;
+use estimator_core::sensor::AdcSource;
 
 /// The largest order the host tools accept.
 pub const CAPACITY: usize = 40;

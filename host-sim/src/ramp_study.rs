@@ -16,7 +16,8 @@ use std::io::Write;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use estimator_core::{AdcSource, Estimator, RampConfig, RampEstimator, Real, StepConfig};
+use estimator_core::sensor::AdcSource;
+use estimator_core::{Estimator, RampConfig, RampEstimator, Real, StepConfig};
 use rayon::prelude::*;
 
 use crate::method::Method;

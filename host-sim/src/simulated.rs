@@ -1,7 +1,7 @@
 //! The sensor model playing a scripted scene, as an [`AdcSource`]: the QEMU board's ADC and
 //! the simulator's data source. Fixed size, allocation-free, panic-free, seeded.
 
-use estimator_core::{AdcError, AdcSource};
+use estimator_core::sensor::{AdcError, AdcSource};
 use rand_core::{RngCore, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 

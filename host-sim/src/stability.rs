@@ -32,8 +32,9 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{anyhow, Context, Result};
+use estimator_core::sensor::AdcSource;
 use estimator_core::{
-    AdcSource, CovarianceStepEstimator, Estimator, InvalidReason, Reading, State, StepEstimator,
+    CovarianceStepEstimator, Estimator, InvalidReason, Reading, State, StepEstimator,
 };
 use plotters::coord::Shift;
 use plotters::prelude::*;

@@ -15,7 +15,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 
-use estimator_core::tuning::WeighingConfig;
+use estimator_core::weighing::WeighingConfig;
 
 use crate::calibrate;
 use crate::chart;

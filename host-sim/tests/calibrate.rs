@@ -1,5 +1,5 @@
 //! Calibration as one command (issue 5, item 6): from three simulated drops of the reference
-//! mass, the core's `tuning::calibrate` chooses the smallest method that meets the target
+//! mass, the core's `tuning::tune` chooses the smallest method that meets the target
 //! at every load of the scale's range, and that choice holds on FRESH drops of host-sim's
 //! own simulator (not the identified model the choice was scored on) at loads across the
 //! range, with the simulator's true platform mass (120 g), which calibration did not know.
@@ -15,12 +15,14 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
 
-use estimator_core::tuning::{
-    summarise_drop, CalibrationError, CandidateGrid, LoadCoverage, LoadScene, LoadScore,
-    OnsetConfig, Prediction, RegionError, WeighingConfig, WeighingEstimator, WeighingMethod,
-    MAX_SCENES,
+use estimator_core::tuning::{summarise_drop, CandidateGrid, TuningError};
+
+use estimator_core::sensor::LoadCellModel;
+use estimator_core::weighing::{
+    LoadCoverage, LoadScene, LoadScore, OnsetConfig, Prediction, RegionError, WeighingConfig,
+    WeighingEstimator, WeighingMethod, MAX_SCENES,
 };
-use estimator_core::{Estimator, LoadCellModel};
+use estimator_core::Estimator;
 use host_sim::calibrate::{self, Options, Outcome};
 use host_sim::montecarlo::Precision;
 use host_sim::run_seed;
@@ -59,7 +61,7 @@ fn scene_with_load(snr_db: f64, mass_g: f64) -> Scene {
 
 /// The codes of one drop of the scene, as `simulate` writes them.
 fn record(scene: &Scene, seed: u64, samples: usize) -> Vec<f64> {
-    use estimator_core::AdcSource;
+    use estimator_core::sensor::AdcSource;
     let mut adc = scene.adc(seed);
     (0..samples)
         .map(|_| f64::from(adc.read().unwrap()))
@@ -147,7 +149,7 @@ fn unchecked_estimator(
     precision: Precision,
     zero_counts: f64,
 ) -> Box<dyn Estimator<f64>> {
-    use estimator_core::tuning::WeighingEstimator;
+    use estimator_core::weighing::WeighingEstimator;
     match precision {
         Precision::F64 => Box::new(
             WeighingEstimator::<f64, 40, 5, 33>::with_method(config, &config.method, zero_counts)
@@ -450,14 +452,14 @@ fn a_choice_good_only_at_the_calibration_mass_is_rejected_and_a_range_the_noise_
     let mut slices: Vec<&mut [f32]> = data.iter_mut().map(|d| d.as_mut_slice()).collect();
     let mut runs = vec![estimator_core::tuning::RunSlot::EMPTY; 400 * settings.max_scenes()];
     let grid = CandidateGrid::standard(0.1);
-    match estimator_core::tuning::calibrate::<f32, 40, 5, 33>(
+    match estimator_core::tuning::tune::<f32, 40, 5, 33>(
         &mut slices,
         &settings,
         &grid,
         &mut runs,
         |_| {},
     ) {
-        Err(CalibrationError::NoneMeetsTarget {
+        Err(TuningError::NoneMeetsTarget {
             best,
             failed_load: Some(load),
             evaluated,
@@ -625,14 +627,14 @@ fn an_impossible_target_names_the_best_candidate() {
         instrumental_variable: false,
         bank: None,
     };
-    match estimator_core::tuning::calibrate::<f64, 8, 5, 33>(
+    match estimator_core::tuning::tune::<f64, 8, 5, 33>(
         &mut slices,
         &settings,
         &grid,
         &mut runs,
         |_| {},
     ) {
-        Err(CalibrationError::NoneMeetsTarget {
+        Err(TuningError::NoneMeetsTarget {
             best,
             prediction,
             evaluated,
@@ -762,7 +764,7 @@ fn config_with(method: WeighingMethod) -> WeighingConfig {
         calibration_mass_g: MASS_G,
         readout_s: 0.1,
         target_relative: 0.001,
-        prediction: estimator_core::tuning::Prediction {
+        prediction: estimator_core::weighing::Prediction {
             runs: 400,
             planned_runs: 400,
             valid_runs: 400,

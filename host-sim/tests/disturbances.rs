@@ -1,6 +1,6 @@
 //! Each disturbance and converter option does what its name says, measured on the output.
 
-use estimator_core::AdcSource;
+use estimator_core::sensor::AdcSource;
 use host_sim::sensor::{Adc, SensorChain};
 use host_sim::{Disturbances, LoadEvent, Script, SimulatedAdc};
 

@@ -2,7 +2,7 @@
 //! simulator as the truth (issue 5: "≤ 1.2× CRLB at 100 ms at the calibration mass; bias
 //! ≤ 0.05% from 0.3× to 3× the calibration mass; f32 within 10% of f64").
 //!
-//! Every study here calibrates first: [`estimator_core::identify`] finds `(f_n, ζ)` and the
+//! Every study here calibrates first: [`estimator_core::sensor::identify`] finds `(f_n, ζ)` and the
 //! gain from three simulated drops of the calibration mass (seeds apart from the Monte Carlo
 //! seeds), and the estimators then run on that identified model, never on the true one.
 //!
@@ -15,10 +15,10 @@
 use std::cell::Cell;
 use std::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
 
-use estimator_core::AdcSource;
+use estimator_core::sensor::AdcSource;
+use estimator_core::sensor::{identify, Identified, IdentifyConfig, IdentifyError, LoadCellModel};
 use estimator_core::{
-    identify, Estimator, Identified, IdentifyConfig, IdentifyError, InitialState, InvalidReason,
-    LoadCellModel, ModelBank, ModelConfig, ModelEstimator, Real, State,
+    Estimator, InitialState, InvalidReason, ModelBank, ModelConfig, ModelEstimator, Real, State,
 };
 use host_sim::crlb;
 use host_sim::simulated::{REFERENCE_STEP_G, SNR_WINDOW_SAMPLES};

@@ -7,9 +7,10 @@
 use std::process::Command;
 
 use estimator_core::{
-    AdcSource, Estimator, InvalidReason, NoiseReference, Reading, Real, State, StepConfig,
-    StepEstimator,
+    Estimator, InvalidReason, NoiseReference, Reading, Real, State, StepConfig, StepEstimator,
 };
+
+use estimator_core::sensor::AdcSource;
 use host_sim::method::{measured_tare_reference, BuildContext, Method};
 use host_sim::montecarlo::tare_record;
 use host_sim::scene::Scene;

@@ -19,8 +19,8 @@
 
 use std::fmt::Write as _;
 
-use estimator_core::command::{self, CalibrationStore};
-use estimator_core::{
+use estimator_core::weighing::{self, CalibrationStore};
+use estimator_core::weighing::{
     Calibration, CalibrationFailure, Command, CommandConfig, CommandOutcome, CommandRefusal,
     Commands, ScaleEstimator,
 };
@@ -499,18 +499,18 @@ pub fn check(run: &RunLog) -> CommandReport {
 }
 
 /// The QEMU board's RAM store, on the host.
-struct RamStore([u8; estimator_core::calibration::RECORD_LEN]);
+struct RamStore([u8; estimator_core::weighing::RECORD_LEN]);
 
 impl CalibrationStore for RamStore {
     type Error = std::convert::Infallible;
     fn write_record(
         &mut self,
-        record: &[u8; estimator_core::calibration::RECORD_LEN],
+        record: &[u8; estimator_core::weighing::RECORD_LEN],
     ) -> Result<(), Self::Error> {
         self.0 = *record;
         Ok(())
     }
-    fn read_record(&self) -> Option<[u8; estimator_core::calibration::RECORD_LEN]> {
+    fn read_record(&self) -> Option<[u8; estimator_core::weighing::RECORD_LEN]> {
         Some(self.0)
     }
 }
@@ -521,13 +521,14 @@ impl CalibrationStore for RamStore {
 /// sample) and its log format. Predicts the QEMU run without QEMU; the byte arrives with
 /// no delay here, so this checks the scene and the decisions, QEMU checks the firmware.
 pub fn host_replay(seed: u64) -> RunLog {
-    use estimator_core::{AdcSource, RawSample};
+    use estimator_core::sensor::AdcSource;
+    use estimator_core::weighing::RawSample;
     let timeline = Timeline::new();
     let mut lines = Vec::new();
     let defaults = load_cell::nominal_calibration();
     let factory = load_cell::factory_calibration().expect("the factory calibration runs");
     let mut store = RamStore(factory.encode());
-    let (calibration, source) = command::load_calibration(&store, defaults);
+    let (calibration, source) = weighing::load_calibration(&store, defaults);
     lines.push(format!(
         "calibration counts_per_gram={} zero_counts={} source={source:?}",
         calibration.counts_per_gram, calibration.zero_counts
@@ -609,13 +610,13 @@ fn finish_calibration(
     sample: u32,
     result: Result<Calibration, CalibrationFailure>,
     store: &mut RamStore,
-    scale: &mut estimator_core::Scale<impl ScaleEstimator>,
+    scale: &mut estimator_core::weighing::Scale<impl ScaleEstimator>,
 ) -> String {
     let measured = match result {
         Ok(measured) => measured,
         Err(failure) => return format!("command sample={sample} calibrate=failed ({failure:?})"),
     };
-    match command::store_calibration(store, &measured) {
+    match weighing::store_calibration(store, &measured) {
         Ok(stored) => {
             scale.recalibrate(stored.counts_scale());
             format!(
@@ -640,7 +641,7 @@ mod tests {
     /// code: the demo and its e2e test see exactly what they saw before.
     #[test]
     fn the_demo_scene_is_the_reference_demo() {
-        use estimator_core::AdcSource;
+        use estimator_core::sensor::AdcSource;
         let mut firmware = load_cell::demo_scene();
         let mut reference = host_sim::SimulatedAdc::reference_demo(load_cell::DEMO_SEED);
         for sample in 0..16_000 {

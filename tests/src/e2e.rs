@@ -614,7 +614,7 @@ pub const FIRMWARE_WEIGHING_CONFIG: &str = "../firmware/weighing.toml";
 /// The firmware's weighing configuration (`firmware/weighing.toml`), read with host-sim's
 /// parser: the one the firmware's build script calls, so this is the `WEIGHING` constant
 /// the images are built with.
-pub fn firmware_weighing_config() -> Result<estimator_core::tuning::WeighingConfig> {
+pub fn firmware_weighing_config() -> Result<estimator_core::weighing::WeighingConfig> {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(FIRMWARE_WEIGHING_CONFIG);
     let (config, _precision) = host_sim::calibrate::load_config(&path)?;
     Ok(config)
@@ -624,8 +624,8 @@ pub fn firmware_weighing_config() -> Result<estimator_core::tuning::WeighingConf
 /// `firmware::pipeline::scale` calls it), with host-sim's sizes (those `estimate --config`
 /// runs: any order up to its capacity, its bank size). The firmware sizes the same type for
 /// its one configured method; the sizes hold the arrays, the arithmetic is the same.
-pub type ConfiguredScale = estimator_core::Scale<
-    estimator_core::tuning::WeighingEstimator<
+pub type ConfiguredScale = estimator_core::weighing::Scale<
+    estimator_core::weighing::WeighingEstimator<
         f32,
         { host_sim::montecarlo::CAPACITY },
         { host_sim::sensor::STATES },
@@ -635,22 +635,22 @@ pub type ConfiguredScale = estimator_core::Scale<
 
 /// [`ConfiguredScale`] for `weighing`, converting counts with `calibration`.
 pub fn configured_scale(
-    weighing: &estimator_core::tuning::WeighingConfig,
-    calibration: estimator_core::CountsScale,
+    weighing: &estimator_core::weighing::WeighingConfig,
+    calibration: estimator_core::weighing::CountsScale,
 ) -> Result<ConfiguredScale, estimator_core::ConfigError> {
-    estimator_core::Scale::configured(weighing, calibration)
+    estimator_core::weighing::Scale::configured(weighing, calibration)
 }
 
-/// Run the weighing core (`estimator_core::Scale`, the code the firmware's estimator task
+/// Run the weighing core (`estimator_core::weighing::Scale`, the code the firmware's estimator task
 /// runs, in `f32`) on the host over `samples` conversions of `adc`, and log readout lines
 /// in the firmware's format. Predicts the QEMU run without QEMU (same core, same model);
 /// used to choose the firmware's configuration and as a host-side check of the decisions.
-pub fn host_replay<E: estimator_core::ScaleEstimator>(
-    adc: &mut impl estimator_core::AdcSource,
-    scale: &mut estimator_core::Scale<E>,
+pub fn host_replay<E: estimator_core::weighing::ScaleEstimator>(
+    adc: &mut impl estimator_core::sensor::AdcSource,
+    scale: &mut estimator_core::weighing::Scale<E>,
     samples: u32,
 ) -> RunLog {
-    use estimator_core::RawSample;
+    use estimator_core::weighing::RawSample;
     let mut lines = Vec::new();
     let step = (SAMPLE_RATE_HZ / READOUT_HZ) as u32;
     for index in 0..samples {
@@ -683,12 +683,14 @@ pub fn host_replay<E: estimator_core::ScaleEstimator>(
 #[cfg(test)]
 mod host_replay_tests {
     use super::*;
-    use estimator_core::tuning::{
+    use estimator_core::sensor::AdcSource;
+    use estimator_core::weighing::{
         BankCandidate, WeighingConfig, WeighingEstimator, WeighingMethod,
     };
-    use estimator_core::{
-        AdcSource, CountsScale, Estimator, RawSample, Scale, ScaleConfig, ScaleEstimator, StepScale,
+    use estimator_core::weighing::{
+        CountsScale, RawSample, Scale, ScaleConfig, ScaleEstimator, StepScale,
     };
+    use estimator_core::Estimator;
     use host_sim::SimulatedAdc;
 
     /// The demo's load changes, in samples (0.3 s, 2.0 s, 2.5 s).
@@ -1020,7 +1022,8 @@ mod host_replay_tests {
         changes: &[u32],
         scale: &mut Scale<E>,
     ) -> CheckCount {
-        use estimator_core::{InvalidReason, ScaleFault, ScaleState};
+        use estimator_core::weighing::{ScaleFault, ScaleState};
+        use estimator_core::InvalidReason;
         let mut count = CheckCount::default();
         let mut flagged_before = false;
         // A true change happened and the scale has not declared one since.

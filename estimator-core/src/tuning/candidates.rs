@@ -24,49 +24,7 @@
 //! [`WeighingMethod::size_key`] is this order as a sortable key; [`CandidateGrid::get`]
 //! yields candidates in it.
 
-use core::fmt;
-
-/// A fully specified weighing method (what [`crate::tuning::WeighingConfig`] records).
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum WeighingMethod {
-    /// The data-driven estimator, least squares ([`crate::StepEstimator`]).
-    Step {
-        /// Model order n.
-        order: usize,
-        /// Block length D.
-        decimation: u16,
-        /// Forgetting factor λ at the decimated rate; 1 keeps a growing window.
-        forgetting: f64,
-    },
-    /// Bias-compensated least squares ([`crate::BiasCompensatedStepEstimator`]), with the
-    /// noise variance of [`crate::tuning::WeighingConfig::noise_variance_counts2`].
-    BiasCompensated {
-        /// Model order n.
-        order: usize,
-        /// Block length D.
-        decimation: u16,
-    },
-    /// Instrumental variables ([`crate::IvStepEstimator`]), delay `n + 1`, default floor.
-    InstrumentalVariable {
-        /// Model order n.
-        order: usize,
-        /// Block length D.
-        decimation: u16,
-    },
-    /// A [`crate::ModelBank`] of `candidates` models built by the physical law from the
-    /// identified model ([`crate::LoadCellModel::bank_configs`]), initial state estimated.
-    ModelBank {
-        /// Block length D of the fitted block means.
-        decimation: u16,
-        /// Number of candidate models K (the bank's const generic must equal it).
-        candidates: usize,
-        /// Lowest resonance, relative to the identified one.
-        ratio_min: f64,
-        /// Highest resonance, relative to the identified one.
-        ratio_max: f64,
-    },
-}
+use crate::weighing::{BankCandidate, WeighingMethod};
 
 /// The solver's place in the order of preference at one model order.
 fn solver_rank(method: &WeighingMethod) -> u32 {
@@ -80,26 +38,6 @@ fn solver_rank(method: &WeighingMethod) -> u32 {
 }
 
 impl WeighingMethod {
-    /// Model order n of a data-driven method; `None` for the bank.
-    pub fn order(&self) -> Option<usize> {
-        match *self {
-            WeighingMethod::Step { order, .. }
-            | WeighingMethod::BiasCompensated { order, .. }
-            | WeighingMethod::InstrumentalVariable { order, .. } => Some(order),
-            WeighingMethod::ModelBank { .. } => None,
-        }
-    }
-
-    /// Block length D.
-    pub fn decimation(&self) -> u16 {
-        match *self {
-            WeighingMethod::Step { decimation, .. }
-            | WeighingMethod::BiasCompensated { decimation, .. }
-            | WeighingMethod::InstrumentalVariable { decimation, .. }
-            | WeighingMethod::ModelBank { decimation, .. } => decimation,
-        }
-    }
-
     /// The order of preference as a key: smaller is preferred (see the module docs):
     /// `(family, order, solver, MAX − D)`, the bank after every data-driven method.
     pub fn size_key(&self) -> (u32, u32, u32, u32) {
@@ -114,65 +52,6 @@ impl WeighingMethod {
             None => (1, 0, solver_rank(self), inverse_decimation),
         }
     }
-}
-
-impl fmt::Display for WeighingMethod {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match *self {
-            WeighingMethod::Step {
-                order,
-                decimation,
-                forgetting,
-            } => {
-                write!(f, "step n={order} D={decimation}")?;
-                if forgetting != 1.0 {
-                    write!(f, " lambda={forgetting}")?;
-                }
-                Ok(())
-            }
-            WeighingMethod::BiasCompensated { order, decimation } => {
-                write!(f, "bias-compensated n={order} D={decimation}")
-            }
-            WeighingMethod::InstrumentalVariable { order, decimation } => {
-                write!(f, "instrumental-variable n={order} D={decimation}")
-            }
-            WeighingMethod::ModelBank {
-                decimation,
-                candidates,
-                ratio_min,
-                ratio_max,
-            } => write!(
-                f,
-                "model bank D={decimation} K={candidates} ratios {ratio_min}-{ratio_max}"
-            ),
-        }
-    }
-}
-
-/// The model bank a grid ends with.
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct BankCandidate {
-    /// Block length D.
-    pub decimation: u16,
-    /// Number of candidate models K.
-    pub candidates: usize,
-    /// Lowest and highest resonance relative to the identified one.
-    pub ratio_min: f64,
-    /// See `ratio_min`.
-    pub ratio_max: f64,
-}
-
-impl BankCandidate {
-    /// The bank host-sim's model-based study settled on: D = 8, 33 candidates 2% apart over
-    /// frequency ratios 0.68–1.30, which covers 0.3×–3× the calibration mass on the
-    /// reference cell with a candidate to spare at each end.
-    pub const REFERENCE: Self = Self {
-        decimation: 8,
-        candidates: 33,
-        ratio_min: 0.68,
-        ratio_max: 1.30,
-    };
 }
 
 /// Every candidate calibration may try, generated in the order of preference.

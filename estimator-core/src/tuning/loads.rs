@@ -40,16 +40,12 @@
 //! 0.1% of a 41 g load (0.041 g) is beyond the reach of every method at its 95th percentile
 //! (1.96 × 0.026 = 0.051 g).
 
-use crate::loadcell::LoadCellModel;
 use crate::reading::ConfigError;
+use crate::sensor::LoadCellModel;
 
-use super::config::Prediction;
 use super::synthetic::Synthetic;
+use crate::weighing::{LoadScene, MAX_LOADS, MAX_SCENES};
 
-/// The most loads spaced over a range.
-pub const MAX_LOADS: usize = 8;
-/// The most scenes scored: the calibration mass and two resonances at each load.
-pub const MAX_SCENES: usize = 1 + 2 * MAX_LOADS;
 /// Loads spaced over the range unless asked otherwise.
 pub const DEFAULT_LOADS: usize = 4;
 /// The default range, relative to the calibration mass.
@@ -57,89 +53,6 @@ pub const DEFAULT_RANGE_RELATIVE: (f64, f64) = (0.3, 3.0);
 /// Headroom kept below a rail at the noise-free peak of a drop, in noise standard deviations
 /// (a sample beyond 5σ: about 3 in 10⁷).
 pub const SATURATION_MARGIN_SIGMA: f64 = 5.0;
-
-/// One synthetic scene: a load and the resonance it rings at.
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct LoadScene {
-    /// The load dropped, g.
-    pub mass_g: f64,
-    /// Its resonance relative to the calibrated one (damping ratio scaled alike).
-    pub frequency_ratio: f64,
-}
-
-/// A method's figures at one scene.
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct LoadScore {
-    /// The scene.
-    pub scene: LoadScene,
-    /// The RMS error no method can beat there (see the module docs), g.
-    pub noise_floor_g: f64,
-    /// The Monte Carlo's figures at the readout.
-    pub prediction: Prediction,
-}
-
-impl LoadScore {
-    /// The 95%/95% bound over the target at this load (≤ 1: met).
-    pub fn bound_over_target(&self, target_relative: f64) -> f64 {
-        self.prediction.p95_upper_g / (target_relative * self.scene.mass_g)
-    }
-
-    /// The 95th percentile over the target at this load.
-    pub fn p95_over_target(&self, target_relative: f64) -> f64 {
-        self.prediction.p95_g / (target_relative * self.scene.mass_g)
-    }
-}
-
-/// The loads a configuration was scored at, and what it did at each.
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct LoadCoverage {
-    /// Lightest load of the range, g.
-    pub min_g: f64,
-    /// Heaviest load of the range, g.
-    pub max_g: f64,
-    /// Loads spaced over it (besides the calibration mass).
-    pub loads: u32,
-    /// The platform's moving mass, g; `None`: unknown, both ends scored.
-    pub platform_mass_g: Option<f64>,
-    /// Every scene scored, by mass then ratio (the first `scene_count`).
-    pub scores: [Option<LoadScore>; MAX_SCENES],
-}
-
-impl LoadCoverage {
-    /// Only the calibration mass (a configuration scored before load ranges existed).
-    pub fn calibration_mass_only(mass_g: f64, prediction: Prediction) -> Self {
-        let mut scores = [None; MAX_SCENES];
-        scores[0] = Some(LoadScore {
-            scene: LoadScene {
-                mass_g,
-                frequency_ratio: 1.0,
-            },
-            noise_floor_g: 0.0,
-            prediction,
-        });
-        Self {
-            min_g: mass_g,
-            max_g: mass_g,
-            loads: 1,
-            platform_mass_g: None,
-            scores,
-        }
-    }
-
-    /// The scene with the largest 95th percentile relative to its target.
-    pub fn worst(&self, target_relative: f64) -> Option<LoadScore> {
-        self.scores.iter().flatten().copied().reduce(|a, b| {
-            if b.p95_over_target(target_relative) > a.p95_over_target(target_relative) {
-                b
-            } else {
-                a
-            }
-        })
-    }
-}
 
 /// The frequency ratio of a load `mass_g` for a platform of `platform_mass_g` (infinite:
 /// 1, the dynamics do not change).
@@ -462,7 +375,7 @@ mod tests {
         // A model whose response is the step itself from the first sample (a = 0, b = 1,
         // c = G): Σ (∂y/∂M)² = (N + 1)·G², so the floor is σ/G·√(1/(N + 1) + 1/tare).
         let synthetic = Synthetic {
-            model: crate::model::SensorModel {
+            model: crate::estimators::model::SensorModel {
                 a: [[0.0]],
                 b: [1.0],
                 c: [2.0],

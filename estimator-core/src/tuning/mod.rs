@@ -2,21 +2,21 @@
 //! smallest weighing method that meets an accuracy target at a readout time, and say what it
 //! will do.
 //!
-//! [`calibrate`] does, with fixed memory (the drops and the Monte Carlo's run slots are the
+//! [`tune`] does, with fixed memory (the drops and the Monte Carlo's run slots are the
 //! caller's slices; one estimator at a time on the stack):
 //!
-//! 1. **Each drop** ([`onset`]): checks (NaN, saturation), the empty-pan zero, the noise
+//! 1. **Each drop** (`onset`): checks (NaN, saturation), the empty-pan zero, the noise
 //!    variance ([`crate::NoiseMeter`]) and the onset (two-sided CUSUM, backed off to the
 //!    start of the excursion). The drops are then tared **in place**.
-//! 2. **The sensor**: [`crate::identify()`] fits `(f_n, ζ)` and the static gain of the
-//!    [`crate::LoadCellModel`] (known Butterworth) to the drops from their onsets. The gain
+//! 2. **The sensor**: [`crate::sensor::identify()`] fits `(f_n, ζ)` and the static gain of the
+//!    [`crate::sensor::LoadCellModel`] (known Butterworth) to the drops from their onsets. The gain
 //!    the scale uses is the caller's, or else this one: the fitted step over the known mass,
 //!    i.e. the level the fitted transient settles to (a fit of the whole transient, far less
 //!    noisy than averaging a tail that still rings).
 //! 3. **The noise**: pooled over the drops' empty stretches. The Monte Carlo uses its upper
 //!    confidence value, `σ̂²·(1 + 2·√(3/M))` for `M` differences (two standard errors of the
 //!    meter), so that a lucky tare does not flatter the scores.
-//! 4. **The loads** ([`loads`]): the scale must hold the target, relative to the load, at
+//! 4. **The loads** (`loads`): the scale must hold the target, relative to the load, at
 //!    every load of a range (default 0.3×–3× the calibration mass, the top clipped to the
 //!    heaviest load whose overshoot the converter takes), not only at the calibration mass.
 //!    The identified model is moved to each load by the physical law; the platform's moving
@@ -25,7 +25,7 @@
 //!    each load is then scored at both ends of what physics allows. Each scene also gets its
 //!    noise floor (the Cramér–Rao bound with the tare), to tell a method's miss from the
 //!    sensor's.
-//! 5. **Scores** ([`synthetic`]): at each scene, `R` seeded synthetic drops of the moved
+//! 5. **Scores** (`synthetic`): at each scene, `R` seeded synthetic drops of the moved
 //!    model (the gain the drops showed, the measured noise, an empty stretch as long as the
 //!    shortest recorded one up to 2× the reference stretch), each run through the same onset
 //!    detection and tare, then the method twice: from the detected onset and from the
@@ -44,7 +44,7 @@
 //!    earlier start; both must be within the target. These drops also gave the model, the
 //!    gain and the noise, so this is a consistency check (it catches a sensor the identified
 //!    model does not describe), not an independent test.
-//! 7. **Choice**: candidates in the order of [`candidates`] (smallest model first); the first
+//! 7. **Choice**: candidates in the order of [`CandidateGrid`] (smallest model first); the first
 //!    that meets both and lies inside the stability map's valid region
 //!    ([`WeighingConfig::check_region`]: a data-driven `D` for the model's bandwidth, an
 //!    order of at least 3, a bank covering the loads) is chosen, and the larger ones are not
@@ -68,30 +68,27 @@
 //! ones are not scored. Host-sim's tests check the chosen configuration on fresh drops of its
 //! own simulator across the range.
 
-pub mod candidates;
-pub mod config;
-pub mod loads;
-pub mod onset;
-pub mod synthetic;
+mod candidates;
+mod loads;
+mod onset;
+pub(crate) mod synthetic;
 
-pub use candidates::{BankCandidate, CandidateGrid, WeighingMethod, STANDARD_DECIMATIONS};
-pub use config::{
-    Prediction, RegionError, WeighingConfig, WeighingEstimator, MAX_NYQUIST_OVER_BANDWIDTH,
-    MIN_DATA_DRIVEN_ORDER,
-};
+pub use candidates::{CandidateGrid, STANDARD_DECIMATIONS};
 pub use loads::{
-    platform_mass_from_resonances, LoadCoverage, LoadScene, LoadScore, DEFAULT_LOADS,
-    DEFAULT_RANGE_RELATIVE, MAX_LOADS, MAX_SCENES,
+    platform_mass_from_resonances, DEFAULT_LOADS, DEFAULT_RANGE_RELATIVE, SATURATION_MARGIN_SIGMA,
 };
-pub use onset::{summarise, summarise_drop, DropError, DropSummary, OnsetConfig};
+pub use onset::{summarise, summarise_drop, DropError, DropSummary};
 pub use synthetic::{upper_order_statistic, RunSlot, MIN_RUNS};
 
-use crate::identify::{identify, Identified, IdentifyConfig, IdentifyError};
-use crate::noise_meter::NoiseMeter;
+use crate::estimators::noise_meter::NoiseMeter;
+use crate::numerics::real::Real;
 use crate::reading::{ConfigError, Estimator};
-use crate::real::Real;
+use crate::sensor::{identify, Identified, IdentifyConfig, IdentifyError};
+use crate::weighing::{
+    cover_ratios, readout_samples, LoadCoverage, LoadScore, OnsetConfig, Prediction, RegionError,
+    WeighingConfig, WeighingEstimator, WeighingMethod, MAX_LOADS, MAX_SCENES,
+};
 
-use config::readout_samples;
 use synthetic::{run_key, score, Scoring, Synthetic};
 
 /// The most drops one calibration takes.
@@ -108,7 +105,7 @@ pub const MIN_RUNS_WHEN_FAILING: usize = 60;
 
 /// What calibration is asked to do.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CalibrationSettings {
+pub struct TuningSettings {
     /// The known mass dropped in every recording, g.
     pub mass_g: f64,
     /// The static gain to use, counts per gram; `None`: the one the drops show.
@@ -131,7 +128,7 @@ pub struct CalibrationSettings {
     pub min_load_g: Option<f64>,
     /// The heaviest load, g; it must land within the converter's rails. `None`: the upper
     /// end of [`DEFAULT_RANGE_RELATIVE`] × `mass_g`, clipped to the heaviest load whose
-    /// landing the converter takes ([`loads`]).
+    /// landing the converter takes (`loads`).
     pub max_load_g: Option<f64>,
     /// Loads spaced geometrically over the range, ends included (1..=[`MAX_LOADS`]).
     pub loads: usize,
@@ -141,7 +138,7 @@ pub struct CalibrationSettings {
     pub platform_mass_g: Option<f64>,
 }
 
-impl CalibrationSettings {
+impl TuningSettings {
     /// Drops of `mass_g` through a Butterworth low-pass of `filter_order` at
     /// `filter_cutoff_hz`, sampled at `sample_rate_hz`; the gain from the drops, seed 1.
     pub fn new(
@@ -179,7 +176,7 @@ impl CalibrationSettings {
     }
 
     /// The most scenes these settings score: the calibration mass, and each load at one
-    /// resonance (platform mass known) or two (unknown). [`calibrate`] takes `runs.len() /
+    /// resonance (platform mass known) or two (unknown). [`tune`] takes `runs.len() /
     /// max_scenes()` runs per scene; a scene that coincides with another leaves its slots
     /// unused.
     pub fn max_scenes(&self) -> usize {
@@ -259,7 +256,7 @@ impl CandidateScore {
 
 /// What calibration found.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Calibrated {
+pub struct Tuned {
     /// The configuration to write.
     pub config: WeighingConfig,
     /// The chosen candidate's scores.
@@ -283,7 +280,7 @@ pub struct Calibrated {
 /// Why calibration gave no configuration.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum CalibrationError {
+pub enum TuningError {
     /// An impossible setting (mass, readout, target, gain, onset or identification settings).
     Settings(ConfigError),
     /// No drops were given.
@@ -344,13 +341,13 @@ pub enum CalibrationError {
     },
 }
 
-impl From<ConfigError> for CalibrationError {
+impl From<ConfigError> for TuningError {
     fn from(e: ConfigError) -> Self {
-        CalibrationError::Settings(e)
+        TuningError::Settings(e)
     }
 }
 
-fn check_settings(settings: &CalibrationSettings) -> Result<(), ConfigError> {
+fn check_settings(settings: &TuningSettings) -> Result<(), ConfigError> {
     let positive = |v: f64| v.is_finite() && v > 0.0;
     if !positive(settings.mass_g) || settings.identify.mass_g != settings.mass_g {
         return Err(ConfigError::Gain);
@@ -452,7 +449,7 @@ fn confirm<T: Real, E: Estimator<T>>(
     check
 }
 
-/// Steps 1 and 2 of [`calibrate`] on their own: each drop checked (and required to hold the
+/// Steps 1 and 2 of [`tune`] on their own: each drop checked (and required to hold the
 /// readout after its onset), its zero, noise and onset found and the drop tared **in
 /// place**, then the model identified from the onsets at `settings.mass_g`. Calibration
 /// calls it; a caller that has drops of a second mass uses it to identify the resonance there
@@ -462,24 +459,24 @@ fn confirm<T: Real, E: Estimator<T>>(
 #[allow(clippy::result_large_err)]
 pub fn identify_drops<T: Real, const S: usize>(
     drops: &mut [&mut [T]],
-    settings: &CalibrationSettings,
-) -> Result<(Identified, [Option<DropSummary>; MAX_DROPS]), CalibrationError> {
+    settings: &TuningSettings,
+) -> Result<(Identified, [Option<DropSummary>; MAX_DROPS]), TuningError> {
     check_settings(settings)?;
     if drops.is_empty() {
-        return Err(CalibrationError::NoDrops);
+        return Err(TuningError::NoDrops);
     }
     if drops.len() > MAX_DROPS {
-        return Err(CalibrationError::TooManyDrops { drops: drops.len() });
+        return Err(TuningError::TooManyDrops { drops: drops.len() });
     }
     let readout = settings.readout_samples();
     // 1. Each drop: checks, zero, noise, onset; then tare in place.
     let mut summaries: [Option<DropSummary>; MAX_DROPS] = [None; MAX_DROPS];
     for (index, drop) in drops.iter_mut().enumerate() {
         let summary = summarise_drop(drop, &settings.onset)
-            .map_err(|error| CalibrationError::Drop { drop: index, error })?;
+            .map_err(|error| TuningError::Drop { drop: index, error })?;
         let needed = summary.onset + readout + 1;
         if drop.len() < needed {
-            return Err(CalibrationError::Drop {
+            return Err(TuningError::Drop {
                 drop: index,
                 error: DropError::TooShort {
                     samples: drop.len(),
@@ -502,8 +499,7 @@ pub fn identify_drops<T: Real, const S: usize>(
                 *slice = &drop[summary.onset..];
             }
         }
-        identify::<T, S>(&slices[..count], &settings.identify)
-            .map_err(CalibrationError::Identify)?
+        identify::<T, S>(&slices[..count], &settings.identify).map_err(TuningError::Identify)?
     };
     Ok((identified, summaries))
 }
@@ -516,30 +512,30 @@ pub fn identify_drops<T: Real, const S: usize>(
 /// `S` the model's states (2 + filter order), `K` the bank's size.
 // See `identify_drops` on the error's size.
 #[allow(clippy::result_large_err)]
-pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
+pub fn tune<T: Real, const N: usize, const S: usize, const K: usize>(
     drops: &mut [&mut [T]],
-    settings: &CalibrationSettings,
+    settings: &TuningSettings,
     grid: &CandidateGrid<'_>,
     runs: &mut [RunSlot],
     mut report: impl FnMut(&CandidateScore),
-) -> Result<Calibrated, CalibrationError> {
+) -> Result<Tuned, TuningError> {
     check_settings(settings)?;
     if drops.is_empty() {
-        return Err(CalibrationError::NoDrops);
+        return Err(TuningError::NoDrops);
     }
     if drops.len() > MAX_DROPS {
-        return Err(CalibrationError::TooManyDrops { drops: drops.len() });
+        return Err(TuningError::TooManyDrops { drops: drops.len() });
     }
     let max_scenes = settings.max_scenes();
     let runs_per_scene = runs.len() / max_scenes;
     let Some(upper_index) = upper_order_statistic(runs_per_scene, QUANTILE, CONFIDENCE) else {
-        return Err(CalibrationError::TooFewRuns {
+        return Err(TuningError::TooFewRuns {
             runs: runs.len(),
             needed: MIN_RUNS * max_scenes,
         });
     };
     if grid.is_empty() {
-        return Err(CalibrationError::NoCandidates);
+        return Err(TuningError::NoCandidates);
     }
     let sample_rate_hz = settings.identify.sample_rate_hz;
     let readout = settings.readout_samples();
@@ -553,7 +549,7 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
 
     // 3. The noise.
     let (raw_variance, relative_error) =
-        pooled_noise(drops, &summaries, 1).ok_or(CalibrationError::Settings(ConfigError::Model))?;
+        pooled_noise(drops, &summaries, 1).ok_or(TuningError::Settings(ConfigError::Model))?;
     let monte_carlo_variance = raw_variance * (1.0 + 2.0 * relative_error);
     let sigma = libm::sqrt(monte_carlo_variance);
     let (mut zero_sum, mut zero_weight) = (0.0, 0.0);
@@ -583,7 +579,7 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
         Some(high) => {
             let limit_g = saturation(high)?;
             if limit_g < high {
-                return Err(CalibrationError::LoadSaturates {
+                return Err(TuningError::LoadSaturates {
                     mass_g: high,
                     limit_g,
                 });
@@ -597,7 +593,7 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
         .unwrap_or(default_low * mass_g)
         .min(mass_g);
     if min_g > max_g {
-        return Err(CalibrationError::Settings(ConfigError::Range));
+        return Err(TuningError::Settings(ConfigError::Range));
     }
     let plan = if settings.calibration_mass_only() {
         loads::Plan::new(mass_g, mass_g, mass_g, 1, Some(0.0))
@@ -675,7 +671,7 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
     let mut config = WeighingConfig {
         method: grid
             .get(0, sample_rate_hz)
-            .ok_or(CalibrationError::NoCandidates)?,
+            .ok_or(TuningError::NoCandidates)?,
         counts_per_gram: gain,
         zero_counts,
         noise_variance_counts2: raw_variance,
@@ -744,7 +740,7 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
         candidate.onset.rail_low = f64::NEG_INFINITY;
         candidate.onset.rail_high = f64::INFINITY;
         let mut estimator = WeighingEstimator::<T, N, S, K>::with_method(&candidate, &method, 0.0)
-            .map_err(|error| CalibrationError::Candidate { method, error })?;
+            .map_err(|error| TuningError::Candidate { method, error })?;
         evaluated += 1;
 
         let mut sequence = [0usize; MAX_SCENES];
@@ -845,14 +841,14 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
 
     let Some((chosen, method_variance)) = chosen else {
         return Err(match best {
-            Some(best) => CalibrationError::NoneMeetsTarget {
+            Some(best) => TuningError::NoneMeetsTarget {
                 best: best.method,
                 prediction: best.prediction,
                 failed_load: best.failed_load,
                 recorded_failing: best.recorded.map(|check| check.failing),
                 evaluated,
             },
-            None => CalibrationError::NoCandidates,
+            None => TuningError::NoCandidates,
         });
     };
     config.method = chosen.method;
@@ -862,7 +858,7 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
     if let Some(check) = chosen.recorded {
         config.recorded_worst_error_g = check.worst_error_g;
     }
-    Ok(Calibrated {
+    Ok(Tuned {
         config,
         chosen,
         identified,
@@ -875,27 +871,11 @@ pub fn calibrate<T: Real, const N: usize, const S: usize, const K: usize>(
     })
 }
 
-/// Widen a bank of `candidates` models over `[ratio_min, ratio_max]` so that it spans the
-/// scored resonances `[low, high]` with one candidate beyond each end (the bank flags a best
-/// fit on its edge as out of range): unchanged when it already does, else
-/// `[low/s, high·s]` with the spacing `s = (high/low)^(1/(K − 3))`.
-fn cover_ratios(candidates: usize, ratio_min: &mut f64, ratio_max: &mut f64, low: f64, high: f64) {
-    if candidates < 4 || !(*ratio_max > *ratio_min) {
-        return;
-    }
-    let given_step = libm::pow(*ratio_max / *ratio_min, 1.0 / (candidates - 1) as f64);
-    if *ratio_min * given_step <= low && *ratio_max / given_step >= high {
-        return;
-    }
-    let step = libm::pow(high / low, 1.0 / (candidates - 3) as f64);
-    *ratio_min = low / step;
-    *ratio_max = high * step;
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::loadcell::LoadCellModel;
+    use crate::sensor::LoadCellModel;
+    use crate::weighing::BankCandidate;
 
     const MASS_G: f64 = 138.32;
     const ZERO: f64 = 16_764.0;
@@ -932,11 +912,11 @@ mod tests {
     }
 
     /// The calibration mass only: the machinery of one scene (the loads have their test).
-    fn settings() -> CalibrationSettings {
-        CalibrationSettings {
+    fn settings() -> TuningSettings {
+        TuningSettings {
             min_load_g: Some(MASS_G),
             max_load_g: Some(MASS_G),
-            ..CalibrationSettings::new(MASS_G, 0.1, 0.001, 4000.0, 3, 100.0)
+            ..TuningSettings::new(MASS_G, 0.1, 0.001, 4000.0, 3, 100.0)
         }
     }
 
@@ -956,18 +936,18 @@ mod tests {
     #[allow(clippy::result_large_err)]
     fn run(
         drops: &mut [[f64; EMPTY + RESPONSE]],
-        settings: &CalibrationSettings,
+        settings: &TuningSettings,
         grid: &CandidateGrid<'_>,
         runs: usize,
         report: impl FnMut(&CandidateScore),
-    ) -> Result<Calibrated, CalibrationError> {
+    ) -> Result<Tuned, TuningError> {
         let mut slots = [RunSlot::EMPTY; 300];
         let mut slices: [&mut [f64]; 3] = [&mut [], &mut [], &mut []];
         let count = drops.len().min(3);
         for (slice, drop) in slices.iter_mut().zip(drops.iter_mut()) {
             *slice = drop;
         }
-        calibrate::<f64, 8, 5, 1>(
+        tune::<f64, 8, 5, 1>(
             &mut slices[..count],
             settings,
             grid,
@@ -1037,7 +1017,7 @@ mod tests {
         // the recorded drops would show it too.
         settings.counts_per_gram = Some(73.25 * 1.02);
         match run(&mut drops, &settings, &small_grid(), 100, |_| {}) {
-            Err(CalibrationError::NoneMeetsTarget {
+            Err(TuningError::NoneMeetsTarget {
                 prediction,
                 evaluated,
                 ..
@@ -1055,99 +1035,99 @@ mod tests {
         let grid = small_grid();
         let mut drops = [recording(1), recording(2)];
         assert_eq!(
-            calibrate::<f64, 8, 5, 1>(
+            tune::<f64, 8, 5, 1>(
                 &mut [],
                 &settings(),
                 &grid,
                 &mut [RunSlot::EMPTY; 60],
                 |_| {}
             ),
-            Err(CalibrationError::NoDrops)
+            Err(TuningError::NoDrops)
         );
         let mut many: [&mut [f64]; MAX_DROPS + 1] = Default::default();
         assert_eq!(
-            calibrate::<f64, 8, 5, 1>(
+            tune::<f64, 8, 5, 1>(
                 &mut many,
                 &settings(),
                 &grid,
                 &mut [RunSlot::EMPTY; 60],
                 |_| {}
             ),
-            Err(CalibrationError::TooManyDrops { drops: 17 })
+            Err(TuningError::TooManyDrops { drops: 17 })
         );
         assert_eq!(
             run(&mut drops, &settings(), &grid, 58, |_| {}),
-            Err(CalibrationError::TooFewRuns {
+            Err(TuningError::TooFewRuns {
                 runs: 58,
                 needed: 59
             })
         );
         // Over a range, 59 runs at each scene: the calibration mass and two resonances at
         // each of 4 loads when the platform mass is unknown.
-        let ranged = CalibrationSettings::new(MASS_G, 0.1, 0.001, 4000.0, 3, 100.0);
+        let ranged = TuningSettings::new(MASS_G, 0.1, 0.001, 4000.0, 3, 100.0);
         assert_eq!(ranged.max_scenes(), 9);
         assert_eq!(
             run(&mut drops, &ranged, &grid, 300, |_| {}),
-            Err(CalibrationError::TooFewRuns {
+            Err(TuningError::TooFewRuns {
                 runs: 300,
                 needed: 59 * 9
             })
         );
         for broken in [
-            CalibrationSettings {
+            TuningSettings {
                 target_relative: 0.0,
                 ..settings()
             },
-            CalibrationSettings {
+            TuningSettings {
                 readout_s: f64::NAN,
                 ..settings()
             },
-            CalibrationSettings {
+            TuningSettings {
                 counts_per_gram: Some(0.0),
                 ..settings()
             },
-            CalibrationSettings {
+            TuningSettings {
                 mass_g: -1.0,
                 ..settings()
             },
-            CalibrationSettings {
+            TuningSettings {
                 loads: 0,
                 ..settings()
             },
-            CalibrationSettings {
+            TuningSettings {
                 loads: MAX_LOADS + 1,
                 ..settings()
             },
-            CalibrationSettings {
+            TuningSettings {
                 min_load_g: Some(200.0),
                 max_load_g: Some(100.0),
                 ..settings()
             },
-            CalibrationSettings {
+            TuningSettings {
                 min_load_g: Some(0.0),
                 ..settings()
             },
-            CalibrationSettings {
+            TuningSettings {
                 platform_mass_g: Some(-1.0),
                 ..settings()
             },
         ] {
             assert!(matches!(
                 run(&mut drops, &broken, &grid, 60, |_| {}),
-                Err(CalibrationError::Settings(_))
+                Err(TuningError::Settings(_))
             ));
         }
         let mut empty_grid = grid;
         empty_grid.max_order = 0;
         assert_eq!(
             run(&mut drops, &settings(), &empty_grid, 60, |_| {}),
-            Err(CalibrationError::NoCandidates)
+            Err(TuningError::NoCandidates)
         );
         // A NaN in the second drop is named with its index.
         drops[1][1500] = f64::NAN;
         assert_eq!(
             run(&mut drops, &settings(), &grid, 60, |_| {}),
-            Err(CalibrationError::Drop {
+            Err(TuningError::Drop {
                 drop: 1,
                 error: DropError::NonFinite { sample: 1500 }
             })
@@ -1156,14 +1136,14 @@ mod tests {
         let mut short = [recording(1)];
         let mut slice: [&mut [f64]; 1] = [&mut short[0][..EMPTY + 1200]];
         assert!(matches!(
-            calibrate::<f64, 8, 5, 1>(
+            tune::<f64, 8, 5, 1>(
                 &mut slice,
                 &settings(),
                 &grid,
                 &mut [RunSlot::EMPTY; 60],
                 |_| {}
             ),
-            Err(CalibrationError::Identify(IdentifyError::TooShort {
+            Err(TuningError::Identify(IdentifyError::TooShort {
                 drop: 0,
                 ..
             }))
@@ -1172,14 +1152,14 @@ mod tests {
         let mut drops = [recording(1)];
         let mut slice: [&mut [f64]; 1] = [&mut drops[0]];
         assert!(matches!(
-            calibrate::<f64, 1, 5, 1>(
+            tune::<f64, 1, 5, 1>(
                 &mut slice,
                 &settings(),
                 &grid,
                 &mut [RunSlot::EMPTY; 60],
                 |_| {}
             ),
-            Err(CalibrationError::Candidate {
+            Err(TuningError::Candidate {
                 method: WeighingMethod::Step { order: 2, .. },
                 error: ConfigError::Order { .. }
             })
@@ -1191,12 +1171,12 @@ mod tests {
         // Loads 0.5×–2× the mass (69 and 277 g) with the platform mass known (120 g, the
         // reference cell's): three scenes, 100 runs each. 0.2%: at 100 runs the bound allows
         // one run outside, and 0.1% of 69 g is within 2σ of the noise floor (0.028 g).
-        let ranged = CalibrationSettings {
+        let ranged = TuningSettings {
             min_load_g: Some(0.5 * MASS_G),
             max_load_g: Some(2.0 * MASS_G),
             loads: 2,
             platform_mass_g: Some(120.0),
-            ..CalibrationSettings::new(MASS_G, 0.1, 0.002, 4000.0, 3, 100.0)
+            ..TuningSettings::new(MASS_G, 0.1, 0.002, 4000.0, 3, 100.0)
         };
         assert_eq!(ranged.max_scenes(), 3);
         let mut drops = [recording(1), recording(2), recording(3)];
@@ -1245,7 +1225,7 @@ mod tests {
         // More scenes to meet can only keep or raise the choice: the calibration mass is
         // scored on the same synthetic drops (runs 0..R) either way.
         let mut again = [recording(1), recording(2), recording(3)];
-        let at_mass_settings = CalibrationSettings {
+        let at_mass_settings = TuningSettings {
             target_relative: 0.002,
             ..settings()
         };
@@ -1273,7 +1253,7 @@ mod tests {
         railed.max_load_g = Some(600.0);
         let mut again = [recording(1), recording(2), recording(3)];
         match run(&mut again, &railed, &small_grid(), 300, |_| {}) {
-            Err(CalibrationError::LoadSaturates { mass_g, limit_g }) => {
+            Err(TuningError::LoadSaturates { mass_g, limit_g }) => {
                 assert_eq!(mass_g, 600.0);
                 // (65,535 − 16,764)/73.25 = 666 g of static range; a drop overshoots to
                 // nearly twice its load.

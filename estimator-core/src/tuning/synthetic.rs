@@ -19,11 +19,11 @@
 //! it. Once more runs than that are outside, the method cannot meet the target and its
 //! remaining runs are skipped. `R` must be at least 59 (`0.95⁵⁹ < 0.05`).
 
-use crate::model::SensorModel;
+use crate::estimators::model::SensorModel;
+use crate::numerics::real::Real;
 use crate::reading::Estimator;
-use crate::real::Real;
 
-use super::config::Prediction;
+use crate::weighing::Prediction;
 
 const GOLDEN_GAMMA: u64 = 0x9E37_79B9_7F4A_7C15;
 

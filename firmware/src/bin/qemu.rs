@@ -11,7 +11,7 @@ use defmt_semihosting as _;
 
 #[rtic::app(device = firmware::mps2_an386, peripherals = false)]
 mod app {
-    use estimator_core::Command;
+    use estimator_core::weighing::Command;
     use firmware::mps2_an386::{CmsdkTimer, CmsdkUart, Interrupt, SYSTEM_CLOCK_HZ};
     use firmware::pipeline::{
         self, EstimatorStorage, Pipeline, Readout, SampleMessage, SampleQueue, QUEUE_CAPACITY,
@@ -66,7 +66,7 @@ mod app {
             Ok(factory) => factory.encode(),
             Err(error) => {
                 defmt::error!("factory calibration failed: {}", error);
-                [0xFF; estimator_core::calibration::RECORD_LEN]
+                [0xFF; estimator_core::weighing::RECORD_LEN]
             }
         };
         let store = RamCalibrationStore::with_record(record);
@@ -243,7 +243,8 @@ mod app {
     /// They run on the application's pipeline and restart it at the end.
     #[inline(never)]
     fn run_benchmarks(mut syst: cortex_m::peripheral::SYST, pipeline: &mut Pipeline) {
-        use estimator_core::{AdcSource, RawSample};
+        use estimator_core::sensor::AdcSource;
+        use estimator_core::weighing::RawSample;
         use firmware::pipeline::SampleMessage;
 
         bench::start(&mut syst);

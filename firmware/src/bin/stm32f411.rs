@@ -12,7 +12,7 @@ use defmt_rtt as _;
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
 mod app {
     use cortex_m::peripheral::DWT;
-    use estimator_core::{Command, KeyDebouncer, KeyPress, RawSample};
+    use estimator_core::weighing::{Command, KeyDebouncer, KeyPress, RawSample};
     use firmware::pipeline::{
         self, EstimatorStorage, Pipeline, Readout, SampleMessage, SampleQueue, QUEUE_CAPACITY,
         SAMPLE_RATE_HZ,

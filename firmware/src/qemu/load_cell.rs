@@ -6,7 +6,9 @@
 //! file (`tests::commands` includes it by path) and replay exactly what QEMU runs. It must
 //! never depend on the board.
 
-use estimator_core::{AdcSource, Calibration, CalibrationError};
+use estimator_core::sensor::AdcSource;
+
+use estimator_core::weighing::{Calibration, CalibrationError};
 use host_sim::{white_noise_for_snr, Disturbances, LoadEvent, Script, SensorChain, SimulatedAdc};
 
 /// The simulated cell with room for sixteen scripted load changes (the command scene

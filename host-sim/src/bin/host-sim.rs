@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
-use estimator_core::AdcSource;
+use estimator_core::sensor::AdcSource;
 use host_sim::calibrate;
 use host_sim::chart;
 use host_sim::estimate::{estimate_csv, estimate_with};

@@ -205,7 +205,7 @@ const WEIGHING_CONFIG_VAR: &str = "FIRMWARE_WEIGHING_CONFIG";
 
 /// The shipped `firmware/weighing.toml` and its precision.
 fn shipped_config() -> Result<(
-    estimator_core::tuning::WeighingConfig,
+    estimator_core::weighing::WeighingConfig,
     host_sim::montecarlo::Precision,
 )> {
     let shipped = crate::util::workspace_root().join("firmware/weighing.toml");
@@ -219,7 +219,7 @@ struct BenchVariant {
     /// The config file's stem under `target/xtask`.
     stem: &'static str,
     /// The method.
-    method: estimator_core::tuning::WeighingMethod,
+    method: estimator_core::weighing::WeighingMethod,
 }
 
 /// The step estimator at n = 7, D = 16 and the model bank calibration offers
@@ -227,11 +227,11 @@ struct BenchVariant {
 /// shipped load range (`WeighingConfig::bank_covering_loads`).
 fn bench_variants(
     (shipped, _): &(
-        estimator_core::tuning::WeighingConfig,
+        estimator_core::weighing::WeighingConfig,
         host_sim::montecarlo::Precision,
     ),
 ) -> Result<[BenchVariant; 2]> {
-    use estimator_core::tuning::BankCandidate;
+    use estimator_core::weighing::BankCandidate;
     let bank = shipped
         .bank_covering_loads(BankCandidate::REFERENCE)
         .context("the shipped load range gives no resonance ratios for a bank")?;
@@ -240,7 +240,7 @@ fn bench_variants(
             label: "the step estimator at n = 7, D = 16",
             stem: "weighing-step-n7-d16",
             // `ScaleConfig::DEFAULT_METHOD`: the step default the decisions were measured on.
-            method: estimator_core::ScaleConfig::DEFAULT_METHOD,
+            method: estimator_core::weighing::ScaleConfig::DEFAULT_METHOD,
         },
         BenchVariant {
             label: "the model bank (D = 8, K = 33, covering the shipped loads' resonances)",
@@ -254,12 +254,12 @@ fn bench_variants(
 /// the target directory (a build input, regenerated on every bench).
 fn variant_config(
     (config, precision): &(
-        estimator_core::tuning::WeighingConfig,
+        estimator_core::weighing::WeighingConfig,
         host_sim::montecarlo::Precision,
     ),
     variant: &BenchVariant,
 ) -> Result<PathBuf> {
-    let config = estimator_core::tuning::WeighingConfig {
+    let config = estimator_core::weighing::WeighingConfig {
         method: variant.method,
         ..*config
     };

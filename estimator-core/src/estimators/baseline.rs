@@ -15,14 +15,14 @@
 //! the settled average keeps that ringing (13–14× the Cramér–Rao bound at 1.5 s). Given the
 //! noise metered at tare ([`BaselineConfig::noise_reference`], at `D = block`), the `K` block
 //! means must also be consistent with a constant load: their sample variance over the block
-//! means' noise variance must stay below the threshold of `crate::consistency` (the F
+//! means' noise variance must stay below the threshold of `crate::estimators::consistency` (the F
 //! quantile at `K − 1` and the reference's degrees of freedom, times its allowance).
 //! Within the band but beyond the noise, the reading is `Invalid(ModelMismatch)` (not
 //! latched) instead of a number.
 
-use crate::consistency::{mismatch_threshold, NoiseReference};
+use crate::estimators::consistency::{mismatch_threshold, NoiseReference};
+use crate::numerics::real::Real;
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
-use crate::real::Real;
 
 /// Which baseline.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -31,17 +31,17 @@
 //! - Silent without a noise reference: the bias of an order below the sensor's (n = 1, 2 at
 //!   D = 16). Given the noise metered at tare ([`StepConfig::with_noise_reference`]), the
 //!   estimator compares what its fit leaves unexplained with what that noise would leave
-//!   and flags `Invalid(ModelMismatch)` beyond chance (`crate::consistency`).
+//!   and flags `Invalid(ModelMismatch)` beyond chance (`crate::estimators::consistency`).
 //! - Not detectable here, and so stated: the errors-in-variables bias of the fast-sampled
 //!   regression (D = 1): the fit absorbs the regressors' noise, so its residuals are smaller
 //!   than the noise model's, not larger. Calibration must choose a configuration inside the
 //!   map's valid region (`tuning::WeighingConfig::check_region`).
 
-use crate::consistency::{NoiseReference, ResidualCheck};
-use crate::factor::Factor;
-use crate::input::{check_sample, Decimator, DifferenceWindow};
+use crate::estimators::consistency::{NoiseReference, ResidualCheck};
+use crate::estimators::input::{check_sample, Decimator, DifferenceWindow};
+use crate::numerics::factor::Factor;
+use crate::numerics::real::Real;
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
-use crate::real::Real;
 
 /// The largest block length the decimator accepts.
 pub const MAX_DECIMATION: u16 = 1024;
@@ -85,7 +85,7 @@ pub struct StepConfig<T> {
     pub valid_max: T,
     /// The noise measured at tare, for the consistency check (`None`: no check, the
     /// default). With it, a fit that leaves more unexplained than this noise can explain is
-    /// flagged `Invalid(ModelMismatch)` (see `crate::consistency`).
+    /// flagged `Invalid(ModelMismatch)` (see `crate::estimators::consistency`).
     pub noise_reference: Option<NoiseReference<T>>,
 }
 

@@ -21,8 +21,8 @@
 //! one in use), apply a record the store cannot give back intact, or block: every function
 //! returns at once, so a board may call it from any task.
 
-use crate::calibration::{self, Calibration, CalibrationError, CalibrationSource, RECORD_LEN};
-use crate::scale::{Scale, ScaleEstimator, ScaleFault, ScaleReading, ScaleState};
+use super::calibration::{self, Calibration, CalibrationError, CalibrationSource, RECORD_LEN};
+use super::scale::{Scale, ScaleEstimator, ScaleFault, ScaleReading, ScaleState};
 
 /// What the operator asked for.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -484,7 +484,7 @@ impl KeyDebouncer {
 mod tests {
     extern crate std;
     use super::*;
-    use crate::scale::{CountsScale, RawSample, StepScale};
+    use crate::weighing::{CountsScale, RawSample, StepScale};
 
     const FS: f32 = 4000.0;
     /// The calibration the scale starts with.

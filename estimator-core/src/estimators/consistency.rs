@@ -82,8 +82,8 @@
 //! estimator (the mains is in the tare), and a model bank's grid (see [`crate::ModelBank`]).
 //! The first is refused by configuration instead (`crate::tuning::WeighingConfig::check_region`).
 
+use crate::numerics::real::Real;
 use crate::reading::ConfigError;
-use crate::real::Real;
 
 /// The designed probability that one reading of a correctly modelled record with white noise
 /// is flagged [`crate::InvalidReason::ModelMismatch`] (upper tail of the F distribution of the

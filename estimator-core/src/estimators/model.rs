@@ -24,12 +24,12 @@
 //! unknown and the error meets the bound with known model, onset and tare, but an onset
 //! error becomes a bias).
 
-use crate::consistency::{NoiseReference, ResidualCheck};
-use crate::factor::Factor;
-use crate::input::{check_sample, Decimator};
+use crate::estimators::consistency::{NoiseReference, ResidualCheck};
+use crate::estimators::input::{check_sample, Decimator};
+use crate::estimators::step::MAX_DECIMATION;
+use crate::numerics::factor::Factor;
+use crate::numerics::real::Real;
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
-use crate::real::Real;
-use crate::step::MAX_DECIMATION;
 
 /// A discrete-time single-output sensor model with `S` states, in the estimate's unit:
 /// `s(∞) = C·(I − A)⁻¹·B` is the static gain (raw units per unit of `u`).
@@ -172,7 +172,7 @@ pub struct ModelConfig<T, const S: usize> {
     pub valid_max: T,
     /// The noise measured at tare, for the consistency check (`None`: no check, the
     /// default): a fit whose residuals exceed what this noise explains is flagged
-    /// `Invalid(ModelMismatch)` (see `crate::consistency`). In a [`ModelBank`] only a single
+    /// `Invalid(ModelMismatch)` (see `crate::estimators::consistency`). In a [`ModelBank`] only a single
     /// candidate (`K = 1`) is checked; a grid is not (see there).
     pub noise_reference: Option<NoiseReference<T>>,
 }

@@ -13,7 +13,7 @@
 //! determine it; there are no square roots; forgetting scales only the diagonal `D`; and the
 //! row left after the rotations is the a-priori residual.
 
-use crate::real::Real;
+use crate::numerics::real::Real;
 
 /// The factor of a regression with `N` leading and `E` trailing columns.
 #[derive(Clone, Debug)]

@@ -29,18 +29,18 @@
 //!   `OutsideModelRange`), and a single model (`K = 1`) serves only its calibration mass
 //!   (13–10⁴× the bound at ×0.9–×1.5 of its resonance, from 50 dB).
 
-use crate::bias_compensated::{BiasCompensatedConfig, BiasCompensatedStepEstimator};
-use crate::iv::{IvConfig, IvStepEstimator};
-use crate::loadcell::LoadCellModel;
-use crate::model::{InitialState, ModelBank};
-use crate::reading::{ConfigError, Estimator, Reading};
-use crate::real::Real;
-use crate::step::{StepConfig, StepEstimator};
+use crate::sensor::LoadCellModel;
 use core::fmt;
 
-use super::candidates::WeighingMethod;
-use super::loads::LoadCoverage;
-use super::onset::OnsetConfig;
+mod coverage;
+mod estimator;
+mod kind;
+mod onset;
+
+pub use coverage::{LoadCoverage, LoadScene, LoadScore, MAX_LOADS, MAX_SCENES};
+pub use estimator::WeighingEstimator;
+pub use kind::{BankCandidate, WeighingMethod};
+pub use onset::{OnsetConfig, MIN_REFERENCE_SAMPLES};
 
 /// What the Monte Carlo of calibration predicts for a method at the readout time.
 /// `Default`: no runs and every figure zero (a configuration calibration did not score).
@@ -65,7 +65,7 @@ pub struct Prediction {
     /// infinite error), g.
     pub p95_g: f64,
     /// A distribution-free upper 95% confidence bound on that percentile (an order
-    /// statistic; see [`super::synthetic::upper_order_statistic`]); infinite when the
+    /// statistic; see [`crate::tuning::upper_order_statistic`]); infinite when the
     /// method was stopped early.
     pub p95_upper_g: f64,
 }
@@ -250,10 +250,10 @@ impl WeighingConfig {
     /// The model bank `bank` widened as calibration widens its bank candidates, to cover
     /// this configuration's load range with a candidate to spare at each end (what
     /// [`Self::check_region`] requires); `None` when the load range gives no ratios.
-    pub fn bank_covering_loads(&self, bank: super::BankCandidate) -> Option<WeighingMethod> {
+    pub fn bank_covering_loads(&self, bank: BankCandidate) -> Option<WeighingMethod> {
         let (low, high) = self.needed_ratios()?;
         let (mut ratio_min, mut ratio_max) = (bank.ratio_min, bank.ratio_max);
-        super::cover_ratios(bank.candidates, &mut ratio_min, &mut ratio_max, low, high);
+        cover_ratios(bank.candidates, &mut ratio_min, &mut ratio_max, low, high);
         Some(WeighingMethod::ModelBank {
             decimation: bank.decimation,
             candidates: bank.candidates,
@@ -270,7 +270,7 @@ impl WeighingConfig {
         let calibration = self.calibration_mass_g;
         let platform = loads.platform_mass_g.unwrap_or(0.0);
         let ratio = |mass_g: f64| {
-            crate::loadcell::LoadCellModel::frequency_ratio_for_mass(calibration, platform, mass_g)
+            crate::sensor::LoadCellModel::frequency_ratio_for_mass(calibration, platform, mass_g)
         };
         let (a, b) = (ratio(loads.max_g), ratio(loads.min_g));
         let (low, high) = (a.min(b).min(1.0), a.max(b).max(1.0));
@@ -298,152 +298,39 @@ pub(crate) fn readout_samples(readout_s: f64, sample_rate_hz: f64) -> usize {
     }
 }
 
-/// The configured method as one estimator over samples with the zero removed, answering in
-/// grams. Capacity `N` for the data-driven methods, `S` states and `K` candidates for the
-/// bank (`K` must equal the configured candidate count).
-#[derive(Clone, Debug)]
-// One per scale, built once: the bank variant's size is the point of choosing a smaller one.
-#[allow(clippy::large_enum_variant)]
-pub enum WeighingEstimator<T: Real, const N: usize, const S: usize, const K: usize> {
-    /// [`WeighingMethod::Step`].
-    Step(StepEstimator<T, N>),
-    /// [`WeighingMethod::BiasCompensated`].
-    BiasCompensated(BiasCompensatedStepEstimator<T, N>),
-    /// [`WeighingMethod::InstrumentalVariable`].
-    InstrumentalVariable(IvStepEstimator<T, N>),
-    /// [`WeighingMethod::ModelBank`].
-    ModelBank(ModelBank<T, S, K>),
-}
-
-impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<T, N, S, K> {
-    /// The configured method for samples `code − zero_counts`; codes at or beyond the
-    /// config's rails (`onset.rail_low`, `onset.rail_high`) are flagged `OutOfRange`.
-    ///
-    /// A configuration outside the valid region ([`WeighingConfig::check_region`], which
-    /// says why) is refused as [`ConfigError::OutsideValidRegion`].
-    pub fn new(config: &WeighingConfig, zero_counts: f64) -> Result<Self, ConfigError> {
-        config
-            .check_region()
-            .map_err(|_| ConfigError::OutsideValidRegion)?;
-        Self::with_method(config, &config.method, zero_counts)
+/// Widen a bank of `candidates` models over `[ratio_min, ratio_max]` so that it spans the
+/// scored resonances `[low, high]` with one candidate beyond each end (the bank flags a best
+/// fit on its edge as out of range): unchanged when it already does, else
+/// `[low/s, high·s]` with the spacing `s = (high/low)^(1/(K − 3))`.
+pub(crate) fn cover_ratios(
+    candidates: usize,
+    ratio_min: &mut f64,
+    ratio_max: &mut f64,
+    low: f64,
+    high: f64,
+) {
+    if candidates < 4 || !(*ratio_max > *ratio_min) {
+        return;
     }
-
-    /// The configured method as a scale runs it ([`crate::scale::ScaleEstimator`]): for
-    /// samples in counts with the zero removed, answering in counts (gain 1, so a new
-    /// calibration of the scale does not rebuild it), with no range limit (the scale's ADC
-    /// flags its rails as saturated samples itself, and its zero moves with tracking). The
-    /// bias-compensated method keeps the configured noise variance: counts², which the gain
-    /// does not change.
-    pub fn in_counts(config: &WeighingConfig) -> Result<Self, ConfigError> {
-        config
-            .check_region()
-            .map_err(|_| ConfigError::OutsideValidRegion)?;
-        let mut in_counts = *config;
-        in_counts.counts_per_gram = 1.0;
-        in_counts.onset.rail_low = f64::NEG_INFINITY;
-        in_counts.onset.rail_high = f64::INFINITY;
-        Self::with_method(&in_counts, &config.method, 0.0)
+    let given_step = libm::pow(*ratio_max / *ratio_min, 1.0 / (candidates - 1) as f64);
+    if *ratio_min * given_step <= low && *ratio_max / given_step >= high {
+        return;
     }
-
-    /// Any method with the constants of `config` (calibration uses it to try candidates),
-    /// without the valid-region check.
-    pub fn with_method(
-        config: &WeighingConfig,
-        method: &WeighingMethod,
-        zero_counts: f64,
-    ) -> Result<Self, ConfigError> {
-        if !zero_counts.is_finite() {
-            return Err(ConfigError::Range);
-        }
-        // Integer codes: a code strictly between the rails is at least half a code inside.
-        let (low, high) = (
-            T::from_f64(config.onset.rail_low + 0.5 - zero_counts),
-            T::from_f64(config.onset.rail_high - 0.5 - zero_counts),
-        );
-        let gain = T::from_f64(config.counts_per_gram);
-        let step = |order: usize, decimation: u16, forgetting: f64| {
-            StepConfig::new(order, gain)
-                .with_decimation(decimation)
-                .with_forgetting(T::from_f64(forgetting))
-                .with_valid_range(low, high)
-        };
-        Ok(match *method {
-            WeighingMethod::Step {
-                order,
-                decimation,
-                forgetting,
-            } => Self::Step(StepEstimator::new(step(order, decimation, forgetting))?),
-            WeighingMethod::BiasCompensated { order, decimation } => Self::BiasCompensated(
-                BiasCompensatedStepEstimator::new(BiasCompensatedConfig::new(
-                    step(order, decimation, 1.0),
-                    T::from_f64(config.noise_variance_counts2),
-                ))?,
-            ),
-            WeighingMethod::InstrumentalVariable { order, decimation } => {
-                Self::InstrumentalVariable(IvStepEstimator::new(IvConfig::new(step(
-                    order, decimation, 1.0,
-                )))?)
-            }
-            WeighingMethod::ModelBank {
-                decimation,
-                candidates,
-                ratio_min,
-                ratio_max,
-            } => {
-                if candidates != K {
-                    return Err(ConfigError::Model);
-                }
-                let mut model = config.model;
-                model.counts_per_gram = config.counts_per_gram;
-                let configs = model
-                    .bank_configs::<T, S, K>(
-                        ratio_min,
-                        ratio_max,
-                        decimation,
-                        InitialState::Unknown,
-                    )?
-                    .map(|c| c.with_valid_range(low, high));
-                Self::ModelBank(ModelBank::new(configs)?)
-            }
-        })
-    }
-}
-
-impl<T: Real, const N: usize, const S: usize, const K: usize> Estimator<T>
-    for WeighingEstimator<T, N, S, K>
-{
-    fn push(&mut self, sample: T) -> Reading<T> {
-        match self {
-            Self::Step(e) => e.push(sample),
-            Self::BiasCompensated(e) => e.push(sample),
-            Self::InstrumentalVariable(e) => e.push(sample),
-            Self::ModelBank(e) => e.push(sample),
-        }
-    }
-
-    fn push_missing(&mut self) -> Reading<T> {
-        match self {
-            Self::Step(e) => e.push_missing(),
-            Self::BiasCompensated(e) => e.push_missing(),
-            Self::InstrumentalVariable(e) => e.push_missing(),
-            Self::ModelBank(e) => e.push_missing(),
-        }
-    }
-
-    fn reset(&mut self) {
-        match self {
-            Self::Step(e) => e.reset(),
-            Self::BiasCompensated(e) => e.reset(),
-            Self::InstrumentalVariable(e) => e.reset(),
-            Self::ModelBank(e) => e.reset(),
-        }
-    }
+    let step = libm::pow(high / low, 1.0 / (candidates - 3) as f64);
+    *ratio_min = low / step;
+    *ratio_max = high * step;
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::reading::{InvalidReason, State};
+    use crate::estimators::bias_compensated::{
+        BiasCompensatedConfig, BiasCompensatedStepEstimator,
+    };
+    use crate::estimators::iv::{IvConfig, IvStepEstimator};
+    use crate::estimators::model::{InitialState, ModelBank};
+    use crate::estimators::step::{StepConfig, StepEstimator};
+    use crate::reading::{ConfigError, Estimator, InvalidReason, State};
 
     fn config(method: WeighingMethod) -> WeighingConfig {
         WeighingConfig {
@@ -483,7 +370,8 @@ mod tests {
         .model
         .sensor_model::<f64, 5>()
         .unwrap();
-        let synthetic = super::super::synthetic::Synthetic {
+        // Test data only: the tuning layer's seeded synthetic drop of the model.
+        let synthetic = crate::tuning::synthetic::Synthetic {
             model,
             mass_g: 138.32,
             sigma: 32.6,

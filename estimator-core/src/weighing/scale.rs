@@ -50,7 +50,7 @@
 //!
 //! ## The consistency check
 //! With [`ScaleConfig::consistency_check`] the scale meters the noise of the empty pan
-//! itself and checks every later run against it (`crate::consistency`): a fit that leaves
+//! itself and checks every later run against it (`crate::estimators::consistency`): a fit that leaves
 //! more unexplained than that noise can is flagged `Invalid(ModelMismatch)`.
 //! - **Metering.** A [`crate::NoiseMeter`] at the estimator's `D` is fed the centred raw
 //!   counts of every sample on which the reading is empty and stable *and* the run has been
@@ -58,7 +58,7 @@
 //!   before, and on the demo's removal a window metered on the ringing empty pan read 10³–10⁴
 //!   times the noise). It meters windows of `noise_window_samples` (0.3 s: `M` = 49
 //!   differences at D = 24, 74 at D = 16, relative standard errors `√(3/M)` of 25% and 20%,
-//!   the tare on which the check's allowance was measured, `crate::consistency`). A
+//!   the tare on which the check's allowance was measured, `crate::estimators::consistency`). A
 //!   complete window becomes the reference once the pan stayed empty and stable for
 //!   `noise_guard_samples` more (50 ms: a load landing in the window's last samples is
 //!   detected by then, 18–24 ms for the demo's drops, and the demo allows 50 ms; a drop
@@ -87,14 +87,14 @@
 
 use core::mem::MaybeUninit;
 
-use crate::bias_compensated::BiasCompensatedStepEstimator;
-use crate::consistency::NoiseReference;
-use crate::iv::IvStepEstimator;
-use crate::model::ModelBank;
-use crate::noise_meter::NoiseMeter;
+use super::method::{WeighingConfig, WeighingEstimator, WeighingMethod};
+use crate::estimators::bias_compensated::BiasCompensatedStepEstimator;
+use crate::estimators::consistency::NoiseReference;
+use crate::estimators::iv::IvStepEstimator;
+use crate::estimators::model::ModelBank;
+use crate::estimators::noise_meter::NoiseMeter;
+use crate::estimators::step::{StepConfig, StepEstimator};
 use crate::reading::{ConfigError, Estimator, InvalidReason, State};
-use crate::step::{StepConfig, StepEstimator};
-use crate::tuning::{WeighingConfig, WeighingEstimator, WeighingMethod};
 
 /// An estimator the scale can run: fed ADC counts with the zero removed, answering in
 /// counts (built with a gain of 1), its residual a-priori and in counts.
@@ -104,7 +104,7 @@ pub trait ScaleEstimator: Estimator<f32> {
     fn samples_per_update(&self) -> u32;
 
     /// Check the runs after the next reset against the noise `reference` in counts², at
-    /// this estimator's `D` (`None`: no check; see `crate::consistency`). A reference that
+    /// this estimator's `D` (`None`: no check; see `crate::estimators::consistency`). A reference that
     /// is not finite and positive is refused and nothing changes. Allocation-free.
     fn set_noise_reference(
         &mut self,
@@ -301,7 +301,7 @@ pub struct ScaleConfig {
     /// slowly added load is not tracked away).
     pub zero_tracking_rate_g_per_s: f32,
     /// Check every run after the first metered empty period against the noise metered on
-    /// the empty pan (`crate::consistency`; see the module docs, "The consistency check").
+    /// the empty pan (`crate::estimators::consistency`; see the module docs, "The consistency check").
     pub consistency_check: bool,
     /// Raw samples of one noise metering: the empty, stable pan's noise is metered over
     /// this many samples at a time (block means of the estimator's `D`).
@@ -399,7 +399,7 @@ impl ScaleConfig {
     }
 }
 
-/// Gain and zero the scale converts counts with (see `crate::calibration`).
+/// Gain and zero the scale converts counts with (see `crate::weighing::calibration`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct CountsScale {
@@ -1310,8 +1310,8 @@ mod tests {
 
     /// A weighing configuration of `method` for the test cell (gain and noise in counts).
     fn weighing(method: WeighingMethod) -> WeighingConfig {
-        use crate::loadcell::LoadCellModel;
-        use crate::tuning::{LoadCoverage, OnsetConfig, Prediction};
+        use crate::sensor::LoadCellModel;
+        use crate::weighing::{LoadCoverage, OnsetConfig, Prediction};
         let prediction = Prediction::default();
         WeighingConfig {
             method,

@@ -1,8 +1,8 @@
 //! The input stage every data-driven estimator shares: sample checks, block averaging and
 //! the window of differences that forms the Hankel regressor.
 
+use crate::numerics::real::Real;
 use crate::reading::InvalidReason;
-use crate::real::Real;
 
 /// Refuse a sample that is not finite or lies outside `[min, max]`.
 #[inline]

@@ -1,7 +1,7 @@
 //! The parametric load-cell model: a mechanical second-order mode `(f_n, ζ)` in series with
 //! a known Butterworth low-pass, a static gain and a sample rate, discretised exactly.
 //!
-//! It is what calibration identifies ([`crate::identify`]) and what the model-based
+//! It is what calibration identifies ([`crate::sensor::identify`]) and what the model-based
 //! estimators run on ([`crate::ModelEstimator`], [`crate::ModelBank`]). Its load
 //! dependence is the physical one: with stiffness `k` and damping `c` fixed,
 //! `ω² = k/(m_platform + M)` and `2ζω = c/(m_platform + M)`, so a cell that rings `r` times
@@ -9,7 +9,7 @@
 //! ([`LoadCellModel::with_frequency_ratio`]).
 //!
 //! What it must never do: discretise through transfer-function polynomials (the ZOH is a
-//! matrix exponential, [`crate::expm::zoh`]), or hand out a model with a NaN in it.
+//! matrix exponential, [`crate::numerics::expm::zoh`]), or hand out a model with a NaN in it.
 //!
 //! ## States (continuous time), all in grams of equivalent static load
 //! So that every matrix entry is O(1) after discretisation and `f32` keeps its precision:
@@ -27,10 +27,10 @@
 //! with the Butterworth pole angles `φ_j = π(N + 1 − 2j)/(2N)`, `j = 1..=N/2`, measured from
 //! the negative real axis. `S = 2 + N` states.
 
-use crate::expm;
-use crate::model::{InitialState, ModelConfig, SensorModel};
+use crate::estimators::model::{InitialState, ModelConfig, SensorModel};
+use crate::numerics::expm;
+use crate::numerics::real::Real;
 use crate::reading::ConfigError;
-use crate::real::Real;
 
 /// A load cell with its platform, amplifier low-pass and converter, as the estimators see it.
 #[derive(Clone, Copy, Debug, PartialEq)]

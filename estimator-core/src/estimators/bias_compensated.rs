@@ -80,14 +80,14 @@
 //!   magnitude better than either variant at full rate; keep IV and BCLS for
 //!   well-excited, low-order sensors like the thesis scene, or as a bias check. The tests
 //!   in `tests/eiv.rs` pin each of these statements.
-use crate::consistency::{
+use crate::estimators::consistency::{
     difference_correlation, difference_noise_gain, NoiseReference, ResidualCheck,
 };
-use crate::factor::Factor;
-use crate::input::{check_sample, Decimator, DifferenceWindow};
+use crate::estimators::input::{check_sample, Decimator, DifferenceWindow};
+use crate::estimators::step::{identifiability_floor, recentre, StepConfig};
+use crate::numerics::factor::Factor;
+use crate::numerics::real::Real;
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
-use crate::real::Real;
-use crate::step::{identifiability_floor, recentre, StepConfig};
 
 /// Configuration of a [`BiasCompensatedStepEstimator`].
 #[derive(Clone, Copy, Debug, PartialEq)]

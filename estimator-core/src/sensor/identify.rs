@@ -18,11 +18,11 @@
 //! What it must never do: return parameters it could not identify. Short, flat or
 //! non-finite data, and a minimum on the edge of the search range, are typed errors.
 
-use crate::loadcell::LoadCellModel;
-use crate::model::{InitialState, ModelConfig, ModelEstimator};
+use crate::estimators::model::{InitialState, ModelConfig, ModelEstimator};
+use crate::estimators::step::MAX_DECIMATION;
+use crate::numerics::real::Real;
 use crate::reading::{ConfigError, Estimator};
-use crate::real::Real;
-use crate::step::MAX_DECIMATION;
+use crate::sensor::LoadCellModel;
 
 /// What identification needs to know and where it searches.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -417,7 +417,7 @@ fn check_config<const S: usize>(config: &IdentifyConfig) -> Result<(), IdentifyE
         && config.damping_max.is_finite()
         && config.frequency_max_hz > config.frequency_min_hz
         && config.damping_max > config.damping_min
-        && config.damping_max <= crate::loadcell::MAX_DAMPING_RATIO
+        && config.damping_max <= crate::sensor::MAX_DAMPING_RATIO
         && config.frequency_points >= 3
         && config.damping_points >= 3
         && positive(config.tolerance)

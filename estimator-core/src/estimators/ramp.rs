@@ -15,19 +15,19 @@
 //! LTI sensor; the intercept needs τ, calibrated with a reference mass (`lag_s`). The same
 //! recursive engine as the step estimator solves it, with `[t, 1]` as trailing columns.
 
-use crate::consistency::ResidualCheck;
-use crate::factor::Factor;
-use crate::input::{check_sample, Decimator, DifferenceWindow};
+use crate::estimators::consistency::ResidualCheck;
+use crate::estimators::input::{check_sample, Decimator, DifferenceWindow};
+use crate::estimators::step::StepConfig;
+use crate::numerics::factor::Factor;
+use crate::numerics::real::Real;
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
-use crate::real::Real;
-use crate::step::StepConfig;
 
 /// Configuration of a [`RampEstimator`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct RampConfig<T> {
     /// Order, gain, forgetting, decimation, valid range and noise reference, as for the step
-    /// estimator (the consistency check on second differences, `crate::consistency`).
+    /// estimator (the consistency check on second differences, `crate::estimators::consistency`).
     pub regression: StepConfig<T>,
     /// Time between raw samples, in seconds: the slope is per second.
     pub sample_period_s: T,

@@ -44,7 +44,7 @@
 //! non-finite state latches `NonFiniteUpdate`; bad samples latch as in `StepEstimator`.
 //!
 //! ## Where it wins and where it loses
-//! Measured by `tests/eiv.rs`; the table and the verdict are in [`crate::bias_compensated`]'s
+//! Measured by `tests/eiv.rs`; the table and the verdict are in [`crate::estimators::bias_compensated`]'s
 //! docs. On the thesis's second-order scene IV removes the LS bias at the same variance
 //! (thesis §4.2.4). On the 4 kHz load cell at D = 1 the delayed differences are weak, noisy
 //! instruments: IV removes most of the 4–6 g LS bias, but without the identifiability floor
@@ -54,15 +54,15 @@
 //! variance (1.3–1.6× the LS RMS). A delay of `2n + 1` helps at D = 1 (median error 0.38 g
 //! against 1.1 g) and hurts at D = 12.
 
-use crate::consistency::{
+use crate::estimators::consistency::{
     difference_correlation, difference_noise_gain, NoiseReference, ResidualCheck,
 };
-use crate::factor::{apply, rotation};
-use crate::input::{check_sample, Decimator};
+use crate::estimators::input::{check_sample, Decimator};
+use crate::estimators::step::StepConfig;
+use crate::numerics::factor::{apply, rotation};
+use crate::numerics::real::Real;
+use crate::numerics::square::{Column, SolveError, Square};
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
-use crate::real::Real;
-use crate::square::{Column, SolveError, Square};
-use crate::step::StepConfig;
 
 /// The ring of past differences holds `HISTORY_BLOCKS · N` values.
 const HISTORY_BLOCKS: usize = 4;

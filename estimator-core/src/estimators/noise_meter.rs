@@ -17,10 +17,10 @@
 //! compensation needs. It must never be fed samples with a load on the pan: a load step
 //! is not a slow drift.
 
-use crate::input::{check_sample, Decimator};
+use crate::estimators::input::{check_sample, Decimator};
+use crate::estimators::step::MAX_DECIMATION;
+use crate::numerics::real::Real;
 use crate::reading::{ConfigError, InvalidReason};
-use crate::real::Real;
-use crate::step::MAX_DECIMATION;
 
 /// A running, allocation-free noise-variance meter. See the module docs.
 #[derive(Clone, Debug)]

@@ -10,7 +10,7 @@
 //! `magic "WCAL" | version u16 | length u16 | counts_per_gram f32 | zero_counts f32 | crc32`
 //! where the CRC-32 (IEEE 802.3, reflected, as zlib's `crc32`) covers the first 16 bytes.
 
-use crate::scale::CountsScale;
+use super::scale::CountsScale;
 
 /// Bytes of an encoded record.
 pub const RECORD_LEN: usize = 20;

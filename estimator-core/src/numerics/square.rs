@@ -4,7 +4,7 @@
 //! after row and column equilibration; used by the instrumental-variable estimator, whose
 //! normal equations are square but not symmetric.
 
-use crate::real::Real;
+use crate::numerics::real::Real;
 
 /// A vector of length `n + 1`: `n` leading entries and the trailing one.
 #[derive(Clone, Copy, Debug)]

@@ -23,10 +23,12 @@
 //!   estimate (`offset`): kept as the load itself, in `f32` it stalled over long runs (22×
 //!   the steady-state bound after 10⁶ samples at λ = 1, D = 1, against 3.5× in `f64`).
 
-use crate::consistency::{difference_correlation, difference_noise_gain, ResidualCheck};
+use crate::estimators::consistency::{
+    difference_correlation, difference_noise_gain, ResidualCheck,
+};
+use crate::estimators::step::{identifiability_floor, StepConfig};
+use crate::numerics::real::Real;
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
-use crate::real::Real;
-use crate::step::{identifiability_floor, StepConfig};
 
 /// Covariance-form RLS for the data-driven step estimator, capacity `N` (order ≤ N).
 /// `P` must be `N + 1` (the number of unknowns); checked at construction.

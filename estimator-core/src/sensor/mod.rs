@@ -1,0 +1,15 @@
+//! The sensor side: the converter seam the boards and the simulator implement
+//! ([`AdcSource`]), the physical load-cell model (a mechanical mode in series with the
+//! known anti-alias filter, [`LoadCellModel`]) and its identification from recorded drops
+//! ([`identify()`]).
+//!
+//! What must never happen here: an identification that returns a model it did not fit
+//! (every refusal is an [`IdentifyError`]).
+
+mod adc;
+mod identify;
+mod loadcell;
+
+pub use adc::{AdcError, AdcSource};
+pub use identify::{identify, Identified, IdentifyConfig, IdentifyError};
+pub use loadcell::{LoadCellModel, MAX_DAMPING_RATIO};

@@ -1,0 +1,152 @@
+//! The configured method as one estimator: the enum the scale runs.
+
+use crate::estimators::bias_compensated::{BiasCompensatedConfig, BiasCompensatedStepEstimator};
+use crate::estimators::iv::{IvConfig, IvStepEstimator};
+use crate::estimators::model::{InitialState, ModelBank};
+use crate::estimators::step::{StepConfig, StepEstimator};
+use crate::numerics::real::Real;
+use crate::reading::{ConfigError, Estimator, Reading};
+
+use super::{WeighingConfig, WeighingMethod};
+
+/// The configured method as one estimator over samples with the zero removed, answering in
+/// grams. Capacity `N` for the data-driven methods, `S` states and `K` candidates for the
+/// bank (`K` must equal the configured candidate count).
+#[derive(Clone, Debug)]
+// One per scale, built once: the bank variant's size is the point of choosing a smaller one.
+#[allow(clippy::large_enum_variant)]
+pub enum WeighingEstimator<T: Real, const N: usize, const S: usize, const K: usize> {
+    /// [`WeighingMethod::Step`].
+    Step(StepEstimator<T, N>),
+    /// [`WeighingMethod::BiasCompensated`].
+    BiasCompensated(BiasCompensatedStepEstimator<T, N>),
+    /// [`WeighingMethod::InstrumentalVariable`].
+    InstrumentalVariable(IvStepEstimator<T, N>),
+    /// [`WeighingMethod::ModelBank`].
+    ModelBank(ModelBank<T, S, K>),
+}
+
+impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<T, N, S, K> {
+    /// The configured method for samples `code − zero_counts`; codes at or beyond the
+    /// config's rails (`onset.rail_low`, `onset.rail_high`) are flagged `OutOfRange`.
+    ///
+    /// A configuration outside the valid region ([`WeighingConfig::check_region`], which
+    /// says why) is refused as [`ConfigError::OutsideValidRegion`].
+    pub fn new(config: &WeighingConfig, zero_counts: f64) -> Result<Self, ConfigError> {
+        config
+            .check_region()
+            .map_err(|_| ConfigError::OutsideValidRegion)?;
+        Self::with_method(config, &config.method, zero_counts)
+    }
+
+    /// The configured method as a scale runs it ([`crate::weighing::ScaleEstimator`]): for
+    /// samples in counts with the zero removed, answering in counts (gain 1, so a new
+    /// calibration of the scale does not rebuild it), with no range limit (the scale's ADC
+    /// flags its rails as saturated samples itself, and its zero moves with tracking). The
+    /// bias-compensated method keeps the configured noise variance: counts², which the gain
+    /// does not change.
+    pub fn in_counts(config: &WeighingConfig) -> Result<Self, ConfigError> {
+        config
+            .check_region()
+            .map_err(|_| ConfigError::OutsideValidRegion)?;
+        let mut in_counts = *config;
+        in_counts.counts_per_gram = 1.0;
+        in_counts.onset.rail_low = f64::NEG_INFINITY;
+        in_counts.onset.rail_high = f64::INFINITY;
+        Self::with_method(&in_counts, &config.method, 0.0)
+    }
+
+    /// Any method with the constants of `config` (calibration uses it to try candidates),
+    /// without the valid-region check.
+    pub fn with_method(
+        config: &WeighingConfig,
+        method: &WeighingMethod,
+        zero_counts: f64,
+    ) -> Result<Self, ConfigError> {
+        if !zero_counts.is_finite() {
+            return Err(ConfigError::Range);
+        }
+        // Integer codes: a code strictly between the rails is at least half a code inside.
+        let (low, high) = (
+            T::from_f64(config.onset.rail_low + 0.5 - zero_counts),
+            T::from_f64(config.onset.rail_high - 0.5 - zero_counts),
+        );
+        let gain = T::from_f64(config.counts_per_gram);
+        let step = |order: usize, decimation: u16, forgetting: f64| {
+            StepConfig::new(order, gain)
+                .with_decimation(decimation)
+                .with_forgetting(T::from_f64(forgetting))
+                .with_valid_range(low, high)
+        };
+        Ok(match *method {
+            WeighingMethod::Step {
+                order,
+                decimation,
+                forgetting,
+            } => Self::Step(StepEstimator::new(step(order, decimation, forgetting))?),
+            WeighingMethod::BiasCompensated { order, decimation } => Self::BiasCompensated(
+                BiasCompensatedStepEstimator::new(BiasCompensatedConfig::new(
+                    step(order, decimation, 1.0),
+                    T::from_f64(config.noise_variance_counts2),
+                ))?,
+            ),
+            WeighingMethod::InstrumentalVariable { order, decimation } => {
+                Self::InstrumentalVariable(IvStepEstimator::new(IvConfig::new(step(
+                    order, decimation, 1.0,
+                )))?)
+            }
+            WeighingMethod::ModelBank {
+                decimation,
+                candidates,
+                ratio_min,
+                ratio_max,
+            } => {
+                if candidates != K {
+                    return Err(ConfigError::Model);
+                }
+                let mut model = config.model;
+                model.counts_per_gram = config.counts_per_gram;
+                let configs = model
+                    .bank_configs::<T, S, K>(
+                        ratio_min,
+                        ratio_max,
+                        decimation,
+                        InitialState::Unknown,
+                    )?
+                    .map(|c| c.with_valid_range(low, high));
+                Self::ModelBank(ModelBank::new(configs)?)
+            }
+        })
+    }
+}
+
+impl<T: Real, const N: usize, const S: usize, const K: usize> Estimator<T>
+    for WeighingEstimator<T, N, S, K>
+{
+    fn push(&mut self, sample: T) -> Reading<T> {
+        match self {
+            Self::Step(e) => e.push(sample),
+            Self::BiasCompensated(e) => e.push(sample),
+            Self::InstrumentalVariable(e) => e.push(sample),
+            Self::ModelBank(e) => e.push(sample),
+        }
+    }
+
+    fn push_missing(&mut self) -> Reading<T> {
+        match self {
+            Self::Step(e) => e.push_missing(),
+            Self::BiasCompensated(e) => e.push_missing(),
+            Self::InstrumentalVariable(e) => e.push_missing(),
+            Self::ModelBank(e) => e.push_missing(),
+        }
+    }
+
+    fn reset(&mut self) {
+        match self {
+            Self::Step(e) => e.reset(),
+            Self::BiasCompensated(e) => e.reset(),
+            Self::InstrumentalVariable(e) => e.reset(),
+            Self::ModelBank(e) => e.reset(),
+        }
+    }
+}
