@@ -624,7 +624,8 @@ pub fn model_candidates(
 /// `f32` (after the caller removed the tare in `f64`), the reading widened exactly.
 pub(crate) struct InF32(pub(crate) Box<dyn Estimator<f32> + Send>);
 
-fn widen(reading: Reading<f32>) -> Reading<f64> {
+/// An `f32` reading as the `f64` interface gives it (exact).
+pub(crate) fn widen(reading: Reading<f32>) -> Reading<f64> {
     Reading {
         estimate: reading.estimate.map(f64::from),
         samples: reading.samples,

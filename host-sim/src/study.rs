@@ -488,7 +488,8 @@ pub fn write_markdown(study: &SpeedStudy, command: &str, out: &mut impl Write) -
     Ok(())
 }
 
-fn create(path: &Path) -> Result<std::io::BufWriter<std::fs::File>> {
+/// A buffered file at `path`, its name in the error.
+pub(crate) fn create(path: &Path) -> Result<std::io::BufWriter<std::fs::File>> {
     Ok(std::io::BufWriter::new(
         std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?,
     ))
