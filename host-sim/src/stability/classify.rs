@@ -221,3 +221,105 @@ fn ratio_text(ratio: f64) -> String {
         format!("{ratio:.2}")
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(at: Outcome) -> RunOutcome {
+        RunOutcome {
+            at: [at; 2],
+            lost_definiteness_by: [false; 2],
+            diverged_by: [false; 2],
+            non_finite_by: [false; 2],
+        }
+    }
+
+    fn cell_of(outcomes: &[RunOutcome]) -> Cell {
+        let mut cell = Cell {
+            crlb_g: 0.1,
+            ..Cell::default()
+        };
+        for outcome in outcomes {
+            cell.add(outcome, 1, 100.0);
+        }
+        cell
+    }
+
+    #[test]
+    fn runs_are_counted_by_what_they_gave_at_the_readout() {
+        let cell = cell_of(&[
+            run(Outcome::Valid(0.3)),
+            run(Outcome::Valid(-0.4)),
+            run(Outcome::Flagged(InvalidReason::IllConditioned)),
+            run(Outcome::WarmingUp),
+        ]);
+        assert_eq!((cell.runs, cell.valid, cell.warming), (4, 2, 1));
+        assert_eq!(cell.flagged[reason_index(InvalidReason::IllConditioned)], 1);
+        assert_eq!(cell.flagged_total(), 1);
+        assert!((cell.rms_g() - (0.25f64 / 2.0 * 1.0).sqrt()).abs() < 1e-12);
+        assert_eq!(cell.max_error_g, 0.4);
+        // RMS 0.354 g over a CRLB of 0.1 g: within 10×, some runs not valid.
+        assert_eq!(cell.class(), (Class::OkPartly, false));
+        assert_eq!(cell.text(), "3.54 (50% valid)");
+    }
+
+    #[test]
+    fn a_failure_is_silent_only_when_a_failing_run_still_gave_a_valid_reading() {
+        let mut diverging = run(Outcome::Valid(2000.0));
+        diverging.diverged_by = [false, true];
+        let cell = cell_of(&[diverging, run(Outcome::Valid(0.0))]);
+        assert_eq!(cell.class(), (Class::Diverged, true));
+        assert_eq!(cell.text(), "**DIV!** 50%");
+
+        let mut lost_flagged = run(Outcome::Flagged(InvalidReason::LostDefiniteness));
+        lost_flagged.lost_definiteness_by = [true; 2];
+        let cell = cell_of(&[lost_flagged, run(Outcome::Valid(0.0))]);
+        assert_eq!(cell.class(), (Class::LostDefiniteness, false));
+        assert_eq!(cell.text(), "PD F");
+
+        let mut lost_valid = run(Outcome::Valid(0.01));
+        lost_valid.lost_definiteness_by = [true; 2];
+        let cell = cell_of(&[lost_valid]);
+        assert_eq!(cell.class(), (Class::LostDefiniteness, true));
+
+        let latched = run(Outcome::Flagged(InvalidReason::NonFiniteUpdate));
+        let cell = cell_of(&[latched, run(Outcome::Valid(0.0))]);
+        assert_eq!(cell.class(), (Class::NonFinite, false));
+        assert_eq!(cell.text(), "NaN F");
+    }
+
+    #[test]
+    fn a_cell_most_of_whose_runs_are_flagged_is_refused_however_good_the_rest() {
+        let flagged = run(Outcome::Flagged(InvalidReason::OutOfRange));
+        let cell = cell_of(&[flagged, flagged, run(Outcome::Valid(0.0))]);
+        assert_eq!(cell.class(), (Class::Refused, false));
+        assert_eq!(cell.text(), "F 67%");
+        let cell = cell_of(&[flagged, run(Outcome::WarmingUp)]);
+        assert_eq!(cell.class(), (Class::Refused, false));
+        let cell = cell_of(&[run(Outcome::WarmingUp)]);
+        assert_eq!(cell.class(), (Class::NotYet, false));
+        assert_eq!(cell.text(), "·");
+    }
+
+    #[test]
+    fn ratios_are_written_with_fewer_decimals_as_they_grow() {
+        assert_eq!(ratio_text(f64::NAN), "–");
+        assert_eq!(ratio_text(1.234), "1.23");
+        assert_eq!(ratio_text(12.34), "12.3");
+        assert_eq!(ratio_text(123.4), "123");
+        assert_eq!(ratio_text(12_345.0), "1e4");
+        let over = cell_of(&[run(Outcome::Valid(1.5))]);
+        assert_eq!(over.class(), (Class::OverBound, true));
+        assert_eq!(over.text(), "**15.0** S");
+    }
+
+    #[test]
+    fn every_reason_has_its_own_column() {
+        let mut seen = [false; REASONS.len()];
+        for reason in REASONS {
+            seen[reason_index(reason)] = true;
+        }
+        assert!(seen.iter().all(|&s| s));
+    }
+}

@@ -258,3 +258,48 @@ pub(super) fn readout_name(r: usize) -> &'static str {
         "1.5 s"
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_off_calibration_masses_move_the_resonance_by_their_ratio() {
+        let scene = Scene::load("reference-step").unwrap();
+        assert!((mass_for_ratio(&scene, 1.0) - CALIBRATION_G).abs() < 1e-9);
+        for ratio in RESONANCE_RATIOS {
+            let mass_g = mass_for_ratio(&scene, ratio);
+            assert!(
+                (resonance_ratio(&scene, mass_g) - ratio).abs() < 1e-9,
+                "{ratio}"
+            );
+        }
+        // Heavier loads ring lower: the ratios ascend as the masses descend.
+        assert!(mass_for_ratio(&scene, 0.67) > mass_for_ratio(&scene, 1.5));
+    }
+
+    #[test]
+    fn the_readouts_are_100_ms_and_the_last_sample_of_the_window() {
+        let scene = Scene::load("reference-step").unwrap();
+        let window = scene.studied_window();
+        assert_eq!(readout_indices(&scene), [400, window - 1]);
+        assert_eq!(readout_name(0), "100 ms");
+        assert_eq!(readout_name(1), "1.5 s");
+    }
+
+    #[test]
+    fn the_disturbances_carry_the_white_noise_power() {
+        let scene = Scene::load("reference-step").unwrap();
+        let white = noisy_scene(&scene, 40.0, Noise::White, 2.0);
+        let sigma = white.disturbances.white_noise_g;
+        assert_eq!(white.disturbances.mains_amplitude_g, 0.0);
+        assert_eq!(white.disturbances.vibration_rms_g, 0.0);
+        let mains = noisy_scene(&scene, 40.0, Noise::Mains, 2.0);
+        assert_eq!(mains.disturbances.white_noise_g, sigma);
+        // A sine of amplitude √2·σ has RMS σ.
+        assert!((mains.disturbances.mains_amplitude_g - sigma * 2f64.sqrt()).abs() < 1e-15);
+        let vibration = noisy_scene(&scene, 40.0, Noise::Vibration, 2.0);
+        assert_eq!(vibration.disturbances.vibration_rms_g, sigma / 2.0);
+        assert_eq!(vibration.disturbances.vibration_hz, 24.0);
+    }
+}

@@ -81,3 +81,26 @@ pub fn write_csv(slices: &[SliceResult], out: &mut impl Write) -> Result<()> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::stability::run::tests::known_slice;
+
+    #[test]
+    fn every_row_has_the_header_s_columns_and_the_cell_s_figures() {
+        let mut out = Vec::new();
+        write_csv(&[known_slice(0.2)], &mut out).unwrap();
+        let text = String::from_utf8(out).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        // 5 families × 1 order × 2 precisions × 2 readouts.
+        assert_eq!(lines.len(), 1 + 20);
+        let columns = lines[0].split(',').count();
+        assert!(lines.iter().all(|l| l.split(',').count() == columns));
+        assert_eq!(
+            lines[1],
+            "order_snr,white,50,1.2500,138.320,step D=16,step:n=7 D=16,f64,7,0.1,1,1,0,0,0,0,0,0,0,0,0,0,2.000000e-1,2.000000e-1,1.000000e-1,2.0000,0,0,0,0,ok,false,"
+        );
+        assert!(lines[4].ends_with(",1.5,1,1,0,0,0,0,0,0,0,0,0,0,2.000000e-1,2.000000e-1,1.000000e-1,2.0000,0,0,0,0,ok,false,1.00000"));
+    }
+}

@@ -14,7 +14,7 @@ use super::classify::{Cell, Class};
 use super::conditions::{readout_name, Condition};
 use super::long::{LongResult, BINS_PER_DECADE, FIRST_DECADE};
 use super::probes::{precision_name, probe_label};
-use super::run::SliceResult;
+use super::run::{distinct, SliceResult};
 use crate::chart;
 use crate::method::Method;
 use crate::montecarlo::Precision;
@@ -86,7 +86,7 @@ impl HeatMap {
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<()> {
         let error = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("drawing failed: {e:?}");
         root.fill(&WHITE).map_err(error)?;
-        let (width, height) = root.dim_in_pixel();
+        let (_, height) = root.dim_in_pixel();
         let (top, rest) = root.split_vertically(40);
         top.draw(&Text::new(
             self.title.clone(),
@@ -98,88 +98,72 @@ impl HeatMap {
         let rows = self.panels.len().div_ceil(self.columns);
         let areas = body.split_evenly((rows, self.columns));
         for (panel, area) in self.panels.iter().zip(areas.iter()) {
-            let nx = panel.x_labels.len() as i32;
-            let ny = panel.y_labels.len() as i32;
-            let mut chart = ChartBuilder::on(area)
-                .caption(&panel.title, ("sans-serif", 15))
-                .margin(6)
-                .x_label_area_size(38)
-                .y_label_area_size(self.label_width)
-                .build_cartesian_2d((0..nx).into_segmented(), (0..ny).into_segmented())
-                .map_err(error)?;
-            let x_labels = panel.x_labels.clone();
-            let y_labels = panel.y_labels.clone();
-            chart
-                .configure_mesh()
-                .disable_mesh()
-                .x_labels(nx as usize + 1)
-                .y_labels(ny as usize + 1)
-                .x_desc(panel.x_name.as_str())
-                .label_style(("sans-serif", 12))
-                .x_label_formatter(&|v| match v {
-                    SegmentValue::CenterOf(i) => {
-                        x_labels.get(*i as usize).cloned().unwrap_or_default()
-                    }
-                    _ => String::new(),
-                })
-                .y_label_formatter(&|v| match v {
-                    SegmentValue::CenterOf(i) => {
-                        y_labels.get(*i as usize).cloned().unwrap_or_default()
-                    }
-                    _ => String::new(),
-                })
-                .draw()
-                .map_err(error)?;
-            for (j, row) in panel.cells.iter().enumerate() {
-                for (i, (class, silent, text)) in row.iter().enumerate() {
-                    let (i, j) = (i as i32, j as i32);
-                    let fill = colour(*class, *silent);
-                    chart
-                        .draw_series(std::iter::once(Rectangle::new(
-                            [
-                                (SegmentValue::Exact(i), SegmentValue::Exact(j)),
-                                (SegmentValue::Exact(i + 1), SegmentValue::Exact(j + 1)),
-                            ],
-                            fill.filled(),
-                        )))
-                        .map_err(error)?;
-                    let ink = if *silent && *class != Class::OverBound {
-                        WHITE
-                    } else {
-                        BLACK
-                    };
-                    let style = TextStyle::from(("sans-serif", 10).into_font())
-                        .color(&ink)
-                        .pos(Pos::new(HPos::Center, VPos::Center));
-                    chart
-                        .draw_series(std::iter::once(Text::new(
-                            text.clone(),
-                            (SegmentValue::CenterOf(i), SegmentValue::CenterOf(j)),
-                            style,
-                        )))
-                        .map_err(error)?;
-                }
+            self.draw_panel(panel, area)?;
+        }
+        draw_legend(&legend)?;
+        root.present().map_err(error)?;
+        Ok(())
+    }
+
+    /// One panel: the axes with their labels, then a coloured rectangle and a text per cell.
+    fn draw_panel<DB: DrawingBackend>(
+        &self,
+        panel: &Panel,
+        area: &DrawingArea<DB, Shift>,
+    ) -> Result<()> {
+        let error = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("drawing failed: {e:?}");
+        let nx = panel.x_labels.len() as i32;
+        let ny = panel.y_labels.len() as i32;
+        let mut chart = ChartBuilder::on(area)
+            .caption(&panel.title, ("sans-serif", 15))
+            .margin(6)
+            .x_label_area_size(38)
+            .y_label_area_size(self.label_width)
+            .build_cartesian_2d((0..nx).into_segmented(), (0..ny).into_segmented())
+            .map_err(error)?;
+        let x_labels = panel.x_labels.clone();
+        let y_labels = panel.y_labels.clone();
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .x_labels(nx as usize + 1)
+            .y_labels(ny as usize + 1)
+            .x_desc(panel.x_name.as_str())
+            .label_style(("sans-serif", 12))
+            .x_label_formatter(&|v| segment_label(&x_labels, v))
+            .y_label_formatter(&|v| segment_label(&y_labels, v))
+            .draw()
+            .map_err(error)?;
+        for (j, row) in panel.cells.iter().enumerate() {
+            for (i, (class, silent, text)) in row.iter().enumerate() {
+                let (i, j) = (i as i32, j as i32);
+                let fill = colour(*class, *silent);
+                chart
+                    .draw_series(std::iter::once(Rectangle::new(
+                        [
+                            (SegmentValue::Exact(i), SegmentValue::Exact(j)),
+                            (SegmentValue::Exact(i + 1), SegmentValue::Exact(j + 1)),
+                        ],
+                        fill.filled(),
+                    )))
+                    .map_err(error)?;
+                let ink = if *silent && *class != Class::OverBound {
+                    WHITE
+                } else {
+                    BLACK
+                };
+                let style = TextStyle::from(("sans-serif", 10).into_font())
+                    .color(&ink)
+                    .pos(Pos::new(HPos::Center, VPos::Center));
+                chart
+                    .draw_series(std::iter::once(Text::new(
+                        text.clone(),
+                        (SegmentValue::CenterOf(i), SegmentValue::CenterOf(j)),
+                        style,
+                    )))
+                    .map_err(error)?;
             }
         }
-        let mut x = 10i32;
-        for (class, silent, text) in LEGEND.iter().filter(|l| !l.2.is_empty()) {
-            legend
-                .draw(&Rectangle::new(
-                    [(x, 8), (x + 18, 26)],
-                    colour(*class, *silent).filled(),
-                ))
-                .map_err(error)?;
-            legend
-                .draw(&Text::new(
-                    text.to_string(),
-                    (x + 24, 10),
-                    ("sans-serif", 13).into_font(),
-                ))
-                .map_err(error)?;
-            x += 24 + 8 * text.chars().count() as i32 + 24;
-        }
-        let _ = width;
-        root.present().map_err(error)?;
         Ok(())
     }
 
@@ -197,6 +181,37 @@ impl HeatMap {
         self.draw(&BitMapBackend::new(&png, size).into_drawing_area())?;
         Ok(())
     }
+}
+
+/// The label at the centre of segment `i`, none between segments.
+fn segment_label(labels: &[String], value: &SegmentValue<i32>) -> String {
+    match value {
+        SegmentValue::CenterOf(i) => labels.get(*i as usize).cloned().unwrap_or_default(),
+        _ => String::new(),
+    }
+}
+
+/// The legend along the bottom: a swatch and a meaning per entry.
+fn draw_legend<DB: DrawingBackend>(legend: &DrawingArea<DB, Shift>) -> Result<()> {
+    let error = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("drawing failed: {e:?}");
+    let mut x = 10i32;
+    for (class, silent, text) in LEGEND.iter().filter(|l| !l.2.is_empty()) {
+        legend
+            .draw(&Rectangle::new(
+                [(x, 8), (x + 18, 26)],
+                colour(*class, *silent).filled(),
+            ))
+            .map_err(error)?;
+        legend
+            .draw(&Text::new(
+                text.to_string(),
+                (x + 24, 10),
+                ("sans-serif", 13).into_font(),
+            ))
+            .map_err(error)?;
+        x += 24 + 8 * text.chars().count() as i32 + 24;
+    }
+    Ok(())
 }
 
 fn cell_mark(cell: &Cell) -> (Class, bool, String) {
@@ -230,19 +245,8 @@ fn compact(ratio: f64) -> String {
 
 /// Slice A's heat map at readout `r`: a panel per family and precision, SNR against order.
 pub fn order_heat_map(slice: &SliceResult, r: usize) -> HeatMap {
-    let mut families: Vec<String> = Vec::new();
-    for probe in &slice.probes {
-        if !families.contains(&probe.family) {
-            families.push(probe.family.clone());
-        }
-    }
-    let orders: Vec<usize> = {
-        let mut o: Vec<usize> = slice.probes.iter().filter_map(|p| p.order).collect();
-        o.dedup();
-        o.sort_unstable();
-        o.dedup();
-        o
-    };
+    let families = distinct(slice.probes.iter().map(|p| p.family.clone()));
+    let orders = slice.orders();
     let mut panels = Vec::new();
     for precision in [Precision::F64, Precision::F32] {
         for family in &families {
@@ -255,13 +259,7 @@ pub fn order_heat_map(slice: &SliceResult, r: usize) -> HeatMap {
                         .iter()
                         .map(|&order| {
                             slice
-                                .probes
-                                .iter()
-                                .position(|p| {
-                                    p.family == *family
-                                        && p.order == Some(order)
-                                        && p.method.precision() == precision
-                                })
+                                .probe_at(family, order, precision)
                                 .map(|p| cell_mark(&slice.cells[c][p][r]))
                                 .unwrap_or((Class::NotYet, false, String::new()))
                         })
@@ -309,13 +307,7 @@ pub fn probe_heat_map(
     x_label: impl Fn(&Condition) -> String,
     x_name: &str,
 ) -> HeatMap {
-    let mut groups: Vec<String> = Vec::new();
-    for condition in &slice.conditions {
-        let g = group(condition);
-        if !groups.contains(&g) {
-            groups.push(g);
-        }
-    }
+    let groups = distinct(slice.conditions.iter().map(&group));
     let mut panels = Vec::new();
     for r in 0..2 {
         for g in &groups {
@@ -405,5 +397,37 @@ pub fn long_chart(long: &LongResult, decimation: u16) -> chart::Chart {
         x_label: "log10(samples since the drop) (4 kHz)".into(),
         y_label: "RMS error / steady-state bound, per bin".into(),
         series,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_silent_failure_never_shares_a_colour_with_a_flagged_one() {
+        let failures = [Class::LostDefiniteness, Class::NonFinite, Class::Diverged];
+        for class in failures {
+            assert_ne!(colour(class, true), colour(class, false), "{class:?}");
+        }
+        assert_ne!(colour(Class::OverBound, true), colour(Class::Ok, false));
+        assert_eq!(LEGEND.iter().filter(|l| !l.2.is_empty()).count(), 7);
+    }
+
+    #[test]
+    fn cell_marks_fit_in_four_characters() {
+        assert_eq!(compact(0.94), "0.9");
+        assert_eq!(compact(12.4), "12");
+        assert_eq!(compact(2345.0), "2e3");
+        assert_eq!(compact(f64::INFINITY), "–");
+        let refused = Cell {
+            runs: 2,
+            flagged: [2, 0, 0, 0, 0, 0, 0, 0],
+            ..Cell::default()
+        };
+        assert_eq!(cell_mark(&refused), (Class::Refused, false, "F".into()));
+        let labels = ["a".to_string(), "b".to_string()];
+        assert_eq!(segment_label(&labels, &SegmentValue::CenterOf(1)), "b");
+        assert_eq!(segment_label(&labels, &SegmentValue::Exact(1)), "");
     }
 }

@@ -334,3 +334,74 @@ impl Bin {
         (Class::Ok, false)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bins_start_at_a_thousand_samples_ten_a_decade() {
+        assert_eq!(bin_of(999), None);
+        assert_eq!(bin_of(1000), Some(0));
+        assert_eq!(bin_of(1258), Some(0));
+        assert_eq!(bin_of(1259), Some(1));
+        assert_eq!(bin_of(10_000), Some(BINS_PER_DECADE));
+        assert_eq!(bin_of(10_000_000), Some(4 * BINS_PER_DECADE));
+    }
+
+    #[test]
+    fn the_steady_bound_is_the_mean_of_the_rows_without_forgetting() {
+        assert!(steady_bound_g(4.0, 1.0, 0.5).is_nan());
+        assert!((steady_bound_g(4.0, 1.0, 100.0) - 0.2).abs() < 1e-15);
+        // With forgetting it levels off at σ²·(1−λ)/(1+λ), and is never below the mean's.
+        let lambda: f64 = 0.999;
+        let floor = (4.0 * (1.0 - lambda) / (1.0 + lambda)).sqrt();
+        assert!((steady_bound_g(4.0, lambda, 1e7) - floor).abs() < 1e-12);
+        assert!(steady_bound_g(4.0, lambda, 100.0) >= steady_bound_g(4.0, 1.0, 100.0));
+    }
+
+    #[test]
+    fn a_long_stretch_is_classified_like_a_cell() {
+        let good = Bin {
+            readings: 10,
+            valid: 10,
+            sum_normalised: 10.0,
+            ..Bin::default()
+        };
+        assert_eq!(good.class(false, false), (Class::Ok, false));
+        assert_eq!(good.class(true, false), (Class::LostDefiniteness, false));
+        let after_loss = Bin {
+            valid_after_loss: 1,
+            ..good
+        };
+        assert_eq!(
+            after_loss.class(true, false),
+            (Class::LostDefiniteness, true)
+        );
+        let far = Bin {
+            sum_normalised: 10.0 * 121.0,
+            ..good
+        };
+        assert_eq!(far.class(false, false), (Class::OverBound, true));
+        let mostly_flagged = Bin {
+            readings: 10,
+            valid: 4,
+            flagged: 6,
+            sum_normalised: 4.0,
+            ..Bin::default()
+        };
+        assert_eq!(mostly_flagged.class(false, false), (Class::Refused, false));
+        assert_eq!(good.class(false, true), (Class::NonFinite, false));
+    }
+
+    #[test]
+    fn slice_d_probes_every_form_block_length_and_forgetting_factor() {
+        let probes = long_probes();
+        assert_eq!(
+            probes.len(),
+            LONG_DECIMATIONS.len() * LONG_FORGETTING.len() * 4 * 2
+        );
+        assert_eq!(probes[0].family, "step D=1 λ=1");
+        assert_eq!(probes[0].method.to_string(), "step:n=7,D=1");
+    }
+}

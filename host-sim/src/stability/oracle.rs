@@ -129,3 +129,19 @@ impl Tracked {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cholesky_tells_a_positive_definite_block_from_an_indefinite_one() {
+        let definite = [[4.0f64, 2.0, 0.0], [2.0, 3.0, 0.0], [0.0, 0.0, -1.0]];
+        assert!(cholesky_positive(&definite, 2));
+        assert!(!cholesky_positive(&definite, 3));
+        let indefinite = [[1.0f32, 2.0], [2.0, 1.0]];
+        assert!(!cholesky_positive(&indefinite, 2));
+        let not_finite = [[f64::NAN]];
+        assert!(!cholesky_positive(&not_finite, 1));
+    }
+}

@@ -114,3 +114,43 @@ pub(super) fn probe_label(probe: &Probe) -> String {
         }
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slice_a_has_every_family_at_every_order_in_both_precisions() {
+        let probes = order_probes(&[3, 7]);
+        assert_eq!(probes.len(), 5 * 2 * 2);
+        // Family by family, order by order, f64 then its f32 twin.
+        assert_eq!(probes[0].family, "step D=16");
+        assert_eq!(probes[0].method.to_string(), "step:n=3,D=16");
+        assert_eq!(probes[0].order, Some(3));
+        assert_eq!(probes[1].method.precision(), Precision::F32);
+        assert_eq!(probes[1].twin, Some(0));
+        assert_eq!(probes[2].order, Some(7));
+        assert_eq!(probes[19].family, "bc D=16");
+        for (p, probe) in probes.iter().enumerate() {
+            match probe.twin {
+                Some(twin) => {
+                    assert_eq!(twin + 1, p);
+                    assert_eq!(probes[twin].family, probe.family);
+                    assert_eq!(probes[twin].method.precision(), Precision::F64);
+                }
+                None => assert_eq!(probe.method.precision(), Precision::F64),
+            }
+        }
+    }
+
+    #[test]
+    fn every_default_method_is_probed_in_both_precisions() {
+        let probes = default_probes();
+        assert_eq!(probes.len(), 20);
+        assert_eq!(probe_label(&probes[0]), "step n=7 D=16 (firmware) f64");
+        assert_eq!(probe_label(&probes[1]), "step n=7 D=16 (firmware) f32");
+        assert_eq!(precision_name(&probes[13].method), "f32");
+        assert_eq!(in_f32("model"), "model:precision=f32");
+        assert_eq!(in_f32("step:n=7"), "step:n=7,precision=f32");
+    }
+}

@@ -136,3 +136,38 @@ pub fn long_f32_goal(long: &LongResult) -> Vec<String> {
     }
     failures
 }
+
+/// A family's failure counts as text: `3 diverged<silent>, 2 refused<flagged>`, the mark
+/// after each count saying whether that failure was silent.
+pub(super) fn failure_counts_text(
+    counts: &[((Class, bool), usize)],
+    silent_mark: &str,
+    flagged_mark: &str,
+) -> String {
+    let text: Vec<String> = counts
+        .iter()
+        .map(|((class, silent), n)| {
+            format!(
+                "{n} {}{}",
+                class.name(),
+                if *silent { silent_mark } else { flagged_mark }
+            )
+        })
+        .collect();
+    text.join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn failure_counts_read_as_count_class_and_mark() {
+        let counts = [((Class::Diverged, true), 3), ((Class::Refused, false), 2)];
+        assert_eq!(
+            failure_counts_text(&counts, " (SILENT)", " (flagged)"),
+            "3 diverged (SILENT), 2 refused (flagged)"
+        );
+        assert_eq!(failure_counts_text(&[], " S", " F"), "");
+    }
+}
