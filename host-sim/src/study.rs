@@ -1,4 +1,4 @@
-//! Study 7 of issue 5, speed against accuracy: every method on the reference scene
+//! `host-sim study speed`, speed against accuracy: every method on the reference scene
 //! (138.32 g dropped at t = 0) at 30–80 dB, with the same seeds for every method. For each
 //! method and SNR: the time to reach and stay within 0.1% (median and 95th percentile over
 //! the runs, "never" when a run is not within at the end of the 1.5 s window), the RMS error

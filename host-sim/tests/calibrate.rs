@@ -1,4 +1,4 @@
-//! Calibration as one command (issue 5, item 6): from three simulated drops of the reference
+//! Calibration as one command: from three simulated drops of the reference
 //! mass, the core's `tuning::calibrate` chooses the smallest method that meets the target
 //! at every load of the scale's range, and that choice holds on FRESH drops of host-sim's
 //! own simulator (not the identified model the choice was scored on) at loads across the

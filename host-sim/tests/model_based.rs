@@ -1,5 +1,5 @@
 //! The model-based estimator with a model identified at calibration, with host-sim's
-//! simulator as the truth (issue 5: "≤ 1.2× CRLB at 100 ms at the calibration mass; bias
+//! simulator as the truth (the goals: "≤ 1.2× CRLB at 100 ms at the calibration mass; bias
 //! ≤ 0.05% from 0.3× to 3× the calibration mass; f32 within 10% of f64").
 //!
 //! Every study here calibrates first: [`estimator_core::identify`] finds `(f_n, ζ)` and the
@@ -33,7 +33,8 @@ const READOUT: usize = 400;
 /// Drops recorded at calibration, and their length (1.5 s).
 const CALIBRATION_DROPS: u64 = 3;
 const CALIBRATION_SAMPLES: usize = 6000;
-/// The masses of the issue's load-dependence goal, as multiples of the calibration mass.
+/// The masses of the load-dependence goal (bias ≤ 0.05% from 0.3× to 3× the calibration
+/// mass), as multiples of the calibration mass.
 const MASS_FACTORS: [f64; 5] = [0.3, 0.5, 1.0, 2.0, 3.0];
 /// The bank the firmware should run: 33 candidates 2% apart over frequency ratios
 /// 0.68–1.30, which covers 0.3×–3× the calibration mass on the reference cell (ratios
@@ -506,7 +507,7 @@ fn identified_model_at_the_calibration_mass_against_the_bound() {
     );
     assert_eq!(at_rest.valid, runs);
     assert_eq!(unknown.valid, runs);
-    // The issue's goal, for the variant that knows the onset and that the pan was at rest.
+    // The goal (≤ 1.2× the CRLB at 100 ms), for the variant that knows the onset and that the pan was at rest.
     assert!(at_rest.rms_g / bound <= 1.2, "{:.3}", at_rest.rms_g / bound);
     // The variant that estimates the initial state solves a harder problem: its bound is
     // 1.16× host-sim's. It must meet its own bound within the Monte Carlo error (+3σ = 7%)
@@ -661,7 +662,7 @@ fn an_onset_error_biases_the_at_rest_variant_only() {
 #[test]
 fn f32_matches_f64_on_the_same_data() {
     // The same 300 runs in both precisions, the f32 estimator fed the f64 samples rounded.
-    // Claim (the issue's): the f32 RMS is within 10% of the f64 RMS. We also ask that the
+    // Claim (the goal): the f32 RMS is within 10% of the f64 RMS. We also ask that the
     // RMS of the f32 − f64 difference stays below a tenth of the statistical RMS error
     // (adds < 0.5% to the error budget); the measured difference is about 0.2% of it.
     let model = calibrate().model;
