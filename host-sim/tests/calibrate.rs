@@ -12,7 +12,6 @@
 //! Figures: `cargo test --release -p host-sim --test calibrate -- --nocapture`.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::sync::OnceLock;
 
 use estimator_core::tuning::{
@@ -25,6 +24,9 @@ use host_sim::calibrate::{self, Options, Outcome};
 use host_sim::montecarlo::Precision;
 use host_sim::run_seed;
 use host_sim::scene::Scene;
+
+mod support;
+use support::{host_sim, run_ok};
 
 const MASS_G: f64 = 138.32;
 /// The calibration drops' seeds; the fresh drops use `run_seed(FRESH_SEED, run)`.
@@ -903,15 +905,18 @@ fn the_toml_round_trips_and_refuses_what_it_cannot_use() {
         message.contains("`method.decimation`") && message.contains("below 8"),
         "{message}"
     );
-    let short_bank = calibrate::config_toml(
-        &config_with(WeighingMethod::ModelBank {
-            decimation: 8,
-            candidates: 33,
-            ratio_min: 0.68,
-            ratio_max: 1.3,
-        }),
-        Precision::F32,
-    );
+    let bank_toml = |candidates, ratio_min, ratio_max| {
+        calibrate::config_toml(
+            &config_with(WeighingMethod::ModelBank {
+                decimation: 8,
+                candidates,
+                ratio_min,
+                ratio_max,
+            }),
+            Precision::F32,
+        )
+    };
+    let short_bank = bank_toml(33, 0.68, 1.3);
     let message = refused(&short_bank);
     assert!(message.contains("`method.ratio_min`"), "{message}");
     let message = refused(&text.replace("format = 2", "format = 7"));
@@ -931,15 +936,7 @@ fn the_toml_round_trips_and_refuses_what_it_cannot_use() {
     let message = refused(&text[..ranged_from]);
     assert!(message.contains("`range`"), "{message}");
     // A bank whose size the host's bank type does not hold.
-    let bank = calibrate::config_toml(
-        &config_with(WeighingMethod::ModelBank {
-            decimation: 8,
-            candidates: 17,
-            ratio_min: 0.6,
-            ratio_max: 1.4,
-        }),
-        Precision::F32,
-    );
+    let bank = bank_toml(17, 0.6, 1.4);
     let message = refused(&bank);
     assert!(message.contains("model bank"), "{message}");
 }
@@ -1035,29 +1032,13 @@ fn the_firmware_constants_size_the_method_and_refuse_by_key() {
     assert!(refused("format = [").contains("firmware/weighing.toml"));
 }
 
-fn host_sim() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_host-sim"))
-}
-
 /// This test process's own scratch directory (removed at the end of the test that uses it).
 fn temp_dir() -> PathBuf {
-    std::env::temp_dir().join(format!("host-sim-calibrate-{}", std::process::id()))
+    support::scratch_dir("calibrate")
 }
 
 fn temp(name: &str) -> PathBuf {
-    let dir = temp_dir();
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
-
-fn run_ok(command: &mut Command) -> String {
-    let output = command.output().unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8(output.stdout).unwrap()
+    support::scratch("calibrate", name)
 }
 
 #[test]

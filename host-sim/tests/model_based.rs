@@ -211,6 +211,11 @@ fn monte_carlo<T: Real, E: Estimator<T>>(
     }
 }
 
+/// [`monte_carlo`] at the calibration mass, read on time.
+fn at_calibration_mass<T: Real, E: Estimator<T>>(make: &dyn Fn() -> E, runs: u64) -> Errors {
+    monte_carlo(make, REFERENCE_STEP_G, runs, 0)
+}
+
 fn single<T: Real>(
     model: &LoadCellModel,
     initial_state: InitialState,
@@ -483,17 +488,13 @@ fn identified_model_at_the_calibration_mass_against_the_bound() {
     let bound = crlb_g(REFERENCE_STEP_G);
     let unknown_bound = unknown_state_crlb_g(REFERENCE_STEP_G);
     let runs = 1000;
-    let at_rest = monte_carlo(
+    let at_rest = at_calibration_mass(
         &|| single::<f64>(&model, InitialState::AtRest, DECIMATION),
-        REFERENCE_STEP_G,
         runs,
-        0,
     );
-    let unknown = monte_carlo(
+    let unknown = at_calibration_mass(
         &|| bank::<f64>(&model, InitialState::Unknown, DECIMATION),
-        REFERENCE_STEP_G,
         runs,
-        0,
     );
     println!(
         "calibration mass, 100 ms, {runs} runs: host-sim CRLB {bound:.4} g; [x0; u] bound {unknown_bound:.4} g ({:.3}×); \
@@ -884,18 +885,10 @@ fn figures() {
     println!("initial state, D, single model: bias g, RMS g, ×CRLB | bank of {BANK}: bias g, RMS g, ×CRLB");
     for initial_state in [InitialState::AtRest, InitialState::Unknown] {
         for decimation in [1u16, 4, 8, 16] {
-            let one = monte_carlo(
-                &|| single::<f64>(&model, initial_state, decimation),
-                REFERENCE_STEP_G,
-                runs,
-                0,
-            );
-            let many = monte_carlo(
-                &|| bank::<f64>(&model, initial_state, decimation),
-                REFERENCE_STEP_G,
-                runs,
-                0,
-            );
+            let one =
+                at_calibration_mass(&|| single::<f64>(&model, initial_state, decimation), runs);
+            let many =
+                at_calibration_mass(&|| bank::<f64>(&model, initial_state, decimation), runs);
             println!(
                 "{initial_state:?}, D = {decimation}: {:+.5} {:.5} {:.3} | {:+.5} {:.5} {:.3}",
                 one.bias_g,
@@ -907,17 +900,13 @@ fn figures() {
             );
         }
     }
-    let with_truth = monte_carlo(
+    let with_truth = at_calibration_mass(
         &|| single::<f64>(&truth, InitialState::Unknown, DECIMATION),
-        REFERENCE_STEP_G,
         runs,
-        0,
     );
-    let with_truth_at_rest = monte_carlo(
+    let with_truth_at_rest = at_calibration_mass(
         &|| single::<f64>(&truth, InitialState::AtRest, DECIMATION),
-        REFERENCE_STEP_G,
         runs,
-        0,
     );
     println!(
         "true model, D = {DECIMATION}: AtRest RMS {:.5} g ({:.3}×), Unknown RMS {:.5} g ({:.3}×)",
@@ -941,12 +930,7 @@ fn figures() {
                     initial_state,
                 )
                 .unwrap();
-            let e = monte_carlo(
-                &|| ModelBank::new(configs).unwrap(),
-                REFERENCE_STEP_G,
-                runs,
-                0,
-            );
+            let e = at_calibration_mass(&|| ModelBank::new(configs).unwrap(), runs);
             line += &format!(
                 " shifted {fraction} step: bias {:+.5} RMS {:.5} ({:.3}×);",
                 e.bias_g,
@@ -999,18 +983,8 @@ fn figures() {
 
     println!("\n## f32 against f64, {runs} runs, calibration mass, bank, D = {DECIMATION}");
     for initial_state in [InitialState::Unknown, InitialState::AtRest] {
-        let e64 = monte_carlo(
-            &|| bank::<f64>(&model, initial_state, DECIMATION),
-            REFERENCE_STEP_G,
-            runs,
-            0,
-        );
-        let e32 = monte_carlo(
-            &|| bank::<f32>(&model, initial_state, DECIMATION),
-            REFERENCE_STEP_G,
-            runs,
-            0,
-        );
+        let e64 = at_calibration_mass(&|| bank::<f64>(&model, initial_state, DECIMATION), runs);
+        let e32 = at_calibration_mass(&|| bank::<f32>(&model, initial_state, DECIMATION), runs);
         println!(
             "{initial_state:?}: RMS f64 {:.5} g, f32 {:.5} g ({:+.2}%)",
             e64.rms_g,
