@@ -3,7 +3,7 @@
 //! depend on the thread count.
 
 use anyhow::Result;
-use estimator_core::{AdcSource, InvalidReason, State};
+use estimator_core::{InvalidReason, State};
 use rayon::prelude::*;
 
 use super::classify::{Cell, DIVERGED_FACTOR};
@@ -11,7 +11,7 @@ use super::conditions::{readout_indices, Condition};
 use super::oracle::Tracked;
 use super::probes::Probe;
 use crate::method::{BuildContext, Method};
-use crate::montecarlo::{self, tare_record, Precision};
+use crate::montecarlo::{self, centred_record, tare_record, Precision};
 use crate::simulated::run_seed;
 
 /// What a run's reading was at a readout.
@@ -208,15 +208,8 @@ fn run_record(
         .any(|p| p.method.reference_decimation().is_some());
     let scene = &condition.scene;
     let readouts = readout_indices(scene);
-    let zero = scene.chain.zero_code();
     let mut adc = scene.adc(run_seed(seed, run as u64));
-    let record: Vec<f64> = (0..=readouts[1])
-        .map(|_| {
-            adc.read()
-                .map(|code| f64::from(code) - zero)
-                .unwrap_or(f64::NAN)
-        })
-        .collect();
+    let record = centred_record(&mut adc, scene.chain.zero_code(), readouts[1] + 1);
     let tare = needs_tare.then(|| tare_record(scene, seed, run as u64));
     probes
         .iter()
