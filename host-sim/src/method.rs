@@ -733,6 +733,10 @@ impl Fields {
         let bad = |expected: &str| {
             anyhow!("method `{spec}`: key `{key}`: expected {expected}, found `{value}`")
         };
+        if let Some((slot, canonical, expected)) = self.positive_slot(key) {
+            *slot = Some(checked(value, expected, positive_finite, &bad)?);
+            return Ok(canonical);
+        }
         Ok(match key {
             "n" | "order" => {
                 let expected = format!("an order from 1 to {CAPACITY}");
@@ -756,11 +760,6 @@ impl Fields {
                 self.precision = Some(value.parse().map_err(|_| bad("f32 or f64"))?);
                 "precision"
             }
-            "prior" => {
-                let expected = "a positive prior information δ (Ψ(0) = I/δ)";
-                self.prior = Some(checked(value, expected, positive_finite, &bad)?);
-                "prior"
-            }
             "lag_s" => {
                 let expected = "the ramp lag in seconds, a finite number";
                 self.lag_s = Some(checked(value, expected, f64::is_finite, &bad)?);
@@ -774,20 +773,10 @@ impl Fields {
                 self.span = Some(span(value, &bad)?);
                 "span"
             }
-            "cal_g" => {
-                let expected = "the calibration mass in grams, positive";
-                self.calibration_g = Some(checked(value, expected, positive_finite, &bad)?);
-                "cal_g"
-            }
             "block" => {
                 let expected = "raw samples per block, 1 to 65535";
                 self.block = Some(checked(value, expected, |block| block != 0, &bad)?);
                 "block"
-            }
-            "band_g" => {
-                let expected = "the stability band in grams, positive";
-                self.band_g = Some(checked(value, expected, positive_finite, &bad)?);
-                "band_g"
             }
             "noise_var" => {
                 let expected =
@@ -796,27 +785,53 @@ impl Fields {
                 self.noise_variance = Some(checked(value, expected, within, &bad)?);
                 "noise_var"
             }
-            "fn_hz" => {
-                let expected = "the identified natural frequency in Hz, positive";
-                self.natural_frequency_hz = Some(checked(value, expected, positive_finite, &bad)?);
-                "fn_hz"
-            }
-            "zeta" => {
-                let expected = "the identified damping ratio, positive";
-                self.damping_ratio = Some(checked(value, expected, positive_finite, &bad)?);
-                "zeta"
-            }
-            "filter_hz" => {
-                let expected = "the filter cut-off in Hz, positive";
-                self.filter_cutoff_hz = Some(checked(value, expected, positive_finite, &bad)?);
-                "filter_hz"
-            }
             "delay" => {
                 let expected = "an instrument delay in decimated rows, at least n + 1";
                 self.delay = Some(value.parse().map_err(|_| bad(expected))?);
                 "delay"
             }
             other => bail!("method `{spec}`: unknown key `{other}`"),
+        })
+    }
+
+    /// The keys that take a positive, finite number: the field, the canonical name and what
+    /// is expected.
+    fn positive_slot(
+        &mut self,
+        key: &str,
+    ) -> Option<(&mut Option<f64>, &'static str, &'static str)> {
+        Some(match key {
+            "prior" => (
+                &mut self.prior,
+                "prior",
+                "a positive prior information δ (Ψ(0) = I/δ)",
+            ),
+            "cal_g" => (
+                &mut self.calibration_g,
+                "cal_g",
+                "the calibration mass in grams, positive",
+            ),
+            "band_g" => (
+                &mut self.band_g,
+                "band_g",
+                "the stability band in grams, positive",
+            ),
+            "fn_hz" => (
+                &mut self.natural_frequency_hz,
+                "fn_hz",
+                "the identified natural frequency in Hz, positive",
+            ),
+            "zeta" => (
+                &mut self.damping_ratio,
+                "zeta",
+                "the identified damping ratio, positive",
+            ),
+            "filter_hz" => (
+                &mut self.filter_cutoff_hz,
+                "filter_hz",
+                "the filter cut-off in Hz, positive",
+            ),
+            _ => return None,
         })
     }
 

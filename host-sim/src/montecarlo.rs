@@ -298,14 +298,7 @@ pub fn tare_record(scene: &Scene, seed: u64, run: u64) -> Vec<f64> {
         scene.disturbances,
         run_seed(seed ^ TARE_STREAM, run),
     );
-    let zero = scene.chain.zero_code();
-    (0..TARE_SAMPLES)
-        .map(|_| {
-            adc.read()
-                .map(|code| f64::from(code) - zero)
-                .unwrap_or(f64::NAN)
-        })
-        .collect()
+    centred_record(&mut adc, scene.chain.zero_code(), TARE_SAMPLES)
 }
 
 /// The last index after which `|error|/truth` stays within `tolerance`, as a time.

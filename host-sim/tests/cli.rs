@@ -14,7 +14,7 @@ use host_sim::method::{self, Method};
 use host_sim::scene::Scene;
 
 mod support;
-use support::{host_sim, run_ok};
+use support::{host_sim, run_ok, run_refused};
 
 fn temp(name: &str) -> PathBuf {
     support::scratch("cli", name)
@@ -111,38 +111,33 @@ fn estimate_flags_missing_and_rejects_garbage() {
         "{stdout}"
     );
     std::fs::write(&csv, "t,y\n0,1\n1,abc\n").unwrap();
-    let output = host_sim()
-        .args(["estimate", "--order", "1", "--gain", "1", "--input"])
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(!output.status.success());
-    let stderr = String::from_utf8_lossy(&output.stderr);
+    let stderr = run_refused(
+        host_sim()
+            .args(["estimate", "--order", "1", "--gain", "1", "--input"])
+            .arg(&csv),
+    );
     assert!(
         stderr.contains("line 3") && stderr.contains("abc"),
         "{stderr}"
     );
     std::fs::write(&csv, "t,x\n0,1\n").unwrap();
-    let output = host_sim()
-        .args(["estimate", "--order", "1", "--gain", "1", "--input"])
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(!output.status.success());
-    assert!(String::from_utf8_lossy(&output.stderr).contains("column `y`"));
+    assert!(run_refused(
+        host_sim()
+            .args(["estimate", "--order", "1", "--gain", "1", "--input"])
+            .arg(&csv)
+    )
+    .contains("column `y`"));
 }
 
 #[test]
 fn malformed_scene_file_error_names_file_and_key() {
     let scene = temp("broken.toml");
     std::fs::write(&scene, "[[events]]\ntime_s = 0.0\nmass_g = \"heavy\"\n").unwrap();
-    let output = host_sim()
-        .args(["simulate", "--out", "/dev/null"])
-        .arg(&scene)
-        .output()
-        .unwrap();
-    assert!(!output.status.success());
-    let stderr = String::from_utf8_lossy(&output.stderr);
+    let stderr = run_refused(
+        host_sim()
+            .args(["simulate", "--out", "/dev/null"])
+            .arg(&scene),
+    );
     assert!(
         stderr.contains("broken.toml") && stderr.contains("mass_g") && stderr.contains("expected"),
         "{stderr}"
@@ -450,44 +445,38 @@ fn bad_method_specs_are_errors_naming_spec_key_and_expectation() {
         }
     }
     // The same parser behind montecarlo --method and --config.
-    let output = host_sim()
-        .args(["montecarlo", "reference-step", "--runs", "1"])
-        .args(["--method", "moving:band_g=0"])
-        .output()
-        .unwrap();
-    assert!(!output.status.success());
-    let stderr = String::from_utf8_lossy(&output.stderr);
+    let stderr = run_refused(
+        host_sim()
+            .args(["montecarlo", "reference-step", "--runs", "1"])
+            .args(["--method", "moving:band_g=0"]),
+    );
     assert!(
         stderr.contains("moving:band_g=0") && stderr.contains("`band_g`"),
         "{stderr}"
     );
-    let output = host_sim()
-        .args(["montecarlo", "reference-step", "--runs", "1"])
-        .args(["--config", "settled"])
-        .output()
-        .unwrap();
-    assert!(!output.status.success());
-    assert!(String::from_utf8_lossy(&output.stderr).contains("--method"));
+    assert!(run_refused(
+        host_sim()
+            .args(["montecarlo", "reference-step", "--runs", "1"])
+            .args(["--config", "settled"])
+    )
+    .contains("--method"));
     // `bc` without the tare's noise variance is refused, naming what is missing.
-    let output = host_sim()
-        .args(["estimate", "--gain", "1", "--method", "bc:n=3", "--input"])
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(!output.status.success());
-    let stderr = String::from_utf8_lossy(&output.stderr);
+    let stderr = run_refused(
+        host_sim()
+            .args(["estimate", "--gain", "1", "--method", "bc:n=3", "--input"])
+            .arg(&csv),
+    );
     assert!(
         stderr.contains("bc:n=3,D=1") && stderr.contains("--tare-variance"),
         "{stderr}"
     );
     // --method and the step shorthand exclude each other.
-    let output = host_sim()
-        .args(["estimate", "--gain", "1", "--method", "settled"])
-        .args(["--order", "3", "--input"])
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(!output.status.success());
+    run_refused(
+        host_sim()
+            .args(["estimate", "--gain", "1", "--method", "settled"])
+            .args(["--order", "3", "--input"])
+            .arg(&csv),
+    );
 }
 
 #[test]

@@ -93,9 +93,10 @@ fn adc(mass_g: f64, white_g: f64, seed: u64, samples: usize) -> SimulatedAdc<2> 
     SimulatedAdc::new(chain, script, disturbances, seed)
 }
 
-/// Calibrate: identify the model from three 1.5 s drops of the calibration mass at 50 dB.
-fn calibrate() -> Identified {
-    let drops: Vec<Vec<f64>> = (0..CALIBRATION_DROPS)
+/// The three 1.5 s drops of the calibration mass at 50 dB that calibration records (seeds
+/// apart from the Monte Carlo seeds).
+fn calibration_drops() -> Vec<Vec<f64>> {
+    (0..CALIBRATION_DROPS)
         .map(|i| {
             record(
                 REFERENCE_STEP_G,
@@ -104,7 +105,12 @@ fn calibrate() -> Identified {
                 CALIBRATION_SAMPLES,
             )
         })
-        .collect();
+        .collect()
+}
+
+/// Calibrate: identify the model from three 1.5 s drops of the calibration mass at 50 dB.
+fn calibrate() -> Identified {
+    let drops = calibration_drops();
     let slices: Vec<&[f64]> = drops.iter().map(|d| d.as_slice()).collect();
     identify::<f64, 5>(&slices, &identify_config()).expect("the reference drops identify")
 }
@@ -703,16 +709,7 @@ fn f32_matches_f64_on_the_same_data() {
 fn identification_in_f32_agrees_with_f64() {
     // The firmware may identify in f32. On the same drops the parameters agree within the
     // f64 bound (one standard deviation), so f32 adds less than the noise does.
-    let drops: Vec<Vec<f64>> = (0..CALIBRATION_DROPS)
-        .map(|i| {
-            record(
-                REFERENCE_STEP_G,
-                sigma_g(),
-                run_seed(1000, i),
-                CALIBRATION_SAMPLES,
-            )
-        })
-        .collect();
+    let drops = calibration_drops();
     let drops32: Vec<Vec<f32>> = drops
         .iter()
         .map(|d| d.iter().map(|&v| v as f32).collect())

@@ -327,17 +327,12 @@ fn main() -> Result<()> {
 
 /// `simulate`: a scene's ADC codes and truth as CSV.
 fn simulate(args: SimulateArgs) -> Result<()> {
-    let SimulateArgs {
-        scene,
-        seed,
-        out,
-        snr_db,
-    } = args;
-    let mut scene = Scene::load(&scene)?;
-    if let Some(snr_db) = snr_db {
+    let out = args.out;
+    let mut scene = Scene::load(&args.scene)?;
+    if let Some(snr_db) = args.snr_db {
         scene = scene.with_snr_db(snr_db);
     }
-    let mut adc = scene.adc(seed);
+    let mut adc = scene.adc(args.seed);
     let mut file = create(&out)?;
     writeln!(file, "t,y,truth")?;
     let rate = scene.chain.sample_rate_hz;
@@ -458,78 +453,55 @@ fn identify_platform_mass(
 
 /// `montecarlo`: the core on many seeded runs of a scene, per SNR and method.
 fn montecarlo(args: MontecarloArgs) -> Result<()> {
-    let MontecarloArgs {
-        scene,
-        runs,
-        seed,
-        snr_db,
-        configs,
-        methods,
-        samples,
-        out,
-        summary,
-        readout_s,
-    } = args;
-    let scene = Scene::load(&scene)?;
-    let mut setups: Vec<Method> = configs.into_iter().map(Method::from).collect();
-    setups.extend(methods);
+    let mut setups: Vec<Method> = args.configs.into_iter().map(Method::from).collect();
+    setups.extend(args.methods);
     if setups.is_empty() {
         setups.push(Method::from(Setup::new(7, 1)));
     }
     let study = Study {
-        samples: samples.unwrap_or(usize::MAX),
-        scene,
+        samples: args.samples.unwrap_or(usize::MAX),
+        scene: Scene::load(&args.scene)?,
         setups,
-        runs,
-        seed,
+        runs: args.runs,
+        seed: args.seed,
     };
-    let results = montecarlo::run_studies(&study, &snr_db)?;
-    if let Some(out) = out {
+    let results = montecarlo::run_studies(&study, &args.snr_db)?;
+    if let Some(out) = args.out {
         let mut file = create(&out)?;
         montecarlo::write_csv(&results, &mut file)?;
         file.flush()?;
     }
-    if summary {
-        montecarlo::summary(&results, readout_s, &mut std::io::stdout())?;
+    if args.summary {
+        montecarlo::summary(&results, args.readout_s, &mut std::io::stdout())?;
     }
     Ok(())
 }
 
 /// `chart --all`: the charts (a)–(d).
 fn chart_command(args: ChartArgs) -> Result<()> {
-    let ChartArgs {
-        all,
-        out,
-        runs,
-        seed,
-        configs,
-        readout_s,
-    } = args;
-    if !all {
+    if !args.all {
         anyhow::bail!("only `chart --all` is implemented: it draws (a)–(d)");
     }
-    charts(&out, runs, seed, configs, readout_s)?;
-    Ok(())
+    charts(
+        &args.out,
+        args.runs,
+        args.seed,
+        args.configs,
+        args.readout_s,
+    )
 }
 
 /// `bench`: estimator updates per second on this host.
 fn bench(args: BenchArgs) -> Result<()> {
-    let BenchArgs {
-        runs,
-        samples,
-        order,
-        decimation,
-        precision,
-        seed,
-    } = args;
+    let (runs, samples, precision) = (args.runs, args.samples, args.precision);
     let scene = Scene::load("reference-step")?;
     let setup = Setup {
-        order,
-        decimation,
+        order: args.order,
+        decimation: args.decimation,
         forgetting: 1.0,
         precision,
     };
-    let figures = montecarlo::bench(&scene, &setup, runs, samples, seed)?;
+    let figures = montecarlo::bench(&scene, &setup, runs, samples, args.seed)?;
     let per_thread = figures.updates as f64 / figures.estimator_cpu_s;
     println!(
         "host-sim bench: {runs} runs x {samples} samples, {setup}, {precision:?}, reference-step at {} dB, {} threads",

@@ -360,37 +360,41 @@ mod tests {
         assert!(steady_bound_g(4.0, lambda, 100.0) >= steady_bound_g(4.0, 1.0, 100.0));
     }
 
+    /// A stretch of `readings`, `flagged` of them flagged, the rest valid at `rms` bounds.
+    fn stretch(readings: u64, flagged: u64, rms: f64) -> Bin {
+        let valid = readings - flagged;
+        Bin {
+            readings,
+            valid,
+            flagged,
+            sum_normalised: valid as f64 * rms * rms,
+            ..Bin::default()
+        }
+    }
+
     #[test]
     fn a_long_stretch_is_classified_like_a_cell() {
-        let good = Bin {
-            readings: 10,
-            valid: 10,
-            sum_normalised: 10.0,
-            ..Bin::default()
-        };
+        let good = stretch(10, 0, 1.0);
         assert_eq!(good.class(false, false), (Class::Ok, false));
         assert_eq!(good.class(true, false), (Class::LostDefiniteness, false));
         let after_loss = Bin {
             valid_after_loss: 1,
             ..good
         };
+        let lost = after_loss.class(true, false);
+        assert_eq!(lost, (Class::LostDefiniteness, true));
         assert_eq!(
-            after_loss.class(true, false),
-            (Class::LostDefiniteness, true)
+            stretch(10, 0, 11.0).class(false, false),
+            (Class::OverBound, true)
         );
-        let far = Bin {
-            sum_normalised: 10.0 * 121.0,
-            ..good
-        };
-        assert_eq!(far.class(false, false), (Class::OverBound, true));
-        let mostly_flagged = Bin {
-            readings: 10,
-            valid: 4,
-            flagged: 6,
-            sum_normalised: 4.0,
-            ..Bin::default()
-        };
-        assert_eq!(mostly_flagged.class(false, false), (Class::Refused, false));
+        assert_eq!(
+            stretch(10, 6, 1.0).class(false, false),
+            (Class::Refused, false)
+        );
+        assert_eq!(
+            stretch(10, 3, 1.0).class(false, false),
+            (Class::OkPartly, false)
+        );
         assert_eq!(good.class(false, true), (Class::NonFinite, false));
     }
 

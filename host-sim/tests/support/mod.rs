@@ -33,3 +33,10 @@ pub fn run_ok(command: &mut Command) -> String {
     );
     String::from_utf8(output.stdout).unwrap()
 }
+
+/// Run `command`; it must fail. Its stderr (what the user is told).
+pub fn run_refused(command: &mut Command) -> String {
+    let output = command.output().unwrap();
+    assert!(!output.status.success());
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
