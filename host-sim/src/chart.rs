@@ -1,8 +1,12 @@
 //! Charts (SVG and PNG, plotters) of the Monte Carlo studies: (a) error against time,
 //! (b) time to accuracy against SNR, (c) RMS error at the readout against SNR with the CRLB,
 //! (d) MSE against the order n; for the speed study over every method (`host-sim study
-//! speed`), (e) RMS error against the readout time and (f) time to 0.1% against SNR. The PNG text uses DejaVu Sans, shipped in `assets/` (its
-//! licence beside it), so charts render the same on a headless machine.
+//! speed`), (e) RMS error against the readout time and (f) time to 0.1% against SNR. The PNG
+//! text uses DejaVu Sans, shipped in `assets/` (its licence beside it), so charts render the
+//! same on a headless machine.
+//!
+//! What it must never do: compute a figure (a chart draws what a study computed), or depend
+//! on a font the machine may lack.
 
 use std::path::Path;
 

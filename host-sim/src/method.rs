@@ -153,9 +153,8 @@ impl Default for BaselineSpec {
     /// so pickup averages out of every block), K = 10 (a 200 ms stability window, the usual
     /// "motion detection" time), stable within 0.5 g: ten times the standard deviation of a
     /// block mean at 50 dB (0.445 g/√80 = 0.05 g), so that noise alone is never taken for
-    /// motion. A band of two 0.1 g display divisions (0.2 g) is too tight for that noise: on
-    /// the reference scene it was stable in at most 10 of 200 runs at any time within 1.5 s
-    /// (50 dB).
+    /// motion. A band of two 0.1 g display divisions (0.2 g) is too tight for that noise
+    /// (host-sim/README.md gives the measured figure).
     /// On the reference scene the 200 ms window happens to span exactly five periods of the
     /// 25 Hz ring, which flatters the moving average's value (not its stability test).
     fn default() -> Self {

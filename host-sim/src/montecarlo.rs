@@ -9,6 +9,9 @@
 //! within 0.5%, 0.1% and 0.05%. Methods that need the noise variance at tare (`bc`) get it
 //! measured: `estimator_core::NoiseMeter` over 0.3 s of simulated empty pan before each run
 //! ([`tare_record`], on a noise stream of its own so other methods' records do not change).
+//!
+//! What it must never do: let a figure depend on the thread count (runs are accumulated in
+//! fixed chunks, merged in order), or give one method runs or seeds its rivals did not get.
 
 use std::fmt;
 use std::io::Write;

@@ -1,4 +1,7 @@
-//! Scenes as small TOML files: only what a scene needs, defaults for the rest.
+//! Scenes as small TOML files: only what a scene needs, defaults for the rest, so a study or
+//! a test names its conditions in a file anyone can read. A bad key must never be taken
+//! silently: every value is checked and an error names the file, the key and what was
+//! expected.
 //!
 //! ```toml
 //! description = "138.32 g dropped on the empty platform"

@@ -35,8 +35,9 @@ const FRESH_SEED: u64 = 20_240_601;
 
 /// The lightest load at which 0.1% at 100 ms is asked at 50 dB. The noise floor there
 /// (Cramér–Rao bound with the tare, 0.026 g) puts even an estimator at the floor at a 95th
-/// percentile of 1.96 × 0.026 = 0.051 g, i.e. 0.1% of 51 g; calibration finds no method for
-/// 70 g and one for 80 g (host-sim's README), so the range starts at 80 g. Its top is the
+/// percentile of 1.96 × 0.026 = 0.051 g, i.e. 0.1% of 51 g. The range starts at the lightest
+/// load for which calibration finds a method with the platform mass unknown (host-sim's
+/// README, calibration table). Its top is the
 /// default: the heaviest load whose overshoot the 16-bit converter takes (~342 g).
 const MIN_LOAD_G: f64 = 80.0;
 /// Loads the fresh drops check: the range's ends (340 g: just inside the top), the
@@ -1139,7 +1140,7 @@ fn the_command_end_to_end_and_estimate_config_equals_the_core() {
 
 /// The README's calibration table, checked on fresh drops across each range (400 per load):
 /// `cargo test --release -p host-sim --test calibrate readme_table -- --ignored --nocapture`
-/// (about a minute on 2 cores; behind `--ignored` for CI time).
+/// (behind `--ignored` for CI time).
 #[test]
 #[ignore]
 fn readme_table_on_fresh_drops_across_the_loads() {

@@ -1,5 +1,6 @@
 //! `host-sim`: simulate scenes, run the core's estimator on recorded data, Monte Carlo
 //! studies against the Cramér–Rao bound, the charts, the results table and the benchmark.
+//! Each subcommand is one function; the work is in the library, never here.
 
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Write};
