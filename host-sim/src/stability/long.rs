@@ -4,7 +4,7 @@
 use std::time::Instant;
 
 use anyhow::{anyhow, Result};
-use estimator_core::{AdcSource, InvalidReason, State};
+use estimator_core::{AdcSource, InvalidReason, Reading, State};
 use rayon::prelude::*;
 
 use super::classify::{Class, BOUND_FACTOR, DIVERGED_FACTOR};
@@ -171,28 +171,7 @@ fn run_long(
         let Some(bin) = bin_of(count) else {
             continue;
         };
-        let bin = &mut bins[bin];
-        bin.readings += 1;
-        match (reading.state, reading.estimate) {
-            (State::Invalid(_), _) => bin.flagged += 1,
-            (_, Some(estimate)) => {
-                let error = estimate - LONG_LOAD_G;
-                if !estimate.is_finite() {
-                    bin.non_finite += 1;
-                } else {
-                    bin.valid += 1;
-                    bin.sum_normalised += (error / bound) * (error / bound);
-                    bin.max_error_g = bin.max_error_g.max(error.abs());
-                    if error.abs() > DIVERGED_FACTOR * LONG_LOAD_G {
-                        bin.diverged += 1;
-                    }
-                    if run.lost_definiteness_at.is_some() {
-                        bin.valid_after_loss += 1;
-                    }
-                }
-            }
-            _ => {}
-        }
+        bins[bin].add(&reading, bound, run.lost_definiteness_at.is_some());
         if count == codes.len() {
             run.last = match (reading.state, reading.estimate) {
                 (State::Invalid(reason), _) => Outcome::Flagged(reason),
@@ -300,6 +279,31 @@ impl LongRun {
 }
 
 impl Bin {
+    /// Count one reading of the steady load, its error judged against `bound`.
+    fn add(&mut self, reading: &Reading<f64>, bound: f64, after_loss: bool) {
+        self.readings += 1;
+        match (reading.state, reading.estimate) {
+            (State::Invalid(_), _) => self.flagged += 1,
+            (_, Some(estimate)) => {
+                let error = estimate - LONG_LOAD_G;
+                if !estimate.is_finite() {
+                    self.non_finite += 1;
+                } else {
+                    self.valid += 1;
+                    self.sum_normalised += (error / bound) * (error / bound);
+                    self.max_error_g = self.max_error_g.max(error.abs());
+                    if error.abs() > DIVERGED_FACTOR * LONG_LOAD_G {
+                        self.diverged += 1;
+                    }
+                    if after_loss {
+                        self.valid_after_loss += 1;
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
     /// RMS of error / bound over the valid readings.
     pub fn normalised_rms(&self) -> f64 {
         (self.sum_normalised / self.valid as f64).sqrt()
