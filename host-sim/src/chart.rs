@@ -1,8 +1,12 @@
 //! Charts (SVG and PNG, plotters) of the Monte Carlo studies: (a) error against time,
 //! (b) time to accuracy against SNR, (c) RMS error at the readout against SNR with the CRLB,
 //! (d) MSE against the order n; for the speed study over every method (`host-sim study
-//! speed`), (e) RMS error against the readout time and (f) time to 0.1% against SNR. The PNG text uses DejaVu Sans, shipped in `assets/` (its
-//! licence beside it), so charts render the same on a headless machine.
+//! speed`), (e) RMS error against the readout time and (f) time to 0.1% against SNR. The PNG
+//! text uses DejaVu Sans, shipped in `assets/` (its licence beside it), so charts render the
+//! same on a headless machine.
+//!
+//! What it must never do: compute a figure (a chart draws what a study computed), or depend
+//! on a font the machine may lack.
 
 use std::path::Path;
 
@@ -225,13 +229,22 @@ pub fn time_against_snr(results: &[StudyResult]) -> Chart {
             reference: true,
         });
     }
-    Chart {
-        title: format!(
+    against_snr(
+        format!(
             "(b) {}: median time to reach and stay within tolerance ({} runs per point)",
             first.scene, first.runs
         ),
+        "time after the drop, s (missing: not within 1.5 s)",
+        series,
+    )
+}
+
+/// A chart whose x axis is the SNR.
+fn against_snr(title: String, y_label: &str, series: Vec<Series>) -> Chart {
+    Chart {
+        title,
         x_label: "SNR, dB (thesis eq. 4.39)".into(),
-        y_label: "time after the drop, s (missing: not within 1.5 s)".into(),
+        y_label: y_label.into(),
         series,
     }
 }
@@ -265,17 +278,16 @@ pub fn rms_against_snr(results: &[StudyResult], readout_s: f64) -> Chart {
             .collect(),
         reference: true,
     });
-    Chart {
-        title: format!(
+    against_snr(
+        format!(
             "(c) {}: RMS relative error at {} ms vs SNR ({} runs per point)",
             first.scene,
             readout_s * 1e3,
             first.runs
         ),
-        x_label: "SNR, dB (thesis eq. 4.39)".into(),
-        y_label: "RMS relative error".into(),
+        "RMS relative error",
         series,
-    }
+    )
 }
 
 /// (d) MSE (relative) against the order n at the readout sample, one line per SNR and
@@ -431,17 +443,16 @@ pub fn settle_against_snr(results: &[StudyResult], names: &[String]) -> Chart {
         points: results.iter().map(|r| (r.snr_db, settle * 1e3)).collect(),
         reference: true,
     });
-    Chart {
-        title: format!(
+    against_snr(
+        format!(
             "(f) {}: median time to reach and stay within {}% ({} runs per point)",
             first.scene,
             TOLERANCES[tolerance] * 100.0,
             first.runs
         ),
-        x_label: "SNR, dB (thesis eq. 4.39)".into(),
-        y_label: "time after the drop, ms (missing: not within at 1.5 s)".into(),
+        "time after the drop, ms (missing: not within at 1.5 s)",
         series,
-    }
+    )
 }
 
 /// Labels at 1, 2 and 5 times a power of ten only, so a log axis stays readable.

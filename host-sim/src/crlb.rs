@@ -16,6 +16,9 @@
 //!
 //! Every function returns the bound for each prefix length `k + 1`, in the unit of `u`
 //! squared (`f64::INFINITY` where the prefix does not identify `u`).
+//!
+//! What it must never do: go through transfer-function polynomials (the bound uses the exact
+//! discretised step response), or report a finite bound for a prefix that cannot identify `u`.
 
 use crate::sensor::SensorChain;
 use crate::simulated::StepResponse;

@@ -1,6 +1,8 @@
 //! `host-sim estimate`: run any of the core's estimators (a [`Method`]) over a recorded CSV
-//! (one raw sample a row in a column `y`). No second implementation: every number comes from
-//! `estimator-core`.
+//! (one raw sample a row in a column `y`), so anyone's recorded data meets the same core the
+//! firmware runs. It must never hold a second implementation: every number comes from
+//! `estimator-core`; and a bad row must never be skipped: it is an error naming its line (an
+//! empty `y` is a lost sample, which the reading flags).
 
 use std::io::{BufRead, Write};
 

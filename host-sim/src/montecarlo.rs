@@ -9,6 +9,9 @@
 //! within 0.5%, 0.1% and 0.05%. Methods that need the noise variance at tare (`bc`) get it
 //! measured: `estimator_core::NoiseMeter` over 0.3 s of simulated empty pan before each run
 //! ([`tare_record`], on a noise stream of its own so other methods' records do not change).
+//!
+//! What it must never do: let a figure depend on the thread count (runs are accumulated in
+//! fixed chunks, merged in order), or give one method runs or seeds its rivals did not get.
 
 use std::fmt;
 use std::io::Write;
@@ -298,14 +301,7 @@ pub fn tare_record(scene: &Scene, seed: u64, run: u64) -> Vec<f64> {
         scene.disturbances,
         run_seed(seed ^ TARE_STREAM, run),
     );
-    let zero = scene.chain.zero_code();
-    (0..TARE_SAMPLES)
-        .map(|_| {
-            adc.read()
-                .map(|code| f64::from(code) - zero)
-                .unwrap_or(f64::NAN)
-        })
-        .collect()
+    centred_record(&mut adc, scene.chain.zero_code(), TARE_SAMPLES)
 }
 
 /// The last index after which `|error|/truth` stays within `tolerance`, as a time.
@@ -341,81 +337,21 @@ pub fn sensor_settle_time_s(scene: &Scene, truth_g: f64, tolerance: f64) -> f64 
 impl Study {
     /// Run the study at the scene's SNR, with a progress bar.
     pub fn run(&self, progress: &ProgressBar) -> Result<StudyResult> {
-        let chain = self.scene.chain;
-        let (onset, truth_g, _) = self.scene.studied_step();
-        let samples = self.samples.min(self.scene.studied_window()).max(1);
-        let gain = chain.counts_per_gram();
-        let zero = chain.zero_code();
         let scene = &self.scene;
-        let oversampling = f64::from(chain.adc.oversampling.max(1));
-        let white_counts =
-            scene.disturbances.white_noise_g * chain.volts_per_gram() / chain.adc.volts_per_code();
-        // Per conversion: the white noise plus uniform quantisation (LSB²/12); summed over
-        // the oversampled conversions.
-        let noise_variance = oversampling * (white_counts * white_counts + 1.0 / 12.0);
-        let context = BuildContext {
-            // The modelled variance (white part, quantisation, the amplifier's noise at lag
-            // 0) only to validate the methods below; every run measures its own tare.
-            tare_noise_variance: Some(
-                noise_variance
-                    + if scene.disturbances.amplifier_noise {
-                        crlb::amplifier_autocovariance_g2(&chain, 1)[0] * gain * gain
-                    } else {
-                        0.0
-                    },
-            ),
-            // A drop whose overshoot clips the ADC is refused by the estimators, as the
-            // firmware refuses a saturated sample.
-            ..BuildContext::new(chain, gain).with_adc_rails(zero)
-        };
-        // Refuse impossible configurations before spending time.
-        for method in &self.setups {
-            method.build(&context)?;
-            if let Some(decimation) = method.tare_decimation() {
-                if TARE_SAMPLES / usize::from(decimation) < 3 {
-                    bail!("method `{method}`: a tare of {TARE_SAMPLES} samples is too short to meter the noise at D = {decimation}");
-                }
-            }
-        }
-        let needs_tare = self.setups.iter().any(|m| m.tare_decimation().is_some());
+        let chain = scene.chain;
+        let (onset, truth_g, _) = scene.studied_step();
+        let samples = self.samples.min(scene.studied_window()).max(1);
+        let gain = chain.counts_per_gram();
+        let noise_variance = raw_noise_variance(scene);
+        let context = self.validated_context(noise_variance)?;
         let rate = chain.sample_rate_hz;
-        let setups = &self.setups;
-        let run_one = |run: usize| -> (Vec<Vec<Option<f64>>>, ()) {
-            let mut adc = scene.adc(run_seed(self.seed, run as u64));
-            for _ in 0..onset {
-                let _ = adc.read();
-            }
-            let record: Vec<f64> = (0..samples)
-                .map(|_| {
-                    adc.read()
-                        .map(|code| f64::from(code) - zero)
-                        .unwrap_or(f64::NAN)
-                })
-                .collect();
-            let tare = needs_tare.then(|| tare_record(scene, self.seed, run as u64));
-            let errors = setups
-                .iter()
-                .map(|method| {
-                    let context = match (method.tare_decimation(), &tare) {
-                        (Some(decimation), Some(tare)) => BuildContext {
-                            tare_noise_variance: measured_tare_variance(tare, decimation),
-                            ..context
-                        },
-                        _ => context,
-                    };
-                    // Validated above (the tare is long enough for the meter's D).
-                    let mut estimator = method.build(&context).expect("validated");
-                    record
-                        .iter()
-                        .map(|&sample| estimator.push(sample).estimate.map(|e| e - truth_g))
-                        .collect()
-                })
-                .collect();
+        let run_one = |run: usize| -> Vec<Vec<Option<f64>>> {
+            let errors = self.run_errors(run, &context, onset, samples, truth_g);
             progress.inc(1);
-            (errors, ())
+            errors
         };
         let empty = || -> Vec<SetupStats> {
-            setups
+            self.setups
                 .iter()
                 .map(|method| SetupStats::new(*method, samples))
                 .collect()
@@ -428,19 +364,7 @@ impl Study {
                 let mut stats = empty();
                 let first = chunk * RUNS_PER_CHUNK;
                 for run in first..(first + RUNS_PER_CHUNK).min(self.runs) {
-                    let (errors, ()) = run_one(run);
-                    for (stat, errors) in stats.iter_mut().zip(&errors) {
-                        for (k, error) in errors.iter().enumerate() {
-                            if let Some(e) = error {
-                                stat.sum_error[k] += e;
-                                stat.sum_squared[k] += e * e;
-                                stat.valid[k] += 1;
-                            }
-                        }
-                        for (t, tolerance) in TOLERANCES.iter().enumerate() {
-                            stat.settle_s[t].push(settle_time(errors, truth_g, *tolerance, rate));
-                        }
-                    }
+                    accumulate(&mut stats, &run_one(run), truth_g, rate);
                 }
                 stats
             })
@@ -451,8 +375,7 @@ impl Study {
                 mine.merge(theirs);
             }
         }
-        let example = run_one(0).0;
-        let example_relative_error = example
+        let example_relative_error = run_one(0)
             .iter()
             .map(|errors| {
                 errors
@@ -477,6 +400,118 @@ impl Study {
             example_relative_error,
         })
     }
+
+    /// The study's build context, every method refused here if it cannot be built (before
+    /// any time is spent).
+    fn validated_context(&self, noise_variance: f64) -> Result<BuildContext> {
+        let scene = &self.scene;
+        let chain = scene.chain;
+        let gain = chain.counts_per_gram();
+        let context = BuildContext {
+            // The modelled variance (white part, quantisation, the amplifier's noise at lag
+            // 0) only to validate the methods below; every run measures its own tare.
+            tare_noise_variance: Some(
+                noise_variance
+                    + if scene.disturbances.amplifier_noise {
+                        crlb::amplifier_autocovariance_g2(&chain, 1)[0] * gain * gain
+                    } else {
+                        0.0
+                    },
+            ),
+            // A drop whose overshoot clips the ADC is refused by the estimators, as the
+            // firmware refuses a saturated sample.
+            ..BuildContext::new(chain, gain).with_adc_rails(chain.zero_code())
+        };
+        for method in &self.setups {
+            method.build(&context)?;
+            if let Some(decimation) = method.tare_decimation() {
+                if TARE_SAMPLES / usize::from(decimation) < 3 {
+                    bail!("method `{method}`: a tare of {TARE_SAMPLES} samples is too short to meter the noise at D = {decimation}");
+                }
+            }
+        }
+        Ok(context)
+    }
+
+    /// One run: every method on the same record from the onset, its error per sample
+    /// (`None` while not valid), g. Each method with a tare meter gets the run's own tare.
+    fn run_errors(
+        &self,
+        run: usize,
+        context: &BuildContext,
+        onset: usize,
+        samples: usize,
+        truth_g: f64,
+    ) -> Vec<Vec<Option<f64>>> {
+        let scene = &self.scene;
+        let needs_tare = self.setups.iter().any(|m| m.tare_decimation().is_some());
+        let mut adc = scene.adc(run_seed(self.seed, run as u64));
+        for _ in 0..onset {
+            let _ = adc.read();
+        }
+        let record = centred_record(&mut adc, scene.chain.zero_code(), samples);
+        let tare = needs_tare.then(|| tare_record(scene, self.seed, run as u64));
+        self.setups
+            .iter()
+            .map(|method| {
+                let context = match (method.tare_decimation(), &tare) {
+                    (Some(decimation), Some(tare)) => BuildContext {
+                        tare_noise_variance: measured_tare_variance(tare, decimation),
+                        ..*context
+                    },
+                    _ => *context,
+                };
+                // Validated above (the tare is long enough for the meter's D).
+                let mut estimator = method.build(&context).expect("validated");
+                record
+                    .iter()
+                    .map(|&sample| estimator.push(sample).estimate.map(|e| e - truth_g))
+                    .collect()
+            })
+            .collect()
+    }
+}
+
+/// The raw-sample noise variance of the scene's white noise and quantisation (LSB²/12 per
+/// conversion), summed over the oversampled conversions, counts².
+fn raw_noise_variance(scene: &Scene) -> f64 {
+    let chain = scene.chain;
+    let oversampling = f64::from(chain.adc.oversampling.max(1));
+    let white_counts =
+        scene.disturbances.white_noise_g * chain.volts_per_gram() / chain.adc.volts_per_code();
+    oversampling * (white_counts * white_counts + 1.0 / 12.0)
+}
+
+/// Add one run's errors to the statistics: sums per sample index and the settling times.
+fn accumulate(stats: &mut [SetupStats], errors: &[Vec<Option<f64>>], truth_g: f64, rate: f64) {
+    for (stat, errors) in stats.iter_mut().zip(errors) {
+        for (k, error) in errors.iter().enumerate() {
+            if let Some(e) = error {
+                stat.sum_error[k] += e;
+                stat.sum_squared[k] += e * e;
+                stat.valid[k] += 1;
+            }
+        }
+        for (t, tolerance) in TOLERANCES.iter().enumerate() {
+            stat.settle_s[t].push(settle_time(errors, truth_g, *tolerance, rate));
+        }
+    }
+}
+
+/// The next `samples` conversions of `adc` with `zero` removed, counts; a failed conversion
+/// is NaN (the estimators flag it).
+pub(crate) fn centred_record<const E: usize>(
+    adc: &mut SimulatedAdc<E>,
+    zero: f64,
+    samples: usize,
+) -> Vec<f64> {
+    (0..samples)
+        .map(|_| {
+            adc.read()
+                .map(|code| f64::from(code) - zero)
+                .unwrap_or(f64::NAN)
+        })
+        .collect()
 }
 
 /// The known-model, known-tare CRLB of a step of `truth_g` on `scene` at every sample index
@@ -653,13 +688,7 @@ pub fn bench(
         .into_par_iter()
         .map(|run| {
             let mut adc = scene.adc(run_seed(seed, run as u64));
-            let record: Vec<f64> = (0..samples)
-                .map(|_| {
-                    adc.read()
-                        .map(|code| f64::from(code) - zero)
-                        .unwrap_or(f64::NAN)
-                })
-                .collect();
+            let record = centred_record(&mut adc, zero, samples);
             let mut estimator = CoreEstimator::new(setup, gain).expect("validated");
             let timer = Instant::now();
             let mut last = 0.0;

@@ -5,7 +5,7 @@
 //! is time-varying while it happens (thesis eq. 6.1). The core's [`RampEstimator`] fits the
 //! slope with the input model inside the regression; this study runs it from the ramp's
 //! onset to the ramp's end, in every Monte Carlo run, and reports the slope error there (the
-//! issue's goal: below 1% at the end of a 0.1 s ramp at 40 dB; the thesis reports < 2%).
+//! goal: below 1% at the end of a 0.1 s ramp at 40 dB; the thesis reports < 2%).
 //!
 //! What it must never do: estimate anything itself (every number is the core's), or depend
 //! on the number of threads (each run is seeded from the study seed and its index, and the
@@ -25,7 +25,7 @@ use crate::montecarlo::{Precision, Setup, CAPACITY};
 use crate::scene::Scene;
 use crate::simulated::run_seed;
 
-/// The slope error the issue asks for at 40 dB (relative RMS).
+/// The conveyor goal: the slope error allowed at 40 dB (relative RMS).
 pub const GOAL_RELATIVE_RMS: f64 = 0.01;
 /// The SNR of the goal.
 pub const GOAL_SNR_DB: f64 = 40.0;

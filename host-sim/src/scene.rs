@@ -1,4 +1,7 @@
-//! Scenes as small TOML files: only what a scene needs, defaults for the rest.
+//! Scenes as small TOML files: only what a scene needs, defaults for the rest, so a study or
+//! a test names its conditions in a file anyone can read. A bad key must never be taken
+//! silently: every value is checked and an error names the file, the key and what was
+//! expected.
 //!
 //! ```toml
 //! description = "138.32 g dropped on the empty platform"
@@ -193,6 +196,199 @@ fn check(
     Ok(())
 }
 
+fn finite_positive(value: f64) -> bool {
+    value.is_finite() && value > 0.0
+}
+
+/// The top-level keys: the duration and the anti-alias filter's cut-off.
+fn check_top_level(file: &Path, raw: &SceneFile) -> Result<()> {
+    check(
+        file,
+        "duration_s",
+        finite_positive(raw.duration_s),
+        "a positive number of seconds",
+        raw.duration_s,
+    )?;
+    check(
+        file,
+        "filter_cutoff_hz",
+        finite_positive(raw.filter_cutoff_hz) && raw.filter_cutoff_hz < SAMPLE_RATE_HZ / 2.0,
+        "a cut-off between 0 and 2000 Hz",
+        raw.filter_cutoff_hz,
+    )
+}
+
+/// The `[adc]` section.
+fn adc_of(file: &Path, adc: &AdcFile) -> Result<Adc> {
+    check(
+        file,
+        "adc.bits",
+        adc.bits == 12 || adc.bits == 16,
+        "12 or 16",
+        adc.bits,
+    )?;
+    check(
+        file,
+        "adc.reference_v",
+        finite_positive(adc.reference_v),
+        "a positive voltage",
+        adc.reference_v,
+    )?;
+    check(
+        file,
+        "adc.oversampling",
+        (1..=256).contains(&adc.oversampling),
+        "1..=256",
+        adc.oversampling,
+    )?;
+    Ok(Adc {
+        bits: adc.bits,
+        reference_v: adc.reference_v,
+        oversampling: adc.oversampling,
+    })
+}
+
+/// The `[cell]` section: a cell designed to ring at `ring_hz` with the design load, with the
+/// reference cell's capacity.
+fn cell_of(file: &Path, c: &CellFile) -> Result<LoadCell> {
+    check(
+        file,
+        "cell.platform_mass_kg",
+        finite_positive(c.platform_mass_kg),
+        "a positive mass in kg",
+        c.platform_mass_kg,
+    )?;
+    check(
+        file,
+        "cell.ring_hz",
+        finite_positive(c.ring_hz),
+        "a positive frequency",
+        c.ring_hz,
+    )?;
+    check(
+        file,
+        "cell.damping_ratio",
+        c.damping_ratio.is_finite() && c.damping_ratio > 0.0 && c.damping_ratio < 1.0,
+        "a damping ratio in (0, 1)",
+        c.damping_ratio,
+    )?;
+    let mut cell = LoadCell::designed(
+        c.platform_mass_kg,
+        c.design_load_g,
+        c.ring_hz,
+        c.damping_ratio,
+    );
+    cell.capacity_g = LoadCell::reference().capacity_g;
+    Ok(cell)
+}
+
+/// At least one `[[events]]` entry, and no more than a script holds.
+fn check_event_count(file: &Path, events: &[EventFile]) -> Result<()> {
+    check(
+        file,
+        "events",
+        !events.is_empty(),
+        "at least one [[events]] entry",
+        "none",
+    )?;
+    check(
+        file,
+        "events",
+        events.len() <= MAX_EVENTS,
+        "at most 64 events",
+        events.len(),
+    )
+}
+
+/// The `[[events]]` entries as a script: masses within the cell's capacity, in time order.
+fn script_of(
+    file: &Path,
+    events: &[EventFile],
+    duration_s: f64,
+    capacity_g: f64,
+) -> Result<Script<MAX_EVENTS>> {
+    let mut script = Script::new(duration_s);
+    for (index, event) in events.iter().enumerate() {
+        let key = format!("events[{index}]");
+        check(
+            file,
+            &format!("{key}.mass_g"),
+            event.mass_g.is_finite() && (0.0..=capacity_g).contains(&event.mass_g),
+            "a mass in 0..=600 g",
+            event.mass_g,
+        )?;
+        script
+            .push(LoadEvent {
+                time_s: event.time_s,
+                mass_g: event.mass_g,
+                ramp_s: event.ramp_s,
+            })
+            .map_err(|error| {
+                anyhow::anyhow!(
+                    "scene file {}: key `{key}.time_s`: expected a time after the previous event ends and within duration_s = {}, found {} ({error:?})",
+                    file.display(),
+                    duration_s,
+                    event.time_s
+                )
+            })?;
+    }
+    Ok(script)
+}
+
+/// The `[noise]` section, the white noise resolved from its SNR on `snr_step_g`.
+fn disturbances_of(
+    file: &Path,
+    n: &NoiseFile,
+    chain: &SensorChain,
+    snr_step_g: f64,
+) -> Result<Disturbances> {
+    check(
+        file,
+        "noise.snr_step_g",
+        finite_positive(snr_step_g),
+        "a positive step in grams",
+        snr_step_g,
+    )?;
+    for (key, value) in [
+        ("noise.vibration_rms_g", n.vibration_rms_g),
+        ("noise.mains_amplitude_g", n.mains_amplitude_g),
+        ("noise.creep_fraction", n.creep_fraction.abs()),
+    ] {
+        check(
+            file,
+            key,
+            value.is_finite() && value >= 0.0,
+            "a finite, non-negative number",
+            value,
+        )?;
+    }
+    let white_noise_g = match n.snr_db {
+        Some(snr) => {
+            check(
+                file,
+                "noise.snr_db",
+                snr.is_finite(),
+                "a finite SNR in dB",
+                snr,
+            )?;
+            white_noise_for_snr(chain, snr_step_g, snr, SNR_WINDOW_SAMPLES)
+        }
+        None => 0.0,
+    };
+    Ok(Disturbances {
+        white_noise_g,
+        amplifier_noise: n.amplifier,
+        vibration_rms_g: n.vibration_rms_g,
+        vibration_hz: n.vibration_hz,
+        vibration_bandwidth_hz: n.vibration_bandwidth_hz,
+        mains_amplitude_g: n.mains_amplitude_g,
+        mains_hz: n.mains_hz,
+        drift_g_per_s: n.drift_g_per_s,
+        creep_fraction: n.creep_fraction,
+        creep_time_constant_s: n.creep_time_constant_s,
+    })
+}
+
 impl Scene {
     /// Load a scene by path or shipped name.
     pub fn load(scene: &str) -> Result<Self> {
@@ -202,176 +398,26 @@ impl Scene {
         Self::parse(&path, &text)
     }
 
-    /// Parse the text of a scene file; `file` names it in errors.
+    /// Parse the text of a scene file; `file` names it in errors. The sections are checked
+    /// in file order (top-level keys, `[adc]`, `[cell]`, `[[events]]`, `[noise]`), so the first
+    /// bad key is the one reported.
     pub fn parse(file: &Path, text: &str) -> Result<Self> {
         let raw: SceneFile = toml::from_str(text)
             .map_err(|error| anyhow::anyhow!("scene file {}: {error}", file.display()))?;
-        let finite_positive = |v: f64| v.is_finite() && v > 0.0;
-        check(
-            file,
-            "duration_s",
-            finite_positive(raw.duration_s),
-            "a positive number of seconds",
-            raw.duration_s,
-        )?;
-        check(
-            file,
-            "filter_cutoff_hz",
-            finite_positive(raw.filter_cutoff_hz) && raw.filter_cutoff_hz < SAMPLE_RATE_HZ / 2.0,
-            "a cut-off between 0 and 2000 Hz",
-            raw.filter_cutoff_hz,
-        )?;
-        check(
-            file,
-            "adc.bits",
-            raw.adc.bits == 12 || raw.adc.bits == 16,
-            "12 or 16",
-            raw.adc.bits,
-        )?;
-        check(
-            file,
-            "adc.reference_v",
-            finite_positive(raw.adc.reference_v),
-            "a positive voltage",
-            raw.adc.reference_v,
-        )?;
-        check(
-            file,
-            "adc.oversampling",
-            (1..=256).contains(&raw.adc.oversampling),
-            "1..=256",
-            raw.adc.oversampling,
-        )?;
-        let c = &raw.cell;
-        check(
-            file,
-            "cell.platform_mass_kg",
-            finite_positive(c.platform_mass_kg),
-            "a positive mass in kg",
-            c.platform_mass_kg,
-        )?;
-        check(
-            file,
-            "cell.ring_hz",
-            finite_positive(c.ring_hz),
-            "a positive frequency",
-            c.ring_hz,
-        )?;
-        check(
-            file,
-            "cell.damping_ratio",
-            c.damping_ratio.is_finite() && c.damping_ratio > 0.0 && c.damping_ratio < 1.0,
-            "a damping ratio in (0, 1)",
-            c.damping_ratio,
-        )?;
-        check(
-            file,
-            "events",
-            !raw.events.is_empty(),
-            "at least one [[events]] entry",
-            "none",
-        )?;
-        check(
-            file,
-            "events",
-            raw.events.len() <= MAX_EVENTS,
-            "at most 64 events",
-            raw.events.len(),
-        )?;
-
-        let cell = {
-            let mut cell = LoadCell::designed(
-                c.platform_mass_kg,
-                c.design_load_g,
-                c.ring_hz,
-                c.damping_ratio,
-            );
-            cell.capacity_g = LoadCell::reference().capacity_g;
-            cell
-        };
+        check_top_level(file, &raw)?;
+        let adc = adc_of(file, &raw.adc)?;
+        let cell = cell_of(file, &raw.cell)?;
+        check_event_count(file, &raw.events)?;
         let chain = SensorChain {
             cell,
             amplifier: Ina114::reference(),
             filter_cutoff_hz: raw.filter_cutoff_hz,
-            adc: Adc {
-                bits: raw.adc.bits,
-                reference_v: raw.adc.reference_v,
-                oversampling: raw.adc.oversampling,
-            },
+            adc,
             sample_rate_hz: SAMPLE_RATE_HZ,
         };
-        let mut script = Script::new(raw.duration_s);
-        for (index, event) in raw.events.iter().enumerate() {
-            let key = format!("events[{index}]");
-            check(
-                file,
-                &format!("{key}.mass_g"),
-                event.mass_g.is_finite() && (0.0..=cell.capacity_g).contains(&event.mass_g),
-                "a mass in 0..=600 g",
-                event.mass_g,
-            )?;
-            script
-                .push(LoadEvent {
-                    time_s: event.time_s,
-                    mass_g: event.mass_g,
-                    ramp_s: event.ramp_s,
-                })
-                .map_err(|error| {
-                    anyhow::anyhow!(
-                        "scene file {}: key `{key}.time_s`: expected a time after the previous event ends and within duration_s = {}, found {} ({error:?})",
-                        file.display(),
-                        raw.duration_s,
-                        event.time_s
-                    )
-                })?;
-        }
-        let n = &raw.noise;
-        let snr_step_g = n.snr_step_g.unwrap_or(raw.events[0].mass_g.abs());
-        check(
-            file,
-            "noise.snr_step_g",
-            finite_positive(snr_step_g),
-            "a positive step in grams",
-            snr_step_g,
-        )?;
-        for (key, value) in [
-            ("noise.vibration_rms_g", n.vibration_rms_g),
-            ("noise.mains_amplitude_g", n.mains_amplitude_g),
-            ("noise.creep_fraction", n.creep_fraction.abs()),
-        ] {
-            check(
-                file,
-                key,
-                value.is_finite() && value >= 0.0,
-                "a finite, non-negative number",
-                value,
-            )?;
-        }
-        let white_noise_g = match n.snr_db {
-            Some(snr) => {
-                check(
-                    file,
-                    "noise.snr_db",
-                    snr.is_finite(),
-                    "a finite SNR in dB",
-                    snr,
-                )?;
-                white_noise_for_snr(&chain, snr_step_g, snr, SNR_WINDOW_SAMPLES)
-            }
-            None => 0.0,
-        };
-        let disturbances = Disturbances {
-            white_noise_g,
-            amplifier_noise: n.amplifier,
-            vibration_rms_g: n.vibration_rms_g,
-            vibration_hz: n.vibration_hz,
-            vibration_bandwidth_hz: n.vibration_bandwidth_hz,
-            mains_amplitude_g: n.mains_amplitude_g,
-            mains_hz: n.mains_hz,
-            drift_g_per_s: n.drift_g_per_s,
-            creep_fraction: n.creep_fraction,
-            creep_time_constant_s: n.creep_time_constant_s,
-        };
+        let script = script_of(file, &raw.events, raw.duration_s, cell.capacity_g)?;
+        let snr_step_g = raw.noise.snr_step_g.unwrap_or(raw.events[0].mass_g.abs());
+        let disturbances = disturbances_of(file, &raw.noise, &chain, snr_step_g)?;
         Ok(Self {
             name: file
                 .file_stem()
@@ -381,7 +427,7 @@ impl Scene {
             chain,
             script,
             disturbances,
-            snr_db: n.snr_db,
+            snr_db: raw.noise.snr_db,
             snr_step_g,
         })
     }

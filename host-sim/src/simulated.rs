@@ -1,5 +1,6 @@
 //! The sensor model playing a scripted scene, as an [`AdcSource`]: the QEMU board's ADC and
-//! the simulator's data source. Fixed size, allocation-free, panic-free, seeded.
+//! the simulator's data source. Fixed size, allocation-free, panic-free, seeded: the same
+//! seed must always give the same samples, on the host and on the board.
 
 use estimator_core::sensor::{AdcError, AdcSource};
 use rand_core::{RngCore, SeedableRng};

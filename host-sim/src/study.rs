@@ -1,4 +1,4 @@
-//! Study 7 of issue 5, speed against accuracy: every method on the reference scene
+//! `host-sim study speed`, speed against accuracy: every method on the reference scene
 //! (138.32 g dropped at t = 0) at 30–80 dB, with the same seeds for every method. For each
 //! method and SNR: the time to reach and stay within 0.1% (median and 95th percentile over
 //! the runs, "never" when a run is not within at the end of the 1.5 s window), the RMS error
@@ -488,7 +488,8 @@ pub fn write_markdown(study: &SpeedStudy, command: &str, out: &mut impl Write) -
     Ok(())
 }
 
-fn create(path: &Path) -> Result<std::io::BufWriter<std::fs::File>> {
+/// A buffered file at `path`, its name in the error.
+pub(crate) fn create(path: &Path) -> Result<std::io::BufWriter<std::fs::File>> {
     Ok(std::io::BufWriter::new(
         std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?,
     ))

@@ -1,4 +1,4 @@
-//! Calibration as one command (issue 5, item 6): from three simulated drops of the reference
+//! Calibration as one command: from three simulated drops of the reference
 //! mass, the core's `tuning::tune` chooses the smallest method that meets the target
 //! at every load of the scale's range, and that choice holds on FRESH drops of host-sim's
 //! own simulator (not the identified model the choice was scored on) at loads across the
@@ -12,7 +12,6 @@
 //! Figures: `cargo test --release -p host-sim --test calibrate -- --nocapture`.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::sync::OnceLock;
 
 use estimator_core::tuning::{summarise_drop, CandidateGrid, TuningError};
@@ -28,6 +27,9 @@ use host_sim::montecarlo::Precision;
 use host_sim::run_seed;
 use host_sim::scene::Scene;
 
+mod support;
+use support::{host_sim, run_ok};
+
 const MASS_G: f64 = 138.32;
 /// The calibration drops' seeds; the fresh drops use `run_seed(FRESH_SEED, run)`.
 const CALIBRATION_SEEDS: [u64; 3] = [1, 2, 3];
@@ -35,8 +37,9 @@ const FRESH_SEED: u64 = 20_240_601;
 
 /// The lightest load at which 0.1% at 100 ms is asked at 50 dB. The noise floor there
 /// (Cramér–Rao bound with the tare, 0.026 g) puts even an estimator at the floor at a 95th
-/// percentile of 1.96 × 0.026 = 0.051 g, i.e. 0.1% of 51 g; calibration finds no method for
-/// 70 g and one for 80 g (host-sim's README), so the range starts at 80 g. Its top is the
+/// percentile of 1.96 × 0.026 = 0.051 g, i.e. 0.1% of 51 g. The range starts at the lightest
+/// load for which calibration finds a method with the platform mass unknown (host-sim's
+/// README, calibration table). Its top is the
 /// default: the heaviest load whose overshoot the 16-bit converter takes (~342 g).
 const MIN_LOAD_G: f64 = 80.0;
 /// Loads the fresh drops check: the range's ends (340 g: just inside the top), the
@@ -905,15 +908,18 @@ fn the_toml_round_trips_and_refuses_what_it_cannot_use() {
         message.contains("`method.decimation`") && message.contains("below 8"),
         "{message}"
     );
-    let short_bank = calibrate::config_toml(
-        &config_with(WeighingMethod::ModelBank {
-            decimation: 8,
-            candidates: 33,
-            ratio_min: 0.68,
-            ratio_max: 1.3,
-        }),
-        Precision::F32,
-    );
+    let bank_toml = |candidates, ratio_min, ratio_max| {
+        calibrate::config_toml(
+            &config_with(WeighingMethod::ModelBank {
+                decimation: 8,
+                candidates,
+                ratio_min,
+                ratio_max,
+            }),
+            Precision::F32,
+        )
+    };
+    let short_bank = bank_toml(33, 0.68, 1.3);
     let message = refused(&short_bank);
     assert!(message.contains("`method.ratio_min`"), "{message}");
     let message = refused(&text.replace("format = 2", "format = 7"));
@@ -933,15 +939,7 @@ fn the_toml_round_trips_and_refuses_what_it_cannot_use() {
     let message = refused(&text[..ranged_from]);
     assert!(message.contains("`range`"), "{message}");
     // A bank whose size the host's bank type does not hold.
-    let bank = calibrate::config_toml(
-        &config_with(WeighingMethod::ModelBank {
-            decimation: 8,
-            candidates: 17,
-            ratio_min: 0.6,
-            ratio_max: 1.4,
-        }),
-        Precision::F32,
-    );
+    let bank = bank_toml(17, 0.6, 1.4);
     let message = refused(&bank);
     assert!(message.contains("model bank"), "{message}");
 }
@@ -1037,29 +1035,13 @@ fn the_firmware_constants_size_the_method_and_refuse_by_key() {
     assert!(refused("format = [").contains("firmware/weighing.toml"));
 }
 
-fn host_sim() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_host-sim"))
-}
-
 /// This test process's own scratch directory (removed at the end of the test that uses it).
 fn temp_dir() -> PathBuf {
-    std::env::temp_dir().join(format!("host-sim-calibrate-{}", std::process::id()))
+    support::scratch_dir("calibrate")
 }
 
 fn temp(name: &str) -> PathBuf {
-    let dir = temp_dir();
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
-
-fn run_ok(command: &mut Command) -> String {
-    let output = command.output().unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8(output.stdout).unwrap()
+    support::scratch("calibrate", name)
 }
 
 #[test]
@@ -1160,7 +1142,7 @@ fn the_command_end_to_end_and_estimate_config_equals_the_core() {
 
 /// The README's calibration table, checked on fresh drops across each range (400 per load):
 /// `cargo test --release -p host-sim --test calibrate readme_table -- --ignored --nocapture`
-/// (about a minute on 2 cores; behind `--ignored` for CI time).
+/// (behind `--ignored` for CI time).
 #[test]
 #[ignore]
 fn readme_table_on_fresh_drops_across_the_loads() {

@@ -3,35 +3,21 @@
 //! error naming it, Monte Carlo and the speed study give the same output on 1 and 2 threads.
 
 use std::path::PathBuf;
-use std::process::Command;
 
 use estimator_core::{
     Baseline, BaselineConfig, BaselineMode, BiasCompensatedConfig, BiasCompensatedStepEstimator,
     CovarianceStepEstimator, Estimator, InvalidReason, IvConfig, IvStepEstimator, ModelBank,
-    ModelConfig, RampConfig, RampEstimator, Reading, State, StepConfig, StepEstimator,
+    ModelConfig, RampConfig, RampEstimator, Reading, Real, State, StepConfig, StepEstimator,
 };
 use host_sim::estimate::state_name;
 use host_sim::method::{self, Method};
 use host_sim::scene::Scene;
 
-fn host_sim() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_host-sim"))
-}
+mod support;
+use support::{host_sim, run_ok, run_refused};
 
 fn temp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("host-sim-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
-
-fn run_ok(command: &mut Command) -> String {
-    let output = command.output().unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8(output.stdout).unwrap()
+    support::scratch("cli", name)
 }
 
 #[test]
@@ -125,38 +111,33 @@ fn estimate_flags_missing_and_rejects_garbage() {
         "{stdout}"
     );
     std::fs::write(&csv, "t,y\n0,1\n1,abc\n").unwrap();
-    let output = host_sim()
-        .args(["estimate", "--order", "1", "--gain", "1", "--input"])
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(!output.status.success());
-    let stderr = String::from_utf8_lossy(&output.stderr);
+    let stderr = run_refused(
+        host_sim()
+            .args(["estimate", "--order", "1", "--gain", "1", "--input"])
+            .arg(&csv),
+    );
     assert!(
         stderr.contains("line 3") && stderr.contains("abc"),
         "{stderr}"
     );
     std::fs::write(&csv, "t,x\n0,1\n").unwrap();
-    let output = host_sim()
-        .args(["estimate", "--order", "1", "--gain", "1", "--input"])
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(!output.status.success());
-    assert!(String::from_utf8_lossy(&output.stderr).contains("column `y`"));
+    assert!(run_refused(
+        host_sim()
+            .args(["estimate", "--order", "1", "--gain", "1", "--input"])
+            .arg(&csv)
+    )
+    .contains("column `y`"));
 }
 
 #[test]
 fn malformed_scene_file_error_names_file_and_key() {
     let scene = temp("broken.toml");
     std::fs::write(&scene, "[[events]]\ntime_s = 0.0\nmass_g = \"heavy\"\n").unwrap();
-    let output = host_sim()
-        .args(["simulate", "--out", "/dev/null"])
-        .arg(&scene)
-        .output()
-        .unwrap();
-    assert!(!output.status.success());
-    let stderr = String::from_utf8_lossy(&output.stderr);
+    let stderr = run_refused(
+        host_sim()
+            .args(["simulate", "--out", "/dev/null"])
+            .arg(&scene),
+    );
     assert!(
         stderr.contains("broken.toml") && stderr.contains("mass_g") && stderr.contains("expected"),
         "{stderr}"
@@ -253,6 +234,44 @@ fn widen(r: Reading<f32>) -> Reading<f64> {
 /// (0.445 g × 73.25 counts/g ≈ 32.6 counts) and the quantisation.
 const TARE_VARIANCE: f64 = 1063.0;
 
+/// The covariance form as `covariance:n=..,D=..` builds it (prior information 10⁻⁶).
+fn covariance<T: Real>(
+    order: usize,
+    decimation: u16,
+    gain: T,
+) -> CovarianceStepEstimator<T, 40, 41> {
+    CovarianceStepEstimator::new(
+        StepConfig::new(order, gain).with_decimation(decimation),
+        T::from_f64(1e-6),
+    )
+    .unwrap()
+}
+
+/// The bias-compensated form as `bc:n=..,D=..` builds it with [`TARE_VARIANCE`].
+fn bias_compensated<T: Real>(
+    order: usize,
+    decimation: u16,
+    gain: T,
+) -> BiasCompensatedStepEstimator<T, 40> {
+    BiasCompensatedStepEstimator::new(BiasCompensatedConfig::new(
+        StepConfig::new(order, gain).with_decimation(decimation),
+        T::from_f64(TARE_VARIANCE),
+    ))
+    .unwrap()
+}
+
+/// A baseline as `settled` and `moving` build it by default (blocks of 80, a 0.5 g band).
+fn baseline<T: Real>(mode: BaselineMode, gain: T) -> Baseline<T, 10> {
+    Baseline::new(BaselineConfig {
+        mode,
+        gain,
+        block: 80,
+        stable_band: T::from_f64(0.5),
+        noise_reference: None,
+    })
+    .unwrap()
+}
+
 /// Every method through `estimate --method` equals the core's own type fed directly, in the
 /// precision the spec names (f32: the tare removed in f64, then rounded, as the CLI does).
 #[test]
@@ -278,13 +297,6 @@ fn estimate_with_every_method_equals_the_core() {
             .map(|model| ModelConfig::new(model).with_decimation(model_spec(spec).decimation))
             .collect()
     };
-    let baseline = |mode, gain| BaselineConfig {
-        mode,
-        gain,
-        block: 80,
-        stable_band: 0.5,
-        noise_reference: None,
-    };
     let cases: Vec<(&str, Vec<Reading<f64>>)> = vec![
         (
             "step:n=7,D=16,precision=f32",
@@ -304,25 +316,10 @@ fn estimate_with_every_method_equals_the_core() {
                 .unwrap(),
             ),
         ),
-        (
-            "covariance:n=7,D=16",
-            all_f64(
-                &mut CovarianceStepEstimator::<f64, 40, 41>::new(
-                    StepConfig::new(7, gain).with_decimation(16),
-                    1e-6,
-                )
-                .unwrap(),
-            ),
-        ),
+        ("covariance:n=7,D=16", all_f64(&mut covariance(7, 16, gain))),
         (
             "covariance:n=7,D=16,precision=f32",
-            all_f32(
-                &mut CovarianceStepEstimator::<f32, 40, 41>::new(
-                    StepConfig::new(7, g32).with_decimation(16),
-                    1e-6,
-                )
-                .unwrap(),
-            ),
+            all_f32(&mut covariance(7, 16, g32)),
         ),
         (
             "model",
@@ -344,23 +341,11 @@ fn estimate_with_every_method_equals_the_core() {
         ),
         (
             "settled",
-            all_f64(
-                &mut Baseline::<f64, 10>::new(baseline(BaselineMode::SettledAverage, gain))
-                    .unwrap(),
-            ),
+            all_f64(&mut baseline(BaselineMode::SettledAverage, gain)),
         ),
         (
             "moving:precision=f32",
-            all_f32(
-                &mut Baseline::<f32, 10>::new(BaselineConfig {
-                    mode: BaselineMode::MovingAverage,
-                    gain: g32,
-                    block: 80,
-                    stable_band: 0.5,
-                    noise_reference: None,
-                })
-                .unwrap(),
-            ),
+            all_f32(&mut baseline(BaselineMode::MovingAverage, g32)),
         ),
         (
             "ramp:n=5,D=16,lag_s=0.01",
@@ -392,25 +377,10 @@ fn estimate_with_every_method_equals_the_core() {
                 .unwrap(),
             ),
         ),
-        (
-            "bc:n=3,D=16",
-            all_f64(
-                &mut BiasCompensatedStepEstimator::<f64, 40>::new(BiasCompensatedConfig::new(
-                    StepConfig::new(3, gain).with_decimation(16),
-                    TARE_VARIANCE,
-                ))
-                .unwrap(),
-            ),
-        ),
+        ("bc:n=3,D=16", all_f64(&mut bias_compensated(3, 16, gain))),
         (
             "bc:n=3,D=16,precision=f32",
-            all_f32(
-                &mut BiasCompensatedStepEstimator::<f32, 40>::new(BiasCompensatedConfig::new(
-                    StepConfig::new(3, g32).with_decimation(16),
-                    TARE_VARIANCE as f32,
-                ))
-                .unwrap(),
-            ),
+            all_f32(&mut bias_compensated(3, 16, g32)),
         ),
     ];
     for (spec, readings) in cases {
@@ -475,44 +445,38 @@ fn bad_method_specs_are_errors_naming_spec_key_and_expectation() {
         }
     }
     // The same parser behind montecarlo --method and --config.
-    let output = host_sim()
-        .args(["montecarlo", "reference-step", "--runs", "1"])
-        .args(["--method", "moving:band_g=0"])
-        .output()
-        .unwrap();
-    assert!(!output.status.success());
-    let stderr = String::from_utf8_lossy(&output.stderr);
+    let stderr = run_refused(
+        host_sim()
+            .args(["montecarlo", "reference-step", "--runs", "1"])
+            .args(["--method", "moving:band_g=0"]),
+    );
     assert!(
         stderr.contains("moving:band_g=0") && stderr.contains("`band_g`"),
         "{stderr}"
     );
-    let output = host_sim()
-        .args(["montecarlo", "reference-step", "--runs", "1"])
-        .args(["--config", "settled"])
-        .output()
-        .unwrap();
-    assert!(!output.status.success());
-    assert!(String::from_utf8_lossy(&output.stderr).contains("--method"));
+    assert!(run_refused(
+        host_sim()
+            .args(["montecarlo", "reference-step", "--runs", "1"])
+            .args(["--config", "settled"])
+    )
+    .contains("--method"));
     // `bc` without the tare's noise variance is refused, naming what is missing.
-    let output = host_sim()
-        .args(["estimate", "--gain", "1", "--method", "bc:n=3", "--input"])
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(!output.status.success());
-    let stderr = String::from_utf8_lossy(&output.stderr);
+    let stderr = run_refused(
+        host_sim()
+            .args(["estimate", "--gain", "1", "--method", "bc:n=3", "--input"])
+            .arg(&csv),
+    );
     assert!(
         stderr.contains("bc:n=3,D=1") && stderr.contains("--tare-variance"),
         "{stderr}"
     );
     // --method and the step shorthand exclude each other.
-    let output = host_sim()
-        .args(["estimate", "--gain", "1", "--method", "settled"])
-        .args(["--order", "3", "--input"])
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(!output.status.success());
+    run_refused(
+        host_sim()
+            .args(["estimate", "--gain", "1", "--method", "settled"])
+            .args(["--order", "3", "--input"])
+            .arg(&csv),
+    );
 }
 
 #[test]

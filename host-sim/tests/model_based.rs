@@ -1,5 +1,5 @@
 //! The model-based estimator with a model identified at calibration, with host-sim's
-//! simulator as the truth (issue 5: "≤ 1.2× CRLB at 100 ms at the calibration mass; bias
+//! simulator as the truth (the goals: "≤ 1.2× CRLB at 100 ms at the calibration mass; bias
 //! ≤ 0.05% from 0.3× to 3× the calibration mass; f32 within 10% of f64").
 //!
 //! Every study here calibrates first: [`estimator_core::sensor::identify`] finds `(f_n, ζ)` and the
@@ -33,7 +33,8 @@ const READOUT: usize = 400;
 /// Drops recorded at calibration, and their length (1.5 s).
 const CALIBRATION_DROPS: u64 = 3;
 const CALIBRATION_SAMPLES: usize = 6000;
-/// The masses of the issue's load-dependence goal, as multiples of the calibration mass.
+/// The masses of the load-dependence goal (bias ≤ 0.05% from 0.3× to 3× the calibration
+/// mass), as multiples of the calibration mass.
 const MASS_FACTORS: [f64; 5] = [0.3, 0.5, 1.0, 2.0, 3.0];
 /// The bank the firmware should run: 33 candidates 2% apart over frequency ratios
 /// 0.68–1.30, which covers 0.3×–3× the calibration mass on the reference cell (ratios
@@ -92,9 +93,10 @@ fn adc(mass_g: f64, white_g: f64, seed: u64, samples: usize) -> SimulatedAdc<2> 
     SimulatedAdc::new(chain, script, disturbances, seed)
 }
 
-/// Calibrate: identify the model from three 1.5 s drops of the calibration mass at 50 dB.
-fn calibrate() -> Identified {
-    let drops: Vec<Vec<f64>> = (0..CALIBRATION_DROPS)
+/// The three 1.5 s drops of the calibration mass at 50 dB that calibration records (seeds
+/// apart from the Monte Carlo seeds).
+fn calibration_drops() -> Vec<Vec<f64>> {
+    (0..CALIBRATION_DROPS)
         .map(|i| {
             record(
                 REFERENCE_STEP_G,
@@ -103,7 +105,12 @@ fn calibrate() -> Identified {
                 CALIBRATION_SAMPLES,
             )
         })
-        .collect();
+        .collect()
+}
+
+/// Calibrate: identify the model from three 1.5 s drops of the calibration mass at 50 dB.
+fn calibrate() -> Identified {
+    let drops = calibration_drops();
     let slices: Vec<&[f64]> = drops.iter().map(|d| d.as_slice()).collect();
     identify::<f64, 5>(&slices, &identify_config()).expect("the reference drops identify")
 }
@@ -208,6 +215,11 @@ fn monte_carlo<T: Real, E: Estimator<T>>(
         valid,
         runs,
     }
+}
+
+/// [`monte_carlo`] at the calibration mass, read on time.
+fn at_calibration_mass<T: Real, E: Estimator<T>>(make: &dyn Fn() -> E, runs: u64) -> Errors {
+    monte_carlo(make, REFERENCE_STEP_G, runs, 0)
 }
 
 fn single<T: Real>(
@@ -482,17 +494,13 @@ fn identified_model_at_the_calibration_mass_against_the_bound() {
     let bound = crlb_g(REFERENCE_STEP_G);
     let unknown_bound = unknown_state_crlb_g(REFERENCE_STEP_G);
     let runs = 1000;
-    let at_rest = monte_carlo(
+    let at_rest = at_calibration_mass(
         &|| single::<f64>(&model, InitialState::AtRest, DECIMATION),
-        REFERENCE_STEP_G,
         runs,
-        0,
     );
-    let unknown = monte_carlo(
+    let unknown = at_calibration_mass(
         &|| bank::<f64>(&model, InitialState::Unknown, DECIMATION),
-        REFERENCE_STEP_G,
         runs,
-        0,
     );
     println!(
         "calibration mass, 100 ms, {runs} runs: host-sim CRLB {bound:.4} g; [x0; u] bound {unknown_bound:.4} g ({:.3}×); \
@@ -506,7 +514,7 @@ fn identified_model_at_the_calibration_mass_against_the_bound() {
     );
     assert_eq!(at_rest.valid, runs);
     assert_eq!(unknown.valid, runs);
-    // The issue's goal, for the variant that knows the onset and that the pan was at rest.
+    // The goal (≤ 1.2× the CRLB at 100 ms), for the variant that knows the onset and that the pan was at rest.
     assert!(at_rest.rms_g / bound <= 1.2, "{:.3}", at_rest.rms_g / bound);
     // The variant that estimates the initial state solves a harder problem: its bound is
     // 1.16× host-sim's. It must meet its own bound within the Monte Carlo error (+3σ = 7%)
@@ -661,7 +669,7 @@ fn an_onset_error_biases_the_at_rest_variant_only() {
 #[test]
 fn f32_matches_f64_on_the_same_data() {
     // The same 300 runs in both precisions, the f32 estimator fed the f64 samples rounded.
-    // Claim (the issue's): the f32 RMS is within 10% of the f64 RMS. We also ask that the
+    // Claim (the goal): the f32 RMS is within 10% of the f64 RMS. We also ask that the
     // RMS of the f32 − f64 difference stays below a tenth of the statistical RMS error
     // (adds < 0.5% to the error budget); the measured difference is about 0.2% of it.
     let model = calibrate().model;
@@ -701,16 +709,7 @@ fn f32_matches_f64_on_the_same_data() {
 fn identification_in_f32_agrees_with_f64() {
     // The firmware may identify in f32. On the same drops the parameters agree within the
     // f64 bound (one standard deviation), so f32 adds less than the noise does.
-    let drops: Vec<Vec<f64>> = (0..CALIBRATION_DROPS)
-        .map(|i| {
-            record(
-                REFERENCE_STEP_G,
-                sigma_g(),
-                run_seed(1000, i),
-                CALIBRATION_SAMPLES,
-            )
-        })
-        .collect();
+    let drops = calibration_drops();
     let drops32: Vec<Vec<f32>> = drops
         .iter()
         .map(|d| d.iter().map(|&v| v as f32).collect())
@@ -883,18 +882,10 @@ fn figures() {
     println!("initial state, D, single model: bias g, RMS g, ×CRLB | bank of {BANK}: bias g, RMS g, ×CRLB");
     for initial_state in [InitialState::AtRest, InitialState::Unknown] {
         for decimation in [1u16, 4, 8, 16] {
-            let one = monte_carlo(
-                &|| single::<f64>(&model, initial_state, decimation),
-                REFERENCE_STEP_G,
-                runs,
-                0,
-            );
-            let many = monte_carlo(
-                &|| bank::<f64>(&model, initial_state, decimation),
-                REFERENCE_STEP_G,
-                runs,
-                0,
-            );
+            let one =
+                at_calibration_mass(&|| single::<f64>(&model, initial_state, decimation), runs);
+            let many =
+                at_calibration_mass(&|| bank::<f64>(&model, initial_state, decimation), runs);
             println!(
                 "{initial_state:?}, D = {decimation}: {:+.5} {:.5} {:.3} | {:+.5} {:.5} {:.3}",
                 one.bias_g,
@@ -906,17 +897,13 @@ fn figures() {
             );
         }
     }
-    let with_truth = monte_carlo(
+    let with_truth = at_calibration_mass(
         &|| single::<f64>(&truth, InitialState::Unknown, DECIMATION),
-        REFERENCE_STEP_G,
         runs,
-        0,
     );
-    let with_truth_at_rest = monte_carlo(
+    let with_truth_at_rest = at_calibration_mass(
         &|| single::<f64>(&truth, InitialState::AtRest, DECIMATION),
-        REFERENCE_STEP_G,
         runs,
-        0,
     );
     println!(
         "true model, D = {DECIMATION}: AtRest RMS {:.5} g ({:.3}×), Unknown RMS {:.5} g ({:.3}×)",
@@ -940,12 +927,7 @@ fn figures() {
                     initial_state,
                 )
                 .unwrap();
-            let e = monte_carlo(
-                &|| ModelBank::new(configs).unwrap(),
-                REFERENCE_STEP_G,
-                runs,
-                0,
-            );
+            let e = at_calibration_mass(&|| ModelBank::new(configs).unwrap(), runs);
             line += &format!(
                 " shifted {fraction} step: bias {:+.5} RMS {:.5} ({:.3}×);",
                 e.bias_g,
@@ -998,18 +980,8 @@ fn figures() {
 
     println!("\n## f32 against f64, {runs} runs, calibration mass, bank, D = {DECIMATION}");
     for initial_state in [InitialState::Unknown, InitialState::AtRest] {
-        let e64 = monte_carlo(
-            &|| bank::<f64>(&model, initial_state, DECIMATION),
-            REFERENCE_STEP_G,
-            runs,
-            0,
-        );
-        let e32 = monte_carlo(
-            &|| bank::<f32>(&model, initial_state, DECIMATION),
-            REFERENCE_STEP_G,
-            runs,
-            0,
-        );
+        let e64 = at_calibration_mass(&|| bank::<f64>(&model, initial_state, DECIMATION), runs);
+        let e32 = at_calibration_mass(&|| bank::<f32>(&model, initial_state, DECIMATION), runs);
         println!(
             "{initial_state:?}: RMS f64 {:.5} g, f32 {:.5} g ({:+.2}%)",
             e64.rms_g,

@@ -28,7 +28,7 @@ fn slope_error_at_40_db_is_below_one_percent_and_reproducible() {
         assert_eq!(row.rms.to_bits(), repeat.rms.to_bits(), "not reproducible");
         assert_eq!(row.valid_runs, runs, "line not determined in every run");
         // The 1,000-run study measures 0.26% RMS (README); over 200 runs the RMS estimate's
-        // relative standard deviation is ~5%, so 1% (the goal) fails only if the
+        // relative standard deviation is ~5%, so 1% (the goal) fails only if the
         // estimator does.
         assert!(row.rms < ramp_study::GOAL_RELATIVE_RMS, "{row}");
     }

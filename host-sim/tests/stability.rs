@@ -4,8 +4,6 @@
 //! classification of cells, and its reproducibility. The core's own regression tests are in
 //! estimator-core/tests/stability.rs.
 
-use std::process::Command;
-
 use estimator_core::{
     Estimator, InvalidReason, NoiseReference, Reading, Real, State, StepConfig, StepEstimator,
 };
@@ -18,6 +16,8 @@ use host_sim::simulated::{run_seed, LoadEvent, Script};
 use host_sim::stability::{
     mass_for_ratio, noisy_scene, readout_indices, vibration_gain, Cell, Class, Noise,
 };
+
+mod support;
 
 /// The reference chain with `mass_g` dropped at t = 0, at the reference scene's noise.
 fn drop_of(mass_g: f64) -> Scene {
@@ -143,7 +143,7 @@ fn the_stability_study_is_reproducible_across_thread_counts() {
             "host-sim-stability-{}-{threads}",
             std::process::id()
         ));
-        let output = Command::new(env!("CARGO_BIN_EXE_host-sim"))
+        let output = support::host_sim()
             .env("RAYON_NUM_THREADS", threads)
             .args(["study", "stability", "--runs", "4", "--seed", "2"])
             .args([

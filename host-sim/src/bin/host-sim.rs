@@ -1,12 +1,13 @@
 //! `host-sim`: simulate scenes, run the core's estimator on recorded data, Monte Carlo
 //! studies against the Cramér–Rao bound, the charts, the results table and the benchmark.
+//! Each subcommand is one function; the work is in the library, never here.
 
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Write};
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use clap::{Parser, Subcommand};
+use clap::{Args, Parser, Subcommand};
 use estimator_core::sensor::AdcSource;
 use host_sim::calibrate;
 use host_sim::chart;
@@ -29,250 +30,274 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Simulate a scene: CSV `t,y,truth` (t in s, y the ADC code, truth the load in g).
-    Simulate {
-        /// A scene file, or the name of a shipped scene (host-sim/scenes/NAME.toml).
-        scene: String,
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        #[arg(long)]
-        out: PathBuf,
-        /// White noise at this SNR instead of the scene's (dB, thesis eq. 4.39, relative to
-        /// the scene's SNR step).
-        #[arg(long)]
-        snr_db: Option<f64>,
-    },
+    Simulate(SimulateArgs),
     /// Run one of the core's estimators over a CSV with a header and a column `y`; writes
     /// `k,estimate,state` to stdout (estimate empty while not valid). Give `--method SPEC`
     /// (e.g. `model:D=8`, `settled`, `step:n=7,D=16,precision=f32`), or the step estimator's
     /// shorthand `--order N [--decimation D --forgetting L --precision P]`.
-    Estimate {
-        #[arg(long)]
-        input: PathBuf,
-        /// A weighing configuration written by `calibrate`: runs exactly the configured
-        /// method as the firmware builds it, with its gain and zero (--zero overrides the zero).
-        #[arg(long, conflicts_with_all = ["method", "order", "forgetting", "decimation", "precision", "gain"])]
-        config: Option<PathBuf>,
-        /// The estimator: step, covariance, model, settled, moving, ramp, iv or bc with its
-        /// keys (see host-sim/README.md).
-        #[arg(long, conflicts_with_all = ["order", "forgetting", "decimation", "precision"])]
-        method: Option<Method>,
-        /// Shorthand for `--method step:n=N,...`: model order n.
-        #[arg(long, required_unless_present_any = ["method", "config"])]
-        order: Option<usize>,
-        /// Static gain: raw units of `y` per unit of the estimate (e.g. counts per gram).
-        #[arg(long, required_unless_present = "config")]
-        gain: Option<f64>,
-        #[arg(long)]
-        forgetting: Option<f64>,
-        #[arg(long)]
-        decimation: Option<u16>,
-        #[arg(long)]
-        precision: Option<Precision>,
-        /// Subtracted from every sample before the estimator (the tare, in raw units; default
-        /// 0, or the config's zero).
-        #[arg(long)]
-        zero: Option<f64>,
-        /// The scene whose sensor chain the `model` method takes its dynamics from.
-        #[arg(long, default_value = "reference-step")]
-        scene: String,
-        /// Noise variance of one raw sample measured at tare, raw units² (for `bc`, and the
-        /// reference of `--check-residuals`), metered at the method's D.
-        #[arg(long)]
-        tare_variance: Option<f64>,
-        /// The differences of block means the tare variance was metered over (its own
-        /// uncertainty, for `--check-residuals`; default: known exactly).
-        #[arg(long, default_value_t = 0, requires = "check_residuals")]
-        tare_differences: u32,
-        /// Flag a fit whose residuals exceed what the tare's noise explains
-        /// (`invalid_model_mismatch`; estimator-core's consistency check). Needs
-        /// `--tare-variance`.
-        #[arg(long, requires = "tare_variance", conflicts_with = "config")]
-        check_residuals: bool,
-    },
+    Estimate(EstimateArgs),
     /// Calibration as one command: from recorded drops of a known mass (CSVs with a column
     /// `y`: an empty-pan stretch, then the drop), choose the smallest method that meets the
     /// target at the readout time and write the weighing configuration (TOML). Each scored
     /// candidate is logged on stderr; the choice and its figures on stdout.
-    Calibrate {
-        /// A recorded drop (repeat for each; 3 is typical).
-        #[arg(long = "drop", required = true)]
-        drops: Vec<PathBuf>,
-        /// The known mass dropped, g.
-        #[arg(long)]
-        mass_g: f64,
-        /// Readout time after the mass lands, ms.
-        #[arg(long, default_value_t = 100.0)]
-        readout_ms: f64,
-        /// Accuracy target at the readout, % of the mass (95th percentile of |error|).
-        #[arg(long, default_value_t = 0.1)]
-        target_pct: f64,
-        /// Static gain to use; default: derived from the drops (the identified model's fitted
-        /// step over the known mass).
-        #[arg(long)]
-        counts_per_gram: Option<f64>,
-        /// Where the configuration goes.
-        #[arg(long)]
-        out: PathBuf,
-        /// Sample rate of the recordings, Hz.
-        #[arg(long, default_value_t = 4000.0)]
-        sample_rate_hz: f64,
-        /// Cut-off of the known 3rd-order Butterworth anti-alias filter, Hz.
-        #[arg(long, default_value_t = 100.0)]
-        filter_hz: f64,
-        /// Converter resolution (codes at 0 or 2^bits − 1 are saturated).
-        #[arg(long, default_value_t = 16)]
-        adc_bits: u32,
-        /// Synthetic drops per candidate (at least 59).
-        #[arg(long, default_value_t = 400)]
-        runs: usize,
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Arithmetic the candidates are scored in (the firmware runs f32).
-        #[arg(long, default_value = "f32")]
-        precision: Precision,
-        /// Largest model order n tried.
-        #[arg(long, default_value_t = 8)]
-        max_order: usize,
-        /// Score every candidate, not only up to the first that meets the target.
-        #[arg(long)]
-        all: bool,
-        /// Also print the configuration as a Rust constant (for a firmware build script).
-        #[arg(long)]
-        rust: bool,
-        /// Lightest load the target must hold at, g (default: 0.3x the mass). With
-        /// --max-load-g, both equal to --mass-g: score the calibration mass only.
-        #[arg(long)]
-        min_load_g: Option<f64>,
-        /// Heaviest load the target must hold at, g (default: 3x the mass, clipped to the
-        /// heaviest load whose landing the converter takes).
-        #[arg(long)]
-        max_load_g: Option<f64>,
-        /// Loads spaced geometrically over the range, ends included (1-8).
-        #[arg(long, default_value_t = estimator_core::tuning::DEFAULT_LOADS)]
-        loads: usize,
-        /// The platform's moving mass (pan and the cell's free end), g, if known; default:
-        /// unknown, each load scored at both ends of what physics allows.
-        #[arg(long, conflicts_with = "second_drop")]
-        platform_mass_g: Option<f64>,
-        /// A recorded drop of a second known mass (repeat for each): the platform mass is
-        /// identified from the two resonances (with --second-mass-g).
-        #[arg(long, requires = "second_mass_g")]
-        second_drop: Vec<PathBuf>,
-        /// The second known mass, g.
-        #[arg(long, requires = "second_drop")]
-        second_mass_g: Option<f64>,
-    },
+    Calibrate(CalibrateArgs),
     /// Monte Carlo of the core on a scene: CSV per SNR, configuration and sample index.
-    Montecarlo {
-        scene: String,
-        #[arg(long, default_value_t = 1000)]
-        runs: usize,
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// SNRs in dB (comma separated); default: the scene's.
-        #[arg(long, value_delimiter = ',')]
-        snr_db: Vec<f64>,
-        /// Step estimator configurations, e.g. `--config n=7,D=1 --config n=5,D=16`
-        /// (default, when neither --config nor --method is given: n=7,D=1).
-        #[arg(long = "config")]
-        configs: Vec<Setup>,
-        /// Any estimator by its spec, e.g. `--method model --method settled`; after the
-        /// `--config` ones. The CSV's `config` column holds each one's label.
-        #[arg(long = "method")]
-        methods: Vec<Method>,
-        /// Samples after the onset to study (default: up to the next event or the end).
-        #[arg(long)]
-        samples: Option<usize>,
-        #[arg(long)]
-        out: Option<PathBuf>,
-        /// Print the headline figures (RMS at the readout, time to 0.1%) to stdout.
-        #[arg(long)]
-        summary: bool,
-        #[arg(long, default_value_t = 0.1)]
-        readout_s: f64,
-    },
+    Montecarlo(MontecarloArgs),
     /// The README's results table: the plain thesis configuration and a sweep of order and
     /// decimation on the reference scene at 50 dB; prints the figures and the best one.
-    Table {
-        #[arg(long, default_value_t = 1000)]
-        runs: usize,
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        #[arg(long, default_value_t = 50.0)]
-        snr_db: f64,
-        #[arg(long, default_value_t = 0.1)]
-        readout_s: f64,
-    },
+    Table(TableArgs),
     /// Draw the charts (a)–(d) as SVG and PNG.
-    Chart {
-        /// Draw all four charts (the only mode so far).
-        #[arg(long)]
-        all: bool,
-        #[arg(long, default_value = "host-sim/charts")]
-        out: PathBuf,
-        #[arg(long, default_value_t = 1000)]
-        runs: usize,
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Configurations for (a)–(c).
-        #[arg(long = "config", default_values = ["n=7,D=1", "n=7,D=12"])]
-        configs: Vec<Setup>,
-        #[arg(long, default_value_t = 0.1)]
-        readout_s: f64,
-    },
+    Chart(ChartArgs),
     /// Studies over every method. `study speed`: speed against accuracy on the reference
     /// scene at 30–80 dB (time to 0.1%, RMS at 50/100/200 ms against the CRLB), CSV +
     /// markdown + charts, and the firmware default's goal figures.
-    Study {
-        /// `speed` (issue 5, study 7), `stability` (issue 5, item 8: the stability map) or `ramp`
-        /// (conveyor weighing, the `conveyor-ramp` scene: its SNRs default to 30,40,50 dB;
-        /// `--method ramp:n=..,D=..` replaces its setups).
-        which: StudyKind,
-        /// Runs per SNR (speed, default 1000) or per Monte Carlo cell (stability, default 100).
-        #[arg(long)]
-        runs: Option<usize>,
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// SNRs in dB (comma separated); default: speed 30–80, stability 10–80 (step 10).
-        #[arg(long, value_delimiter = ',')]
-        snr_db: Vec<f64>,
-        /// Stability: the orders of slice A (default 1–40, 15 of them).
-        #[arg(long, value_delimiter = ',')]
-        orders: Vec<usize>,
-        /// Stability: samples of each long run (slice D; 0 leaves the slice out).
-        #[arg(long, default_value_t = host_sim::stability::LONG_SAMPLES)]
-        long_samples: usize,
-        /// More methods, after the default list (e.g. a variant under development).
-        #[arg(long = "method")]
-        methods: Vec<Method>,
-        /// Where the CSV, the markdown table and the charts go.
-        #[arg(long, default_value = "host-sim/charts")]
-        out: PathBuf,
-    },
+    Study(StudyArgs),
     /// Monte Carlo benchmark: estimator updates per second on this host.
-    Bench {
-        #[arg(long, default_value_t = 10_000)]
-        runs: usize,
-        #[arg(long, default_value_t = 6000)]
-        samples: usize,
-        #[arg(long, default_value_t = 7)]
-        order: usize,
-        #[arg(long, default_value_t = 1)]
-        decimation: u16,
-        #[arg(long, default_value = "f64")]
-        precision: Precision,
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-    },
+    Bench(BenchArgs),
+}
+
+#[derive(Args)]
+struct SimulateArgs {
+    /// A scene file, or the name of a shipped scene (host-sim/scenes/NAME.toml).
+    scene: String,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    #[arg(long)]
+    out: PathBuf,
+    /// White noise at this SNR instead of the scene's (dB, thesis eq. 4.39, relative to
+    /// the scene's SNR step).
+    #[arg(long)]
+    snr_db: Option<f64>,
+}
+
+#[derive(Args)]
+struct EstimateArgs {
+    #[arg(long)]
+    input: PathBuf,
+    /// A weighing configuration written by `calibrate`: runs exactly the configured
+    /// method as the firmware builds it, with its gain and zero (--zero overrides the zero).
+    #[arg(long, conflicts_with_all = ["method", "order", "forgetting", "decimation", "precision", "gain"])]
+    config: Option<PathBuf>,
+    /// The estimator: step, covariance, model, settled, moving, ramp, iv or bc with its
+    /// keys (see host-sim/README.md).
+    #[arg(long, conflicts_with_all = ["order", "forgetting", "decimation", "precision"])]
+    method: Option<Method>,
+    /// Shorthand for `--method step:n=N,...`: model order n.
+    #[arg(long, required_unless_present_any = ["method", "config"])]
+    order: Option<usize>,
+    /// Static gain: raw units of `y` per unit of the estimate (e.g. counts per gram).
+    #[arg(long, required_unless_present = "config")]
+    gain: Option<f64>,
+    #[arg(long)]
+    forgetting: Option<f64>,
+    #[arg(long)]
+    decimation: Option<u16>,
+    #[arg(long)]
+    precision: Option<Precision>,
+    /// Subtracted from every sample before the estimator (the tare, in raw units; default
+    /// 0, or the config's zero).
+    #[arg(long)]
+    zero: Option<f64>,
+    /// The scene whose sensor chain the `model` method takes its dynamics from.
+    #[arg(long, default_value = "reference-step")]
+    scene: String,
+    /// Noise variance of one raw sample measured at tare, raw units² (for `bc`, and the
+    /// reference of `--check-residuals`), metered at the method's D.
+    #[arg(long)]
+    tare_variance: Option<f64>,
+    /// The differences of block means the tare variance was metered over (its own
+    /// uncertainty, for `--check-residuals`; default: known exactly).
+    #[arg(long, default_value_t = 0, requires = "check_residuals")]
+    tare_differences: u32,
+    /// Flag a fit whose residuals exceed what the tare's noise explains
+    /// (`invalid_model_mismatch`; estimator-core's consistency check). Needs
+    /// `--tare-variance`.
+    #[arg(long, requires = "tare_variance", conflicts_with = "config")]
+    check_residuals: bool,
+}
+
+#[derive(Args)]
+struct CalibrateArgs {
+    /// A recorded drop (repeat for each; 3 is typical).
+    #[arg(long = "drop", required = true)]
+    drops: Vec<PathBuf>,
+    /// The known mass dropped, g.
+    #[arg(long)]
+    mass_g: f64,
+    /// Readout time after the mass lands, ms.
+    #[arg(long, default_value_t = 100.0)]
+    readout_ms: f64,
+    /// Accuracy target at the readout, % of the mass (95th percentile of |error|).
+    #[arg(long, default_value_t = 0.1)]
+    target_pct: f64,
+    /// Static gain to use; default: derived from the drops (the identified model's fitted
+    /// step over the known mass).
+    #[arg(long)]
+    counts_per_gram: Option<f64>,
+    /// Where the configuration goes.
+    #[arg(long)]
+    out: PathBuf,
+    /// Sample rate of the recordings, Hz.
+    #[arg(long, default_value_t = 4000.0)]
+    sample_rate_hz: f64,
+    /// Cut-off of the known 3rd-order Butterworth anti-alias filter, Hz.
+    #[arg(long, default_value_t = 100.0)]
+    filter_hz: f64,
+    /// Converter resolution (codes at 0 or 2^bits − 1 are saturated).
+    #[arg(long, default_value_t = 16)]
+    adc_bits: u32,
+    /// Synthetic drops per candidate (at least 59).
+    #[arg(long, default_value_t = 400)]
+    runs: usize,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Arithmetic the candidates are scored in (the firmware runs f32).
+    #[arg(long, default_value = "f32")]
+    precision: Precision,
+    /// Largest model order n tried.
+    #[arg(long, default_value_t = 8)]
+    max_order: usize,
+    /// Score every candidate, not only up to the first that meets the target.
+    #[arg(long)]
+    all: bool,
+    /// Also print the configuration as a Rust constant (for a firmware build script).
+    #[arg(long)]
+    rust: bool,
+    /// Lightest load the target must hold at, g (default: 0.3x the mass). With
+    /// --max-load-g, both equal to --mass-g: score the calibration mass only.
+    #[arg(long)]
+    min_load_g: Option<f64>,
+    /// Heaviest load the target must hold at, g (default: 3x the mass, clipped to the
+    /// heaviest load whose landing the converter takes).
+    #[arg(long)]
+    max_load_g: Option<f64>,
+    /// Loads spaced geometrically over the range, ends included (1-8).
+    #[arg(long, default_value_t = estimator_core::tuning::DEFAULT_LOADS)]
+    loads: usize,
+    /// The platform's moving mass (pan and the cell's free end), g, if known; default:
+    /// unknown, each load scored at both ends of what physics allows.
+    #[arg(long, conflicts_with = "second_drop")]
+    platform_mass_g: Option<f64>,
+    /// A recorded drop of a second known mass (repeat for each): the platform mass is
+    /// identified from the two resonances (with --second-mass-g).
+    #[arg(long, requires = "second_mass_g")]
+    second_drop: Vec<PathBuf>,
+    /// The second known mass, g.
+    #[arg(long, requires = "second_drop")]
+    second_mass_g: Option<f64>,
+}
+
+#[derive(Args)]
+struct MontecarloArgs {
+    scene: String,
+    #[arg(long, default_value_t = 1000)]
+    runs: usize,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// SNRs in dB (comma separated); default: the scene's.
+    #[arg(long, value_delimiter = ',')]
+    snr_db: Vec<f64>,
+    /// Step estimator configurations, e.g. `--config n=7,D=1 --config n=5,D=16`
+    /// (default, when neither --config nor --method is given: n=7,D=1).
+    #[arg(long = "config")]
+    configs: Vec<Setup>,
+    /// Any estimator by its spec, e.g. `--method model --method settled`; after the
+    /// `--config` ones. The CSV's `config` column holds each one's label.
+    #[arg(long = "method")]
+    methods: Vec<Method>,
+    /// Samples after the onset to study (default: up to the next event or the end).
+    #[arg(long)]
+    samples: Option<usize>,
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Print the headline figures (RMS at the readout, time to 0.1%) to stdout.
+    #[arg(long)]
+    summary: bool,
+    #[arg(long, default_value_t = 0.1)]
+    readout_s: f64,
+}
+
+#[derive(Args)]
+struct TableArgs {
+    #[arg(long, default_value_t = 1000)]
+    runs: usize,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    #[arg(long, default_value_t = 50.0)]
+    snr_db: f64,
+    #[arg(long, default_value_t = 0.1)]
+    readout_s: f64,
+}
+
+#[derive(Args)]
+struct ChartArgs {
+    /// Draw all four charts (the only mode so far).
+    #[arg(long)]
+    all: bool,
+    #[arg(long, default_value = "host-sim/charts")]
+    out: PathBuf,
+    #[arg(long, default_value_t = 1000)]
+    runs: usize,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Configurations for (a)–(c).
+    #[arg(long = "config", default_values = ["n=7,D=1", "n=7,D=12"])]
+    configs: Vec<Setup>,
+    #[arg(long, default_value_t = 0.1)]
+    readout_s: f64,
+}
+
+#[derive(Args)]
+struct StudyArgs {
+    /// `speed` (speed against accuracy), `stability` (the stability map) or `ramp`
+    /// (conveyor weighing, the `conveyor-ramp` scene: its SNRs default to 30,40,50 dB;
+    /// `--method ramp:n=..,D=..` replaces its setups).
+    which: StudyKind,
+    /// Runs per SNR (speed, default 1000) or per Monte Carlo cell (stability, default 100).
+    #[arg(long)]
+    runs: Option<usize>,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// SNRs in dB (comma separated); default: speed 30–80, stability 10–80 (step 10).
+    #[arg(long, value_delimiter = ',')]
+    snr_db: Vec<f64>,
+    /// Stability: the orders of slice A (default 1–40, 15 of them).
+    #[arg(long, value_delimiter = ',')]
+    orders: Vec<usize>,
+    /// Stability: samples of each long run (slice D; 0 leaves the slice out).
+    #[arg(long, default_value_t = host_sim::stability::LONG_SAMPLES)]
+    long_samples: usize,
+    /// More methods, after the default list (e.g. a variant under development).
+    #[arg(long = "method")]
+    methods: Vec<Method>,
+    /// Where the CSV, the markdown table and the charts go.
+    #[arg(long, default_value = "host-sim/charts")]
+    out: PathBuf,
+}
+
+#[derive(Args)]
+struct BenchArgs {
+    #[arg(long, default_value_t = 10_000)]
+    runs: usize,
+    #[arg(long, default_value_t = 6000)]
+    samples: usize,
+    #[arg(long, default_value_t = 7)]
+    order: usize,
+    #[arg(long, default_value_t = 1)]
+    decimation: u16,
+    #[arg(long, default_value = "f64")]
+    precision: Precision,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
 }
 
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
 enum StudyKind {
-    /// Speed against accuracy (issue 5, study 7).
+    /// Speed against accuracy.
     Speed,
     /// Conveyor weighing: slope error at the end of the `conveyor-ramp` scene's ramp.
     Ramp,
-    /// The stability map of every estimator (issue 5, item 8).
+    /// The stability map of every estimator.
     Stability,
 }
 
@@ -290,359 +315,370 @@ fn create(path: &PathBuf) -> Result<BufWriter<File>> {
 
 fn main() -> Result<()> {
     match Cli::parse().command {
-        Command::Simulate {
-            scene,
-            seed,
-            out,
-            snr_db,
-        } => {
-            let mut scene = Scene::load(&scene)?;
-            if let Some(snr_db) = snr_db {
-                scene = scene.with_snr_db(snr_db);
-            }
-            let mut adc = scene.adc(seed);
-            let mut file = create(&out)?;
-            writeln!(file, "t,y,truth")?;
-            let rate = scene.chain.sample_rate_hz;
-            for k in 0..scene.samples() {
-                let code = adc.read().map_err(|e| anyhow::anyhow!("ADC: {e:?}"))?;
-                writeln!(file, "{:.6},{code},{}", k as f64 / rate, adc.load_g())?;
-            }
-            file.flush()?;
-            eprintln!(
-                "{}: {} samples at {} Hz; gain {:.6} counts/g, zero {:.3} counts (use: estimate --gain {:.6} --zero {:.3})",
-                out.display(),
-                scene.samples(),
-                rate,
-                scene.chain.counts_per_gram(),
-                scene.chain.zero_code(),
-                scene.chain.counts_per_gram(),
-                scene.chain.zero_code()
-            );
-        }
-        Command::Estimate {
-            input,
-            config: Some(config),
-            zero,
-            ..
-        } => {
-            let (config, precision) = calibrate::load_config(&config)?;
-            let zero = zero.unwrap_or(config.zero_counts);
-            let estimator = calibrate::configured_estimator(&config, precision, zero)?;
-            let file =
-                File::open(&input).with_context(|| format!("cannot open {}", input.display()))?;
-            let stdout = std::io::stdout();
-            let mut out = BufWriter::new(stdout.lock());
-            estimate_with(
-                estimator,
-                BufReader::new(file),
-                &input.display().to_string(),
-                zero,
-                &mut out,
-            )?;
-            out.flush()?;
-        }
-        Command::Estimate {
-            input,
-            config: None,
-            method,
-            order,
-            gain,
-            forgetting,
-            decimation,
-            precision,
-            zero,
-            scene,
-            tare_variance,
-            tare_differences,
-            check_residuals,
-        } => {
-            let method = match (method, order) {
-                (Some(method), _) => method,
-                (None, Some(order)) => Method::Step(Setup {
-                    order,
-                    decimation: decimation.unwrap_or(1),
-                    forgetting: forgetting.unwrap_or(1.0),
-                    precision: precision.unwrap_or(Precision::F64),
-                }),
-                (None, None) => anyhow::bail!("give --method SPEC or --order N"),
-            };
-            let gain = gain.context("give --gain (or --config)")?;
-            let zero = zero.unwrap_or(0.0);
-            let context = BuildContext {
-                tare_noise_variance: tare_variance,
-                tare_differences,
-                noise_check: check_residuals,
-                ..BuildContext::new(Scene::load(&scene)?.chain, gain)
-            };
-            let file =
-                File::open(&input).with_context(|| format!("cannot open {}", input.display()))?;
-            let stdout = std::io::stdout();
-            let mut out = BufWriter::new(stdout.lock());
-            estimate_csv(
-                BufReader::new(file),
-                &input.display().to_string(),
-                &method,
-                &context,
-                zero,
-                &mut out,
-            )?;
-            out.flush()?;
-        }
-        Command::Calibrate {
-            drops,
-            mass_g,
-            readout_ms,
-            target_pct,
-            counts_per_gram,
-            out,
-            sample_rate_hz,
-            filter_hz,
-            adc_bits,
-            runs,
-            seed,
-            precision,
-            max_order,
-            all,
-            rust,
-            min_load_g,
-            max_load_g,
-            loads,
-            platform_mass_g,
-            second_drop,
-            second_mass_g,
-        } => {
-            let mut options = calibrate::Options {
-                min_load_g,
-                max_load_g,
-                loads,
-                platform_mass_g,
-                readout_s: readout_ms * 1e-3,
-                target_relative: target_pct * 1e-2,
-                counts_per_gram,
-                sample_rate_hz,
-                filter_cutoff_hz: filter_hz,
-                adc_bits,
-                runs,
-                seed,
-                precision,
-                evaluate_all: all,
-                max_order,
-                ..calibrate::Options::new(drops.clone(), mass_g)
-            };
-            let names: Vec<String> = drops.iter().map(|p| p.display().to_string()).collect();
-            if let Some(second_mass_g) = second_mass_g {
-                let read = |paths: &[PathBuf]| {
-                    paths
-                        .iter()
-                        .map(|p| calibrate::read_drop(p))
-                        .collect::<Result<Vec<_>>>()
-                };
-                let second_names: Vec<String> = second_drop
-                    .iter()
-                    .map(|p| p.display().to_string())
-                    .collect();
-                let fit = calibrate::platform_mass_from_drops(
-                    &read(&drops)?,
-                    &names,
-                    &read(&second_drop)?,
-                    &second_names,
-                    second_mass_g,
-                    &options,
-                )?;
-                println!(
-                    "platform mass {:.2} g: {} g rings at {:.4} Hz (zeta {:.5}), {} g at {:.4} Hz (zeta {:.5}); the damping follows the law within {:+.2}%",
-                    fit.platform_mass_g,
-                    fit.first.0,
-                    fit.first.1,
-                    fit.first.2,
-                    fit.second.0,
-                    fit.second.1,
-                    fit.second.2,
-                    fit.damping_law_misfit() * 100.0
-                );
-                options.platform_mass_g = Some(fit.platform_mass_g);
-            }
-            eprintln!(
-                "calibrate: {} drops of {mass_g} g, target {target_pct}% at {readout_ms} ms, {runs} synthetic drops per candidate, {precision:?}",
-                drops.len()
-            );
-            let outcome = calibrate::calibrate_files(&options, |score| {
-                eprintln!(
-                    "{}",
-                    calibrate::score_line(score, mass_g, options.target_relative)
-                );
-            })?;
-            let command: Vec<String> = std::env::args().collect();
-            let text = calibrate::to_toml(&outcome, &names, &command.join(" "));
-            calibrate::write_file(&out, &text)?;
-            print_calibration(&outcome, &options, &out);
-            if rust {
-                println!("{}", calibrate::rust_const(&outcome.calibrated.config));
-            }
-        }
-        Command::Montecarlo {
-            scene,
-            runs,
-            seed,
-            snr_db,
-            configs,
-            methods,
-            samples,
-            out,
-            summary,
-            readout_s,
-        } => {
-            let scene = Scene::load(&scene)?;
-            let mut setups: Vec<Method> = configs.into_iter().map(Method::from).collect();
-            setups.extend(methods);
-            if setups.is_empty() {
-                setups.push(Method::from(Setup::new(7, 1)));
-            }
-            let study = Study {
-                samples: samples.unwrap_or(usize::MAX),
-                scene,
-                setups,
-                runs,
-                seed,
-            };
-            let results = montecarlo::run_studies(&study, &snr_db)?;
-            if let Some(out) = out {
-                let mut file = create(&out)?;
-                montecarlo::write_csv(&results, &mut file)?;
-                file.flush()?;
-            }
-            if summary {
-                montecarlo::summary(&results, readout_s, &mut std::io::stdout())?;
-            }
-        }
-        Command::Table {
-            runs,
-            seed,
-            snr_db,
-            readout_s,
-        } => table(runs, seed, snr_db, readout_s)?,
-        Command::Chart {
-            all,
-            out,
-            runs,
-            seed,
-            configs,
-            readout_s,
-        } => {
-            if !all {
-                anyhow::bail!("only `chart --all` is implemented: it draws (a)–(d)");
-            }
-            charts(&out, runs, seed, configs, readout_s)?;
-        }
-        Command::Study {
-            which,
-            runs,
-            seed,
-            snr_db,
-            orders,
-            long_samples,
-            methods,
-            out,
-        } => match which {
-            StudyKind::Speed => {
-                let snr_db = if snr_db.is_empty() {
-                    study::SNRS_DB.to_vec()
-                } else {
-                    snr_db
-                };
-                study::speed_command(runs.unwrap_or(1000), seed, &snr_db, methods, &out)?
-            }
-            StudyKind::Stability => {
-                if !methods.is_empty() {
-                    anyhow::bail!(
-                        "study stability runs its own methods; --method is for study speed"
-                    );
-                }
-                let snr_db = if snr_db.is_empty() {
-                    host_sim::stability::SNRS_DB.to_vec()
-                } else {
-                    snr_db
-                };
-                let orders = if orders.is_empty() {
-                    host_sim::stability::ORDERS.to_vec()
-                } else {
-                    orders
-                };
-                host_sim::stability::stability_command(
-                    runs.unwrap_or(100),
-                    seed,
-                    &snr_db,
-                    &orders,
-                    long_samples,
-                    &out,
-                )?
-            }
-            StudyKind::Ramp => {
-                // The ramp study takes the regression part of `ramp:` specs (or step specs).
-                let setups = methods
-                    .into_iter()
-                    .map(|method| match method {
-                        Method::Ramp(spec) => Ok(spec.setup),
-                        Method::Step(setup) => Ok(setup),
-                        other => Err(anyhow::anyhow!(
-                            "study ramp: `{other}` is not a ramp: give `ramp:n=..,D=..`"
-                        )),
-                    })
-                    .collect::<Result<Vec<_>>>()?;
-                // The ramp's goal is at 40 dB; 30 and 50 dB show the trend.
-                let snr_db = if snr_db.is_empty() {
-                    vec![30.0, 40.0, 50.0]
-                } else {
-                    snr_db
-                };
-                host_sim::ramp_study::ramp_command(
-                    "conveyor-ramp",
-                    setups,
-                    &snr_db,
-                    runs.unwrap_or(1000),
-                    seed,
-                )?
-            }
-        },
-        Command::Bench {
-            runs,
-            samples,
-            order,
-            decimation,
-            precision,
-            seed,
-        } => {
-            let scene = Scene::load("reference-step")?;
-            let setup = Setup {
-                order,
-                decimation,
-                forgetting: 1.0,
-                precision,
-            };
-            let figures = montecarlo::bench(&scene, &setup, runs, samples, seed)?;
-            let per_thread = figures.updates as f64 / figures.estimator_cpu_s;
-            println!(
-                "host-sim bench: {runs} runs x {samples} samples, {setup}, {precision:?}, reference-step at {} dB, {} threads",
-                scene.snr_db.unwrap_or(f64::INFINITY),
-                figures.threads
-            );
-            println!(
-                "  estimator: {:.3e} updates/s per thread ({:.1} ns/update), {:.3e} updates/s on {} threads",
-                per_thread,
-                1e9 / per_thread,
-                per_thread * figures.threads as f64,
-                figures.threads
-            );
-            println!(
-                "  whole Monte Carlo (simulation + estimator): {:.2} s wall, {:.3e} samples/s (checksum {:.3})",
-                figures.wall_s,
-                figures.updates as f64 / figures.wall_s,
-                figures.checksum
-            );
-        }
+        Command::Simulate(args) => simulate(args),
+        Command::Estimate(args) => estimate(args),
+        Command::Calibrate(args) => calibrate_command(args),
+        Command::Montecarlo(args) => montecarlo(args),
+        Command::Table(args) => table(args.runs, args.seed, args.snr_db, args.readout_s),
+        Command::Chart(args) => chart_command(args),
+        Command::Study(args) => study_command(args),
+        Command::Bench(args) => bench(args),
+    }
+}
+
+/// `simulate`: a scene's ADC codes and truth as CSV.
+fn simulate(args: SimulateArgs) -> Result<()> {
+    let out = args.out;
+    let mut scene = Scene::load(&args.scene)?;
+    if let Some(snr_db) = args.snr_db {
+        scene = scene.with_snr_db(snr_db);
+    }
+    let mut adc = scene.adc(args.seed);
+    let mut file = create(&out)?;
+    writeln!(file, "t,y,truth")?;
+    let rate = scene.chain.sample_rate_hz;
+    for k in 0..scene.samples() {
+        let code = adc.read().map_err(|e| anyhow::anyhow!("ADC: {e:?}"))?;
+        writeln!(file, "{:.6},{code},{}", k as f64 / rate, adc.load_g())?;
+    }
+    file.flush()?;
+    eprintln!(
+        "{}: {} samples at {} Hz; gain {:.6} counts/g, zero {:.3} counts (use: estimate --gain {:.6} --zero {:.3})",
+        out.display(),
+        scene.samples(),
+        rate,
+        scene.chain.counts_per_gram(),
+        scene.chain.zero_code(),
+        scene.chain.counts_per_gram(),
+        scene.chain.zero_code()
+    );
+    Ok(())
+}
+
+/// `calibrate`: identify the sensor from the drops, choose the method, write the
+/// configuration.
+fn calibrate_command(args: CalibrateArgs) -> Result<()> {
+    let mut options = calibration_options(&args);
+    let names = display_names(&args.drops);
+    if let Some(second_mass_g) = args.second_mass_g {
+        let platform_mass_g = identify_platform_mass(&args, &names, second_mass_g, &options)?;
+        options.platform_mass_g = Some(platform_mass_g);
+    }
+    let mass_g = args.mass_g;
+    eprintln!(
+        "calibrate: {} drops of {mass_g} g, target {}% at {} ms, {} synthetic drops per candidate, {:?}",
+        args.drops.len(),
+        args.target_pct,
+        args.readout_ms,
+        args.runs,
+        args.precision
+    );
+    let outcome = calibrate::calibrate_files(&options, |score| {
+        eprintln!(
+            "{}",
+            calibrate::score_line(score, mass_g, options.target_relative)
+        );
+    })?;
+    let command: Vec<String> = std::env::args().collect();
+    let text = calibrate::to_toml(&outcome, &names, &command.join(" "));
+    calibrate::write_file(&args.out, &text)?;
+    print_calibration(&outcome, &options, &args.out);
+    if args.rust {
+        println!("{}", calibrate::rust_const(&outcome.calibrated.config));
     }
     Ok(())
+}
+
+/// The calibration's options from the command line (the platform mass as given, if any).
+fn calibration_options(args: &CalibrateArgs) -> calibrate::Options {
+    calibrate::Options {
+        min_load_g: args.min_load_g,
+        max_load_g: args.max_load_g,
+        loads: args.loads,
+        platform_mass_g: args.platform_mass_g,
+        readout_s: args.readout_ms * 1e-3,
+        target_relative: args.target_pct * 1e-2,
+        counts_per_gram: args.counts_per_gram,
+        sample_rate_hz: args.sample_rate_hz,
+        filter_cutoff_hz: args.filter_hz,
+        adc_bits: args.adc_bits,
+        runs: args.runs,
+        seed: args.seed,
+        precision: args.precision,
+        evaluate_all: args.all,
+        max_order: args.max_order,
+        ..calibrate::Options::new(args.drops.clone(), args.mass_g)
+    }
+}
+
+/// The paths as they name the drops in messages and in the configuration.
+fn display_names(paths: &[PathBuf]) -> Vec<String> {
+    paths.iter().map(|p| p.display().to_string()).collect()
+}
+
+/// The platform mass from the two resonances of the drops of two known masses; prints the
+/// fit.
+fn identify_platform_mass(
+    args: &CalibrateArgs,
+    names: &[String],
+    second_mass_g: f64,
+    options: &calibrate::Options,
+) -> Result<f64> {
+    let read = |paths: &[PathBuf]| {
+        paths
+            .iter()
+            .map(|p| calibrate::read_drop(p))
+            .collect::<Result<Vec<_>>>()
+    };
+    let fit = calibrate::platform_mass_from_drops(
+        &read(&args.drops)?,
+        names,
+        &read(&args.second_drop)?,
+        &display_names(&args.second_drop),
+        second_mass_g,
+        options,
+    )?;
+    println!(
+        "platform mass {:.2} g: {} g rings at {:.4} Hz (zeta {:.5}), {} g at {:.4} Hz (zeta {:.5}); the damping follows the law within {:+.2}%",
+        fit.platform_mass_g,
+        fit.first.0,
+        fit.first.1,
+        fit.first.2,
+        fit.second.0,
+        fit.second.1,
+        fit.second.2,
+        fit.damping_law_misfit() * 100.0
+    );
+    Ok(fit.platform_mass_g)
+}
+
+/// `montecarlo`: the core on many seeded runs of a scene, per SNR and method.
+fn montecarlo(args: MontecarloArgs) -> Result<()> {
+    let mut setups: Vec<Method> = args.configs.into_iter().map(Method::from).collect();
+    setups.extend(args.methods);
+    if setups.is_empty() {
+        setups.push(Method::from(Setup::new(7, 1)));
+    }
+    let study = Study {
+        samples: args.samples.unwrap_or(usize::MAX),
+        scene: Scene::load(&args.scene)?,
+        setups,
+        runs: args.runs,
+        seed: args.seed,
+    };
+    let results = montecarlo::run_studies(&study, &args.snr_db)?;
+    if let Some(out) = args.out {
+        let mut file = create(&out)?;
+        montecarlo::write_csv(&results, &mut file)?;
+        file.flush()?;
+    }
+    if args.summary {
+        montecarlo::summary(&results, args.readout_s, &mut std::io::stdout())?;
+    }
+    Ok(())
+}
+
+/// `chart --all`: the charts (a)–(d).
+fn chart_command(args: ChartArgs) -> Result<()> {
+    if !args.all {
+        anyhow::bail!("only `chart --all` is implemented: it draws (a)–(d)");
+    }
+    charts(
+        &args.out,
+        args.runs,
+        args.seed,
+        args.configs,
+        args.readout_s,
+    )
+}
+
+/// `bench`: estimator updates per second on this host.
+fn bench(args: BenchArgs) -> Result<()> {
+    let (runs, samples, precision) = (args.runs, args.samples, args.precision);
+    let scene = Scene::load("reference-step")?;
+    let setup = Setup {
+        order: args.order,
+        decimation: args.decimation,
+        forgetting: 1.0,
+        precision,
+    };
+    let figures = montecarlo::bench(&scene, &setup, runs, samples, args.seed)?;
+    let per_thread = figures.updates as f64 / figures.estimator_cpu_s;
+    println!(
+        "host-sim bench: {runs} runs x {samples} samples, {setup}, {precision:?}, reference-step at {} dB, {} threads",
+        scene.snr_db.unwrap_or(f64::INFINITY),
+        figures.threads
+    );
+    println!(
+        "  estimator: {:.3e} updates/s per thread ({:.1} ns/update), {:.3e} updates/s on {} threads",
+        per_thread,
+        1e9 / per_thread,
+        per_thread * figures.threads as f64,
+        figures.threads
+    );
+    println!(
+        "  whole Monte Carlo (simulation + estimator): {:.2} s wall, {:.3e} samples/s (checksum {:.3})",
+        figures.wall_s,
+        figures.updates as f64 / figures.wall_s,
+        figures.checksum
+    );
+    Ok(())
+}
+
+/// `estimate`: a configuration written by `calibrate`, or a method given on the command line.
+fn estimate(args: EstimateArgs) -> Result<()> {
+    match args.config.clone() {
+        Some(config) => estimate_configured(args.input, config, args.zero),
+        None => estimate_method(args),
+    }
+}
+
+/// `estimate --config`: exactly the configured method, as the firmware builds it.
+fn estimate_configured(input: PathBuf, config: PathBuf, zero: Option<f64>) -> Result<()> {
+    let (config, precision) = calibrate::load_config(&config)?;
+    let zero = zero.unwrap_or(config.zero_counts);
+    let estimator = calibrate::configured_estimator(&config, precision, zero)?;
+    let file = File::open(&input).with_context(|| format!("cannot open {}", input.display()))?;
+    let stdout = std::io::stdout();
+    let mut out = BufWriter::new(stdout.lock());
+    estimate_with(
+        estimator,
+        BufReader::new(file),
+        &input.display().to_string(),
+        zero,
+        &mut out,
+    )?;
+    out.flush()?;
+    Ok(())
+}
+
+/// `estimate --method SPEC` or `--order N`: a method and its context from the command line.
+fn estimate_method(args: EstimateArgs) -> Result<()> {
+    let EstimateArgs {
+        input,
+        method,
+        order,
+        gain,
+        forgetting,
+        decimation,
+        precision,
+        zero,
+        scene,
+        tare_variance,
+        tare_differences,
+        check_residuals,
+        ..
+    } = args;
+    let method = match (method, order) {
+        (Some(method), _) => method,
+        (None, Some(order)) => Method::Step(Setup {
+            order,
+            decimation: decimation.unwrap_or(1),
+            forgetting: forgetting.unwrap_or(1.0),
+            precision: precision.unwrap_or(Precision::F64),
+        }),
+        (None, None) => anyhow::bail!("give --method SPEC or --order N"),
+    };
+    let gain = gain.context("give --gain (or --config)")?;
+    let zero = zero.unwrap_or(0.0);
+    let context = BuildContext {
+        tare_noise_variance: tare_variance,
+        tare_differences,
+        noise_check: check_residuals,
+        ..BuildContext::new(Scene::load(&scene)?.chain, gain)
+    };
+    let file = File::open(&input).with_context(|| format!("cannot open {}", input.display()))?;
+    let stdout = std::io::stdout();
+    let mut out = BufWriter::new(stdout.lock());
+    estimate_csv(
+        BufReader::new(file),
+        &input.display().to_string(),
+        &method,
+        &context,
+        zero,
+        &mut out,
+    )?;
+    out.flush()?;
+    Ok(())
+}
+
+/// `study`: the speed, stability or ramp study.
+fn study_command(args: StudyArgs) -> Result<()> {
+    match args.which {
+        StudyKind::Speed => study_speed(args),
+        StudyKind::Stability => study_stability(args),
+        StudyKind::Ramp => study_ramp(args),
+    }
+}
+
+/// `study speed`: every method's speed against its accuracy.
+fn study_speed(args: StudyArgs) -> Result<()> {
+    let snr_db = if args.snr_db.is_empty() {
+        study::SNRS_DB.to_vec()
+    } else {
+        args.snr_db
+    };
+    study::speed_command(
+        args.runs.unwrap_or(1000),
+        args.seed,
+        &snr_db,
+        args.methods,
+        &args.out,
+    )
+}
+
+/// `study stability`: the stability map (its own methods).
+fn study_stability(args: StudyArgs) -> Result<()> {
+    if !args.methods.is_empty() {
+        anyhow::bail!("study stability runs its own methods; --method is for study speed");
+    }
+    let snr_db = if args.snr_db.is_empty() {
+        host_sim::stability::SNRS_DB.to_vec()
+    } else {
+        args.snr_db
+    };
+    let orders = if args.orders.is_empty() {
+        host_sim::stability::ORDERS.to_vec()
+    } else {
+        args.orders
+    };
+    host_sim::stability::stability_command(
+        args.runs.unwrap_or(100),
+        args.seed,
+        &snr_db,
+        &orders,
+        args.long_samples,
+        &args.out,
+    )
+}
+
+/// `study ramp`: conveyor weighing on the `conveyor-ramp` scene.
+fn study_ramp(args: StudyArgs) -> Result<()> {
+    // The ramp study takes the regression part of `ramp:` specs (or step specs).
+    let setups = args
+        .methods
+        .into_iter()
+        .map(|method| match method {
+            Method::Ramp(spec) => Ok(spec.setup),
+            Method::Step(setup) => Ok(setup),
+            other => Err(anyhow::anyhow!(
+                "study ramp: `{other}` is not a ramp: give `ramp:n=..,D=..`"
+            )),
+        })
+        .collect::<Result<Vec<_>>>()?;
+    // The ramp's goal is at 40 dB; 30 and 50 dB show the trend.
+    let snr_db = if args.snr_db.is_empty() {
+        vec![30.0, 40.0, 50.0]
+    } else {
+        args.snr_db
+    };
+    host_sim::ramp_study::ramp_command(
+        "conveyor-ramp",
+        setups,
+        &snr_db,
+        args.runs.unwrap_or(1000),
+        args.seed,
+    )
 }
 
 fn print_calibration(
