@@ -3,26 +3,27 @@
 //! on the search path and defines `__board_mps2_an386`, which moves the code to the AN386's
 //! SSRAM at 0 (see `memory.x`).
 //!
-//! It also reads the weighing configuration, `weighing.toml` next to this file (or the file
-//! named by `FIRMWARE_WEIGHING_CONFIG`, relative to this directory, e.g. for the bench of
-//! another method), and writes it as Rust constants to `$OUT_DIR/weighing.rs`, which
-//! `src/pipeline.rs` includes: both boards run the method calibration chose, with no
-//! parsing on the target. A missing or malformed file fails the build with the file, the
-//! key and what was expected.
+//! It also puts the weighing configuration's Rust constants where `src/pipeline.rs`
+//! includes them (`$OUT_DIR/weighing.rs`): `src/weighing_config.rs`, generated from
+//! `weighing.toml` by host-sim's one TOML reader and checked against it by
+//! `cargo test -p tests --test weighing_constants` (which rewrites it with
+//! `UPDATE_WEIGHING_CONSTANTS=1`), or the file named by `FIRMWARE_WEIGHING_CONSTANTS`, which
+//! `cargo xtask` generates from another TOML file (`FIRMWARE_WEIGHING_CONFIG`) for a demo or
+//! a bench of another method.
 //!
-//! Why host-sim's parser (`host_sim::calibrate::firmware_constants`, a build-dependency)
-//! and not a second one here or a TOML feature in `estimator-core`: that parser is the one
-//! `host-sim calibrate` writes against and `host-sim estimate --config` reads with; it checks
-//! every key, refuses unknown ones, cross-checks the `spec` line against host-sim's method
-//! layer, and validates the values by building the configured method with the core. Moving
-//! it into `estimator-core` would drag `std`, serde and toml into the `no_std` core's
-//! feature set (or split the schema from the `spec` check that lives in host-sim's method
-//! layer); calling it keeps exactly one implementation. The price is compile time: the
-//! build script links host-sim with its `std` dependencies (built once per profile).
+//! Why a checked, generated file and not the reader itself here: the reader is host-sim's
+//! (`host_sim::calibrate::firmware_constants`, the one `host-sim calibrate` writes against
+//! and `estimate --config` reads with); as a build-dependency it linked all of host-sim's
+//! `std` side into every firmware build. What this script must never do: build with
+//! constants that do not come from that reader, or ignore a configuration it was handed.
 use std::{env, fs, path::PathBuf};
 
-/// The weighing configuration, relative to this crate, unless `FIRMWARE_WEIGHING_CONFIG`.
-const DEFAULT_CONFIG: &str = "weighing.toml";
+/// The generated constants of `weighing.toml`, relative to this crate.
+const SHIPPED_CONSTANTS: &str = "src/weighing_config.rs";
+/// A generated constants file to build with instead (what `cargo xtask` hands over).
+const CONSTANTS_VAR: &str = "FIRMWARE_WEIGHING_CONSTANTS";
+/// A TOML file: read by `cargo xtask`, which generates the constants; refused here.
+const CONFIG_VAR: &str = "FIRMWARE_WEIGHING_CONFIG";
 
 fn main() {
     let qemu = env::var_os("CARGO_FEATURE_QEMU").is_some();
@@ -33,7 +34,7 @@ fn main() {
     }
     let manifest_dir = PathBuf::from(env::var_os("CARGO_MANIFEST_DIR").expect("cargo sets it"));
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
-    weighing_config(&manifest_dir, &out);
+    weighing_constants(&manifest_dir, &out);
 
     let workspace_root = manifest_dir.join("..");
     // The linker runs in the workspace root and finds `memory.x` there first; the search path
@@ -51,28 +52,28 @@ fn main() {
     println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
 }
 
-/// `weighing.toml` (or `FIRMWARE_WEIGHING_CONFIG`) to `$OUT_DIR/weighing.rs`, or a failed
-/// build that says what is wrong.
-fn weighing_config(manifest_dir: &std::path::Path, out: &std::path::Path) {
-    println!("cargo:rerun-if-env-changed=FIRMWARE_WEIGHING_CONFIG");
-    let relative = env::var("FIRMWARE_WEIGHING_CONFIG").unwrap_or_else(|_| DEFAULT_CONFIG.into());
-    let path = manifest_dir.join(&relative);
-    println!("cargo:rerun-if-changed={}", path.display());
-    // Errors name the file as the user gave it (relative to firmware/), not the absolute path.
-    let shown = PathBuf::from("firmware").join(&relative);
-    let text = match fs::read_to_string(&path) {
-        Ok(text) => text,
-        Err(error) => fail(&format!(
-            "weighing config {}: cannot read it ({error}); expected the weighing config `host-sim calibrate --out {}` writes (see firmware/README.md, \"Weighing configuration\")",
-            shown.display(),
-            shown.display()
-        )),
+/// The shipped constants (or `FIRMWARE_WEIGHING_CONSTANTS`) to `$OUT_DIR/weighing.rs`, or a
+/// failed build that says what is wrong.
+fn weighing_constants(manifest_dir: &std::path::Path, out: &std::path::Path) {
+    println!("cargo:rerun-if-env-changed={CONSTANTS_VAR}");
+    println!("cargo:rerun-if-env-changed={CONFIG_VAR}");
+    let constants = env::var_os(CONSTANTS_VAR);
+    if constants.is_none() && env::var_os(CONFIG_VAR).is_some() {
+        fail(&format!(
+            "{CONFIG_VAR} is read by `cargo xtask` (demo, bench, test), which generates the constants from it; a plain cargo build takes the generated file in {CONSTANTS_VAR} (host_sim::calibrate::firmware_constants writes it)"
+        ));
+    }
+    let path = match constants {
+        Some(path) => PathBuf::from(path),
+        None => manifest_dir.join(SHIPPED_CONSTANTS),
     };
-    match host_sim::calibrate::firmware_constants(&shown, &text) {
-        Ok(source) => {
-            fs::write(out.join("weighing.rs"), source).expect("write weighing.rs to OUT_DIR")
-        }
-        Err(error) => fail(&format!("{error:#}")),
+    println!("cargo:rerun-if-changed={}", path.display());
+    match fs::read_to_string(&path) {
+        Ok(text) => fs::write(out.join("weighing.rs"), text).expect("write weighing.rs to OUT_DIR"),
+        Err(error) => fail(&format!(
+            "weighing constants {}: cannot read them ({error}); expected the file host_sim::calibrate::firmware_constants generates (see firmware/README.md, \"Weighing configuration\")",
+            path.display()
+        )),
     }
 }
 

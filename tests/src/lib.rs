@@ -4,3 +4,4 @@ pub mod commands;
 pub mod core_check;
 pub mod e2e;
 pub mod qemu;
+pub mod weighing_constants;
