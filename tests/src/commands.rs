@@ -1,5 +1,5 @@
 //! The command path end to end: the QEMU firmware plays the command scene
-//! (`load_cell::command_scene`), the harness types commands on its UART 0 as the readout
+//! (`qemu_scenes::command_scene`), the harness types commands on its UART 0 as the readout
 //! asks for them ([`CommandScript`]), and [`check`] judges the log.
 //!
 //! What the run must show (issue 4: tare on command; calibration from a known mass and the
@@ -14,8 +14,8 @@
 //! - the health criteria of every run (`e2e::check_run_health`): status 0, no fault, the
 //!   whole scene, every readout line, no dropped sample.
 //!
-//! The scene is the firmware's own source (`firmware/src/qemu/load_cell.rs`, included here
-//! by path), so the host replay ([`host_replay`]) plays exactly what QEMU plays.
+//! The scene is the one the QEMU board plays (`host_sim::qemu_scenes`, a dependency of
+//! both), so the host replay ([`host_replay`]) plays exactly what QEMU plays.
 
 use std::fmt::Write as _;
 
@@ -27,15 +27,12 @@ use estimator_core::{
 
 use crate::e2e::{self, ReadoutLine, RunLog, Scene, READOUT_HZ, SAMPLE_RATE_HZ};
 
-/// The QEMU board's simulated cell and scenes: the firmware's own file.
-#[path = "../../firmware/src/qemu/load_cell.rs"]
-#[allow(dead_code)]
-pub mod load_cell;
+use host_sim::qemu_scenes;
 
 /// The scene's name on QEMU's semihosting command line.
 pub const SCENE_NAME: &str = "commands";
 /// The reference mass `c` calibrates with on the QEMU board.
-pub const REFERENCE_MASS_G: f64 = load_cell::CALIBRATION_MASS_G;
+pub const REFERENCE_MASS_G: f64 = qemu_scenes::CALIBRATION_MASS_G;
 /// The issue's tolerances, as in `e2e::criteria`.
 const RELATIVE_TOLERANCE: f64 = e2e::criteria::RELATIVE_TOLERANCE;
 const EMPTY_TOLERANCE_G: f64 = e2e::criteria::EMPTY_TOLERANCE_G;
@@ -59,7 +56,7 @@ struct Timeline {
 
 impl Timeline {
     fn new() -> Self {
-        use load_cell::*;
+        use qemu_scenes::*;
         let portions = COMMAND_SCENE_POUR_PORTIONS as f64;
         Self {
             drop_s: COMMAND_SCENE_EVENTS[0].time_s,
@@ -80,7 +77,7 @@ impl Timeline {
     /// The scene as `e2e` describes one (for the health checks).
     fn scene(&self) -> Scene {
         Scene {
-            loads: load_cell::COMMAND_SCENE_EVENTS
+            loads: qemu_scenes::COMMAND_SCENE_EVENTS
                 .iter()
                 .map(|event| (event.time_s, event.mass_g))
                 .collect(),
@@ -238,7 +235,7 @@ impl CommandReport {
 
 /// The true gain and zero of the scene's (replacement) cell.
 fn true_calibration() -> (f64, f64) {
-    let cell = load_cell::command_scene();
+    let cell = qemu_scenes::command_scene();
     (cell.counts_per_gram(), cell.zero_code())
 }
 
@@ -524,8 +521,8 @@ pub fn host_replay(seed: u64) -> RunLog {
     use estimator_core::{AdcSource, RawSample};
     let timeline = Timeline::new();
     let mut lines = Vec::new();
-    let defaults = load_cell::nominal_calibration();
-    let factory = load_cell::factory_calibration().expect("the factory calibration runs");
+    let defaults = qemu_scenes::nominal_calibration();
+    let factory = qemu_scenes::factory_calibration().expect("the factory calibration runs");
     let mut store = RamStore(factory.encode());
     let (calibration, source) = command::load_calibration(&store, defaults);
     lines.push(format!(
@@ -537,7 +534,7 @@ pub fn host_replay(seed: u64) -> RunLog {
         .expect("the firmware's configuration");
     let mut commands = Commands::new(CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32));
     let mut script = CommandScript::new();
-    let mut adc = load_cell::command_scene_with_seed(seed);
+    let mut adc = qemu_scenes::command_scene_with_seed(seed);
     let samples = Timeline::sample(timeline.end_s);
     let step = (SAMPLE_RATE_HZ / READOUT_HZ) as u32;
     let mut typed: Option<u8> = None;
@@ -633,7 +630,7 @@ mod tests {
 
     /// Lines of a run that passes: built from the host replay of seed 1 (the QEMU seed).
     fn replayed() -> RunLog {
-        host_replay(load_cell::DEMO_SEED)
+        host_replay(qemu_scenes::DEMO_SEED)
     }
 
     /// The firmware's demo scene, built in the larger script, is `reference_demo` code for
@@ -641,8 +638,8 @@ mod tests {
     #[test]
     fn the_demo_scene_is_the_reference_demo() {
         use estimator_core::AdcSource;
-        let mut firmware = load_cell::demo_scene();
-        let mut reference = host_sim::SimulatedAdc::reference_demo(load_cell::DEMO_SEED);
+        let mut firmware = qemu_scenes::demo_scene();
+        let mut reference = host_sim::SimulatedAdc::reference_demo(qemu_scenes::DEMO_SEED);
         for sample in 0..16_000 {
             assert_eq!(firmware.read(), reference.read(), "sample {sample}");
         }
@@ -650,12 +647,13 @@ mod tests {
 
     #[test]
     fn the_command_scene_script_takes_every_event() {
-        let mut script = host_sim::Script::<16>::new(load_cell::COMMAND_SCENE_END_S);
-        for event in load_cell::COMMAND_SCENE_EVENTS {
+        let mut script = host_sim::Script::<16>::new(qemu_scenes::COMMAND_SCENE_END_S);
+        for event in qemu_scenes::COMMAND_SCENE_EVENTS {
             assert_eq!(script.push(event), Ok(()), "{event:?}");
         }
         let timeline = Timeline::new();
-        let last_portion = load_cell::COMMAND_SCENE_EVENTS[load_cell::COMMAND_SCENE_POUR_PORTIONS];
+        let last_portion =
+            qemu_scenes::COMMAND_SCENE_EVENTS[qemu_scenes::COMMAND_SCENE_POUR_PORTIONS];
         assert_eq!(last_portion.mass_g, timeline.poured_mass_g);
         assert!(last_portion.time_s < timeline.pour_end_s);
     }
