@@ -3,4 +3,5 @@
 pub mod commands;
 pub mod core_check;
 pub mod e2e;
+pub mod firmware_log;
 pub mod qemu;
