@@ -34,6 +34,8 @@ mod app {
     /// Bytes taken per receive interrupt: the UART holds one, and one more may land while
     /// the first is decided.
     const BYTES_PER_INTERRUPT: usize = 4;
+    /// The readout task's vector, pended by the estimator task after each readout.
+    const READOUT: Interrupt = Interrupt::Uart1Rx;
 
     #[shared]
     struct Shared {
@@ -160,13 +162,9 @@ mod app {
     /// backend): a spare vector, pended by the hand-off.
     #[task(binds = Uart3Rx, priority = 2, local = [consumer], shared = [latest, pipeline])]
     fn estimate(mut cx: estimate::Context) {
+        let consumer = cx.local.consumer;
         let shared = &mut cx.shared;
-        pipeline::estimate(
-            &mut shared.pipeline,
-            &mut shared.latest,
-            cx.local.consumer,
-            Interrupt::Uart1Rx,
-        );
+        pipeline::estimate(&mut shared.pipeline, &mut shared.latest, consumer, READOUT);
     }
 
     /// The command task: the operator's bytes from UART 0, below the estimator's priority.

@@ -42,6 +42,8 @@ mod app {
 
     /// The 12-bit converter's rails.
     const MAX_CODE: u16 = 4095;
+    /// The readout task's vector, pended by the estimator task after each readout.
+    const READOUT: pac::Interrupt = pac::Interrupt::EXTI2;
 
     /// The KEY button and what debounces it: EXTI0 wakes on the first falling edge, then
     /// TIM3 polls the level at `KEY_POLL_HZ` until the button is released and settled.
@@ -241,13 +243,9 @@ mod app {
     /// The estimator task: drains the queue (bounded by its capacity) into the weighing core.
     #[task(binds = EXTI1, priority = 2, local = [consumer], shared = [latest, pipeline])]
     fn estimate(mut cx: estimate::Context) {
+        let consumer = cx.local.consumer;
         let shared = &mut cx.shared;
-        pipeline::estimate(
-            &mut shared.pipeline,
-            &mut shared.latest,
-            cx.local.consumer,
-            pac::Interrupt::EXTI2,
-        );
+        pipeline::estimate(&mut shared.pipeline, &mut shared.latest, consumer, READOUT);
     }
 
     /// The readout task: 20 lines a second over RTT; after each, the commands' regular
