@@ -14,8 +14,9 @@ use rtic::Mutex;
 use estimator_core::command::{self, CalibrationStore, StoreFailure};
 use estimator_core::tuning::{WeighingEstimator, WeighingMethod};
 use estimator_core::{
-    AdcSource, Calibration, CalibrationFailure, Command, CommandConfig, CommandOutcome,
-    CommandRefusal, Commands, ConfigError, CountsScale, RawSample, Scale, ScaleReading,
+    AdcSource, Calibration, CalibrationFailure, CalibrationSource, Command, CommandConfig,
+    CommandOutcome, CommandRefusal, Commands, ConfigError, CountsScale, RawSample, Scale,
+    ScaleReading,
 };
 
 /// The weighing configuration, generated at build time from `firmware/weighing.toml` (what
@@ -291,6 +292,17 @@ pub fn log_config() {
             SAMPLE_RATE_HZ, target_pct, readout_ms, calibration_mass_g, p95_g, p95_upper_g
         ),
     }
+}
+
+/// Log the calibration the board booted with and where it came from (the stored record,
+/// or the defaults and why): `calibration counts_per_gram=… zero_counts=… source=…`.
+pub fn log_calibration(calibration: &Calibration, source: &CalibrationSource) {
+    defmt::println!(
+        "calibration counts_per_gram={=f32} zero_counts={=f32} source={}",
+        calibration.counts_per_gram,
+        calibration.zero_counts,
+        source
+    );
 }
 
 /// Emit one readout line. The host-side checker (`tests::e2e`) parses exactly this format;

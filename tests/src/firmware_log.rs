@@ -1,6 +1,6 @@
 //! The firmware's log lines as the host replays write them (`e2e::host_replay`,
 //! `commands::host_replay`): the firmware's own defmt format strings (those of
-//! `firmware::pipeline` and the boards' `init`), rendered here with the arguments the
+//! `firmware::pipeline` and the QEMU board's end line), rendered here with the arguments the
 //! replay computed.
 //!
 //! Why the format strings and not a second `format!` per line: the firmware formats on the
@@ -39,7 +39,7 @@ pub const CALIBRATION_FAILED: &str = "command sample={=u32} calibrate=failed ({}
 pub const STORE_FAILED: &str = "command sample={=u32} calibrate=failed (Store({}))";
 /// `pipeline::finish_calibration`, stored, read back and applied.
 pub const CALIBRATION_DONE: &str = "command sample={=u32} calibrate=done counts_per_gram={=f32} zero_counts={=f32} (stored, read back, applied)";
-/// The boards' `init`: the calibration booted with.
+/// `pipeline::log_calibration`: the calibration booted with.
 pub const BOOT_CALIBRATION: &str =
     "calibration counts_per_gram={=f32} zero_counts={=f32} source={}";
 /// The QEMU board's end of the scene.
@@ -181,7 +181,7 @@ pub fn calibration_done(sample: u32, stored: &Calibration) -> String {
     )
 }
 
-/// The boards' boot line: the calibration in use and where it came from.
+/// `pipeline::log_calibration`: the calibration in use and where it came from.
 pub fn boot_calibration(calibration: &Calibration, source: &CalibrationSource) -> String {
     render(
         BOOT_CALIBRATION,

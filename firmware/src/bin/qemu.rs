@@ -75,12 +75,7 @@ mod app {
         };
         let store = RamCalibrationStore::with_record(record);
         let (calibration, source) = store.load(defaults);
-        defmt::println!(
-            "calibration counts_per_gram={=f32} zero_counts={=f32} source={}",
-            calibration.counts_per_gram,
-            calibration.zero_counts,
-            source
-        );
+        pipeline::log_calibration(&calibration, &source);
 
         let scale = match pipeline::scale(calibration.counts_scale(), cx.local.estimator) {
             Ok(scale) => scale,

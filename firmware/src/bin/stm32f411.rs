@@ -131,12 +131,7 @@ mod app {
 
         let store = FlashCalibrationStore::new(device.FLASH);
         let (calibration, source) = store.load();
-        defmt::println!(
-            "calibration counts_per_gram={=f32} zero_counts={=f32} source={}",
-            calibration.counts_per_gram,
-            calibration.zero_counts,
-            source
-        );
+        pipeline::log_calibration(&calibration, &source);
         let scale = match pipeline::scale(calibration.counts_scale(), cx.local.estimator) {
             Ok(scale) => scale,
             Err(error) => defmt::panic!("weighing configuration refused: {}", error),
