@@ -143,9 +143,31 @@ pub const TIMER0_BASE: usize = 0x4000_0000;
 /// Base address of CMSDK APB timer 1.
 pub const TIMER1_BASE: usize = 0x4000_1000;
 
+/// The 32-bit registers of one CMSDK APB peripheral, owned by the driver that holds this
+/// value: the one place their volatile accesses are written.
+struct Registers {
+    base: usize,
+}
+
+impl Registers {
+    #[inline(always)]
+    fn read(&self, offset: usize) -> u32 {
+        // Safety: `base + offset` is a register of the peripheral this value's driver owns
+        // (one driver per peripheral, see the constructors' contracts); device memory, so
+        // the access is volatile and aligned.
+        unsafe { core::ptr::read_volatile((self.base + offset) as *const u32) }
+    }
+
+    #[inline(always)]
+    fn write(&mut self, offset: usize, value: u32) {
+        // Safety: as in `read`; the driver holding this value is the peripheral's only owner.
+        unsafe { core::ptr::write_volatile((self.base + offset) as *mut u32, value) }
+    }
+}
+
 /// A CMSDK APB timer: a 32-bit down-counter that reloads and raises its interrupt at zero.
 pub struct CmsdkTimer {
-    base: usize,
+    registers: Registers,
 }
 
 impl CmsdkTimer {
@@ -161,7 +183,7 @@ impl CmsdkTimer {
     /// # Safety
     /// The caller must create at most one `CmsdkTimer` per timer.
     pub unsafe fn timer0() -> Self {
-        Self { base: TIMER0_BASE }
+        Self::at(TIMER0_BASE)
     }
 
     /// Take timer 1 (same contract as [`CmsdkTimer::timer0`]).
@@ -169,13 +191,17 @@ impl CmsdkTimer {
     /// # Safety
     /// The caller must create at most one `CmsdkTimer` per timer.
     pub unsafe fn timer1() -> Self {
-        Self { base: TIMER1_BASE }
+        Self::at(TIMER1_BASE)
+    }
+
+    fn at(base: usize) -> Self {
+        Self {
+            registers: Registers { base },
+        }
     }
 
     fn write(&mut self, offset: usize, value: u32) {
-        // Safety: `base + offset` is a register of the CMSDK timer this value owns; the
-        // block is device memory, so the access is volatile and aligned.
-        unsafe { core::ptr::write_volatile((self.base + offset) as *mut u32, value) }
+        self.registers.write(offset, value)
     }
 
     /// Interrupt every `period_ticks` timer clocks, periodically.
@@ -209,7 +235,7 @@ pub enum UartError {
 /// The receive side of a CMSDK APB UART (ARM DDI 0479, "APB UART"): a one-byte receive
 /// buffer with a full flag, an overrun flag and a receive interrupt.
 pub struct CmsdkUart {
-    base: usize,
+    registers: Registers,
 }
 
 impl CmsdkUart {
@@ -234,18 +260,17 @@ impl CmsdkUart {
     /// # Safety
     /// The caller must create at most one `CmsdkUart` per UART.
     pub unsafe fn uart0() -> Self {
-        Self { base: UART0_BASE }
+        Self {
+            registers: Registers { base: UART0_BASE },
+        }
     }
 
     fn read(&self, offset: usize) -> u32 {
-        // Safety: `base + offset` is a register of the UART this value owns; device
-        // memory, so the access is volatile and aligned.
-        unsafe { core::ptr::read_volatile((self.base + offset) as *const u32) }
+        self.registers.read(offset)
     }
 
     fn write(&mut self, offset: usize, value: u32) {
-        // Safety: as in `read`; this value is the only owner of the UART.
-        unsafe { core::ptr::write_volatile((self.base + offset) as *mut u32, value) }
+        self.registers.write(offset, value)
     }
 
     /// Enable the receiver and its interrupt at `baud` (transmitter off: the readout goes

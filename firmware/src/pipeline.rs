@@ -1,14 +1,21 @@
-//! What both boards share: the sample message, the estimator-side bookkeeping (sequence
-//! numbers, dropped samples, readout cadence), the operator's commands on the scale, and
-//! the readout and command line formats.
+//! What both boards share: the sample message and its hand-off, the estimator task's body
+//! and its bookkeeping (sequence numbers, dropped samples, readout cadence), the operator's
+//! commands on the scale, and the readout and command line formats (the host checkers in
+//! `tests` parse exactly these).
+//!
+//! Written once so both boards run the same weighing path. Nothing here may compute in the
+//! hand-off, wait, or lose a sample without counting it.
 
 use core::mem::MaybeUninit;
+
+use cortex_m::interrupt::InterruptNumber;
+use rtic::Mutex;
 
 use estimator_core::sensor::AdcSource;
 use estimator_core::weighing::{self, CalibrationStore, StoreFailure};
 use estimator_core::weighing::{
-    Calibration, CalibrationFailure, Command, CommandConfig, CommandOutcome, CommandRefusal,
-    Commands, CountsScale, RawSample, Scale, ScaleReading,
+    Calibration, CalibrationFailure, CalibrationSource, Command, CommandConfig, CommandOutcome,
+    CommandRefusal, Commands, CountsScale, RawSample, Scale, ScaleReading,
 };
 use estimator_core::weighing::{WeighingEstimator, WeighingMethod};
 use estimator_core::ConfigError;
@@ -43,7 +50,7 @@ pub type FirmwareEstimator = WeighingEstimator<
 
 /// Where the configured estimator lives: a zero-initialised `static` (an RTIC `init` local)
 /// that [`scale`] writes it into. The scale holds a reference, so the estimator (a model
-/// bank is 20 KB) is never moved through the stack with the scale and the pipeline.
+/// bank takes tens of KB) is never moved through the stack with the scale and the pipeline.
 pub type EstimatorStorage = MaybeUninit<FirmwareEstimator>;
 
 /// The scale both boards run: the weighing decisions around the configured method.
@@ -76,16 +83,44 @@ pub fn hand_off<A: AdcSource>(
     producer: &mut heapless::spsc::Producer<'_, SampleMessage>,
     sequence: &mut u32,
 ) {
-    let sample = match adc.read() {
+    let _ = producer.enqueue(SampleMessage {
+        sequence: *sequence,
+        sample: read_sample(adc),
+    });
+    *sequence = sequence.wrapping_add(1);
+}
+
+/// One conversion as the weighing core takes it: counts, a rail, or a lost conversion.
+#[inline(always)]
+pub fn read_sample<A: AdcSource>(adc: &mut A) -> RawSample {
+    match adc.read() {
         Ok(code) if adc.is_saturated(code) => RawSample::Saturated,
         Ok(code) => RawSample::Counts(code as i32),
         Err(_) => RawSample::Lost,
-    };
-    let _ = producer.enqueue(SampleMessage {
-        sequence: *sequence,
-        sample,
+    }
+}
+
+/// The estimator task of both boards: drain the hand-off queue into the pipeline, at most
+/// its capacity per run so the task is bounded; each readout goes to `latest` and pends
+/// `readout_task`. Runs above the command and readout tasks, so its lock on the pipeline
+/// costs nothing; it must never log or wait.
+pub fn estimate<I: InterruptNumber>(
+    pipeline: &mut impl Mutex<T = Pipeline>,
+    latest: &mut impl Mutex<T = Option<Readout>>,
+    consumer: &mut heapless::spsc::Consumer<'_, SampleMessage>,
+    readout_task: I,
+) {
+    pipeline.lock(|pipeline| {
+        for _ in 0..QUEUE_CAPACITY {
+            let Some(message) = consumer.dequeue() else {
+                break;
+            };
+            if let Some(readout) = pipeline.accept(message) {
+                latest.lock(|latest| *latest = Some(readout));
+                rtic::pend(readout_task);
+            }
+        }
     });
-    *sequence = sequence.wrapping_add(1);
 }
 
 /// One readout line's content.
@@ -121,7 +156,7 @@ impl Pipeline {
 
     /// Start over as at boot, with the same scale configuration and the calibration in use
     /// (the bench replays a scene through the application's pipeline first: a second one
-    /// would need another 20 KB of stack for a model bank). The restart counts as a load
+    /// would need a second estimator's worth of stack for a model bank). The restart counts as a load
     /// change; the noise metered on the empty pan is forgotten, as at boot.
     pub fn restart(&mut self) {
         self.scale.forget_noise_reference();
@@ -260,7 +295,20 @@ pub fn log_config() {
     }
 }
 
-/// Emit one readout line. The host-side checker (`tests::e2e`) parses exactly this format.
+/// Log the calibration the board booted with and where it came from (the stored record,
+/// or the defaults and why): `calibration counts_per_gram=… zero_counts=… source=…`.
+pub fn log_calibration(calibration: &Calibration, source: &CalibrationSource) {
+    defmt::println!(
+        "calibration counts_per_gram={=f32} zero_counts={=f32} source={}",
+        calibration.counts_per_gram,
+        calibration.zero_counts,
+        source
+    );
+}
+
+/// Emit one readout line. The host-side checker (`tests::e2e`) parses exactly this format;
+/// the host replays write it with these very format strings (`tests::firmware_log`, which
+/// `cargo xtask test` checks against this image's defmt table).
 pub fn log_readout(readout: &Readout) {
     let reading = &readout.reading;
     match reading.mass_g {
@@ -285,7 +333,8 @@ pub fn log_readout(readout: &Readout) {
 }
 
 /// Log one command's outcome as `command sample=… <action>=<outcome> …`; the host-side
-/// checker (`tests::commands`) parses exactly this format.
+/// checker (`tests::commands`) parses exactly this format, and the host replay writes it
+/// with these format strings (`tests::firmware_log`, checked against this image).
 pub fn log_command(sample: u32, command: Command, result: &Result<CommandOutcome, CommandRefusal>) {
     let action = match command {
         Command::Tare => "tare",

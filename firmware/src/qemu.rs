@@ -1,6 +1,8 @@
 //! The QEMU board: the simulated load cell behind a converter "data register", the scene
-//! it plays (chosen on QEMU's command line), the RAM-backed calibration store, and the
-//! exits that tell CI how a run ended.
+//! it plays (chosen on QEMU's command line; the scenes themselves are
+//! `host_sim::qemu_scenes`, which the host tests replay), the RAM-backed calibration store,
+//! and the exits that tell CI how a run ended. A panic or fault must never exit with
+//! status 0.
 
 use core::convert::Infallible;
 use core::mem::MaybeUninit;
@@ -8,6 +10,9 @@ use core::mem::MaybeUninit;
 use estimator_core::sensor::{AdcError, AdcSource};
 use estimator_core::weighing::{self, CalibrationStore};
 use estimator_core::weighing::{Calibration, CalibrationSource, RECORD_LEN};
+use host_sim::qemu_scenes;
+
+use crate::pipeline::{self, SampleMessage};
 
 /// The simulated converter as the hand-off sees it: a data register holding the latest
 /// conversion, read once per timer tick. Stepping the sensor model (`convert`) is the
@@ -35,6 +40,21 @@ impl<M: AdcSource> SimulatedConverter<M> {
             Some(_) => Err(AdcError::Overrun),
             None => next,
         });
+    }
+
+    /// Fill `chunk` with the next samples as the hand-off would queue them, each followed
+    /// by its conversion, numbered from `sequence` on: the scene replayed without the timer
+    /// (the benchmarks).
+    pub fn fill(&mut self, chunk: &mut [SampleMessage], sequence: &mut u32) {
+        for message in chunk.iter_mut() {
+            let sample = pipeline::read_sample(self);
+            self.convert();
+            *message = SampleMessage {
+                sequence: *sequence,
+                sample,
+            };
+            *sequence += 1;
+        }
     }
 }
 
@@ -93,21 +113,17 @@ pub struct UnknownScene;
 /// semihosting command line (`-semihosting-config …,arg=firmware,arg=commands`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
 pub enum Scene {
-    /// Issue 4's demo (the default): no commands needed.
+    /// The demo (the default): drops and a removal, no commands needed.
     Demo,
     /// The command path's end-to-end scene: tare, refused tare, calibration, with the
     /// harness typing the commands on UART 0 (`tests::commands`).
     Commands,
-    /// The demo after [`CHECKED_DEMO_EMPTY_S`] more of empty pan: the scale meters the
+    /// The demo after `qemu_scenes::CHECKED_DEMO_EMPTY_S` more of empty pan: the scale meters the
     /// empty pan's noise before the first drop, so every run after it is checked by the
     /// consistency check (`estimator_core::weighing`), which the demo's short empty periods
     /// never allow.
     CheckedDemo,
 }
-
-/// How much longer the checked demo holds the empty pan before the demo's events, s: the
-/// metering needs 1.5 s settled plus a 0.3 s window and its 50 ms guard.
-pub const CHECKED_DEMO_EMPTY_S: f64 = 2.0;
 
 impl Scene {
     /// The scene QEMU was asked for; the demo when there is no argument (or semihosting
@@ -132,11 +148,11 @@ impl Scene {
     }
 
     /// The simulated cell playing this scene.
-    pub fn load_cell(self) -> load_cell::LoadCell {
+    pub fn load_cell(self) -> qemu_scenes::LoadCell {
         match self {
-            Self::Demo => load_cell::demo_scene(),
-            Self::Commands => load_cell::command_scene(),
-            Self::CheckedDemo => load_cell::demo_scene_with_empty_start(CHECKED_DEMO_EMPTY_S),
+            Self::Demo => qemu_scenes::demo_scene(),
+            Self::Commands => qemu_scenes::command_scene(),
+            Self::CheckedDemo => qemu_scenes::checked_demo_scene(),
         }
     }
 }
@@ -157,7 +173,3 @@ unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
     defmt::error!("HardFault at pc={=u32:#010x}", frame.pc());
     exit(false)
 }
-
-/// The simulated load cell and its scenes (a file of its own: the host tests replay the very
-/// same scenes, see `tests::commands`).
-pub mod load_cell;

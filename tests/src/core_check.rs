@@ -11,9 +11,11 @@ use std::fmt;
 use std::path::PathBuf;
 
 use estimator_core::{Estimator, Reading, State, StepConfig, StepEstimator};
+use rand_core::{RngCore, SeedableRng};
+use rand_xoshiro::SplitMix64;
 
-#[path = "../on-target/src/cases.rs"]
-pub mod cases;
+/// The configurations the bare-metal `core_check` binary runs, from its own crate.
+pub use on_target::cases;
 
 use cases::{CAPACITY, CASES, GAIN_PER_G, RESPONSE_FILE};
 
@@ -38,26 +40,14 @@ pub fn response_path() -> PathBuf {
         .join(RESPONSE_FILE)
 }
 
-/// SplitMix64: a tiny integer generator, identical on every platform.
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Approximately standard normal: Irwin–Hall sum of 12 uniforms minus 6 (exact
-    /// arithmetic only, so the stored bytes do not depend on a platform's libm).
-    fn normal(&mut self) -> f64 {
-        let sum: f64 = (0..12)
-            .map(|_| (self.next() >> 11) as f64 / (1u64 << 53) as f64)
-            .sum();
-        sum - 6.0
-    }
+/// Approximately standard normal: Irwin–Hall sum of 12 uniforms from SplitMix64 (a tiny
+/// integer generator, identical on every platform) minus 6; exact arithmetic only, so the
+/// stored bytes do not depend on a platform's libm.
+fn normal(noise: &mut SplitMix64) -> f64 {
+    let sum: f64 = (0..12)
+        .map(|_| (noise.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
+        .sum();
+    sum - 6.0
 }
 
 /// The stored response, computed: `G·m·(1 − e^{−ζωt}(cos ω_d t + ζ/√(1−ζ²) sin ω_d t))`
@@ -68,7 +58,7 @@ pub fn generate_response() -> Vec<f32> {
     let damped = omega * libm::sqrt(1.0 - zeta * zeta);
     let step_raw = f64::from(GAIN_PER_G) * MASS_G;
     let noise_rms = step_raw / libm::pow(10.0, SNR_DB / 20.0);
-    let mut noise = SplitMix64(0x005e_ed0f_10ad_ce11);
+    let mut noise = SplitMix64::from_seed(0x005e_ed0f_10ad_ce11_u64.to_le_bytes());
     (0..RESPONSE_SAMPLES)
         .map(|k| {
             let t = k as f64 / SAMPLE_RATE_HZ;
@@ -77,7 +67,7 @@ pub fn generate_response() -> Vec<f32> {
                 - envelope
                     * (libm::cos(damped * t)
                         + zeta / libm::sqrt(1.0 - zeta * zeta) * libm::sin(damped * t));
-            (step_raw * shape + noise_rms * noise.normal()) as f32
+            (step_raw * shape + noise_rms * normal(&mut noise)) as f32
         })
         .collect()
 }

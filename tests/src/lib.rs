@@ -3,5 +3,6 @@
 pub mod commands;
 pub mod core_check;
 pub mod e2e;
+pub mod firmware_log;
 pub mod qemu;
 pub mod weighing_constants;

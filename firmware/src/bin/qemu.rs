@@ -14,24 +14,28 @@ mod app {
     use estimator_core::weighing::Command;
     use firmware::mps2_an386::{CmsdkTimer, CmsdkUart, Interrupt, SYSTEM_CLOCK_HZ};
     use firmware::pipeline::{
-        self, EstimatorStorage, Pipeline, Readout, SampleMessage, SampleQueue, QUEUE_CAPACITY,
-        SAMPLE_RATE_HZ,
+        self, EstimatorStorage, Pipeline, Readout, SampleMessage, SampleQueue, SAMPLE_RATE_HZ,
     };
-    use firmware::qemu::{self, load_cell, RamCalibrationStore, Scene, SimulatedConverter};
+    use firmware::qemu::{self, RamCalibrationStore, Scene, SimulatedConverter};
     use heapless::spsc::{Consumer, Producer};
+    use host_sim::qemu_scenes;
 
+    #[cfg(feature = "bench")]
+    use estimator_core::weighing::RawSample;
     #[cfg(feature = "bench")]
     use firmware::bench;
 
-    type LoadCell = load_cell::LoadCell;
+    type LoadCell = qemu_scenes::LoadCell;
 
     /// The reference mass of `c` (calibrate): the factory's known mass.
-    const REFERENCE_MASS_G: f32 = load_cell::CALIBRATION_MASS_G as f32;
+    const REFERENCE_MASS_G: f32 = qemu_scenes::CALIBRATION_MASS_G as f32;
     /// The console's baud rate (QEMU ignores it; real CMSDK silicon would not).
     const CONSOLE_BAUD: u32 = 115_200;
     /// Bytes taken per receive interrupt: the UART holds one, and one more may land while
     /// the first is decided.
     const BYTES_PER_INTERRUPT: usize = 4;
+    /// The readout task's vector, pended by the estimator task after each readout.
+    const READOUT: Interrupt = Interrupt::Uart1Rx;
 
     #[shared]
     struct Shared {
@@ -61,8 +65,8 @@ mod app {
         #[cfg(feature = "bench")]
         bench::paint_stack();
         defmt::println!("factory calibration: 6 s of the simulated cell, empty then 200 g...");
-        let defaults = load_cell::nominal_calibration();
-        let record = match load_cell::factory_calibration() {
+        let defaults = qemu_scenes::nominal_calibration();
+        let record = match qemu_scenes::factory_calibration() {
             Ok(factory) => factory.encode(),
             Err(error) => {
                 defmt::error!("factory calibration failed: {}", error);
@@ -71,12 +75,7 @@ mod app {
         };
         let store = RamCalibrationStore::with_record(record);
         let (calibration, source) = store.load(defaults);
-        defmt::println!(
-            "calibration counts_per_gram={=f32} zero_counts={=f32} source={}",
-            calibration.counts_per_gram,
-            calibration.zero_counts,
-            source
-        );
+        pipeline::log_calibration(&calibration, &source);
 
         let scale = match pipeline::scale(calibration.counts_scale(), cx.local.estimator) {
             Ok(scale) => scale,
@@ -157,25 +156,10 @@ mod app {
     /// Bound to UART 3's receive vector, which nothing else raises (QEMU gives UART 3 no
     /// backend): a spare vector, pended by the hand-off.
     #[task(binds = Uart3Rx, priority = 2, local = [consumer], shared = [latest, pipeline])]
-    fn estimate(cx: estimate::Context) {
-        let estimate::SharedResources {
-            mut latest,
-            mut pipeline,
-            ..
-        } = cx.shared;
+    fn estimate(mut cx: estimate::Context) {
         let consumer = cx.local.consumer;
-        // The command and readout tasks run below this priority: the lock costs nothing here.
-        pipeline.lock(|pipeline| {
-            for _ in 0..QUEUE_CAPACITY {
-                let Some(message) = consumer.dequeue() else {
-                    break;
-                };
-                if let Some(readout) = pipeline.accept(message) {
-                    latest.lock(|latest| *latest = Some(readout));
-                    rtic::pend(Interrupt::Uart1Rx);
-                }
-            }
-        });
+        let shared = &mut cx.shared;
+        pipeline::estimate(&mut shared.pipeline, &mut shared.latest, consumer, READOUT);
     }
 
     /// The command task: the operator's bytes from UART 0, below the estimator's priority.
@@ -238,15 +222,11 @@ mod app {
 
     /// Instruction counts (feature `bench`, run under `-icount shift=0`): the hand-off and
     /// the estimator task's work, replayed on the same functions the tasks call, so each
-    /// figure is one long measurement instead of many one-tick ones.
+    /// figure is one long measurement instead of many one-tick ones. They run on the
+    /// application's pipeline and restart it at the end.
     #[cfg(feature = "bench")]
-    /// They run on the application's pipeline and restart it at the end.
     #[inline(never)]
     fn run_benchmarks(mut syst: cortex_m::peripheral::SYST, pipeline: &mut Pipeline) {
-        use estimator_core::sensor::AdcSource;
-        use estimator_core::weighing::RawSample;
-        use firmware::pipeline::SampleMessage;
-
         bench::start(&mut syst);
         let iterations = 100_000;
         let (short, long) = bench::calibrate(iterations);
@@ -256,7 +236,30 @@ mod app {
             short,
             long
         );
+        bench_handoff();
 
+        let mut converter = SimulatedConverter::new(qemu_scenes::demo_scene());
+        // 100 ms of samples per measurement: small enough to sit on the init stack next to a
+        // model bank's scale (20 KB) and the converter.
+        let mut chunk = [SampleMessage {
+            sequence: 0,
+            sample: RawSample::Lost,
+        }; 400];
+        let sequence = bench_demo(pipeline, &mut converter, &mut chunk);
+        bench_restart(pipeline, &mut converter, sequence);
+        pipeline.restart();
+        bench_checked_demo(pipeline, &mut chunk);
+        pipeline.restart();
+
+        // The deepest the stack went since `init` began: the factory calibration, building
+        // the configured scale, the replay above.
+        let (used, size) = bench::stack_used();
+        defmt::println!("bench stack used={=u32} size={=u32}", used, size);
+    }
+
+    /// The hand-off with the timer's acknowledge and the pend of the estimator task.
+    #[cfg(feature = "bench")]
+    fn bench_handoff() {
         // Safety: timer 1 is not used by the application; this is its only handle.
         let mut spare_timer = unsafe { CmsdkTimer::timer1() };
         let (ticks, events) = bench::measure_handoff(100, || {
@@ -266,32 +269,25 @@ mod app {
         // Uart2Rx is never enabled, so the pend only costs what the real one costs.
         cortex_m::peripheral::NVIC::unpend(Interrupt::Uart2Rx);
         defmt::println!("bench handoff ticks={=u64} events={=u32}", ticks, events);
+    }
 
-        let mut converter = SimulatedConverter::new(load_cell::demo_scene());
-        // 100 ms of samples per measurement: small enough to sit on the init stack next to a
-        // model bank's scale (20 KB) and the converter.
-        let mut chunk = [SampleMessage {
-            sequence: 0,
-            sample: RawSample::Lost,
-        }; 400];
+    /// The demo scene through the pipeline, chunk by chunk; the simulated analogue chain
+    /// timed apart. Returns the next sequence number.
+    #[cfg(feature = "bench")]
+    fn bench_demo(
+        pipeline: &mut Pipeline,
+        converter: &mut SimulatedConverter<LoadCell>,
+        chunk: &mut [SampleMessage],
+    ) -> u32 {
         let mut sequence = 0u32;
         let mut ticks = 0u64;
         let mut model_ticks = 0u64;
         for _ in 0..(4 * SAMPLE_RATE_HZ) as usize / chunk.len() {
             let model_start = bench::now();
-            for message in chunk.iter_mut() {
-                let sample = match converter.read() {
-                    Ok(code) if converter.is_saturated(code) => RawSample::Saturated,
-                    Ok(code) => RawSample::Counts(code as i32),
-                    Err(_) => RawSample::Lost,
-                };
-                converter.convert();
-                *message = SampleMessage { sequence, sample };
-                sequence += 1;
-            }
+            converter.fill(chunk, &mut sequence);
             model_ticks += bench::since(model_start) as u64;
-            let work = bench::measure_pipeline(pipeline, &chunk);
-            let overhead = bench::measure_loop_overhead(&chunk);
+            let work = bench::measure_pipeline(pipeline, chunk);
+            let overhead = bench::measure_loop_overhead(chunk);
             ticks += work.saturating_sub(overhead);
         }
         defmt::println!(
@@ -305,11 +301,20 @@ mod app {
             sequence,
             pipeline.dropped()
         );
+        sequence
+    }
 
-        // A restart (what a load change or a lost sample costs once): the sample after a
-        // lost one resets the estimator before it is pushed. Timed on the samples that
-        // follow the scene, the same push without the reset is not subtracted (it is a few
-        // hundred instructions against the reset's thousands for a bank).
+    /// A restart (what a load change or a lost sample costs once): the sample after a lost
+    /// one resets the estimator before it is pushed. Timed on the samples that follow the
+    /// scene, the same push without the reset is not subtracted (it is a few hundred
+    /// instructions against the reset's thousands for a bank).
+    #[cfg(feature = "bench")]
+    fn bench_restart(
+        pipeline: &mut Pipeline,
+        converter: &mut SimulatedConverter<LoadCell>,
+        mut sequence: u32,
+    ) {
+        use estimator_core::sensor::AdcSource;
         let mut restart_ticks = 0u64;
         let restarts = 8u32;
         for _ in 0..restarts {
@@ -329,35 +334,30 @@ mod app {
             restart_ticks,
             restarts
         );
-        pipeline.restart();
+    }
 
-        // The consistency check live: the demo after 2 s more of empty pan, so the drops land
-        // after a metered empty period; timed from the first drop (2.3 s) on, the checked
-        // runs.
-        converter = SimulatedConverter::new(load_cell::demo_scene_with_empty_start(2.0));
-        // The restarted pipeline counts sequence numbers from zero again.
-        sequence = 0;
-        let first_drop_chunk = (23 * SAMPLE_RATE_HZ / 10) as usize / chunk.len();
+    /// The consistency check live: the checked demo (the demo after more empty pan), so the
+    /// drops land after a metered empty period; timed from the first drop on, the checked
+    /// runs. The restarted pipeline counts sequence numbers from zero again.
+    #[cfg(feature = "bench")]
+    fn bench_checked_demo(pipeline: &mut Pipeline, chunk: &mut [SampleMessage]) {
+        let mut converter = SimulatedConverter::new(qemu_scenes::checked_demo_scene());
+        let first_drop_s = qemu_scenes::CHECKED_DEMO_EMPTY_S
+            + host_sim::simulated::REFERENCE_DEMO_EVENTS[0].time_s;
+        // Rounded to the nearest sample, as the script places the drop.
+        let first_drop_chunk = (first_drop_s * SAMPLE_RATE_HZ as f64 + 0.5) as usize / chunk.len();
+        let mut sequence = 0u32;
         let mut checked_ticks = 0u64;
         let mut checked_events = 0u32;
         let mut metered = false;
         for index in 0..(6 * SAMPLE_RATE_HZ) as usize / chunk.len() {
-            for message in chunk.iter_mut() {
-                let sample = match converter.read() {
-                    Ok(code) if converter.is_saturated(code) => RawSample::Saturated,
-                    Ok(code) => RawSample::Counts(code as i32),
-                    Err(_) => RawSample::Lost,
-                };
-                converter.convert();
-                *message = SampleMessage { sequence, sample };
-                sequence += 1;
-            }
+            converter.fill(chunk, &mut sequence);
             if index + 1 == first_drop_chunk {
                 metered = pipeline.noise_checked();
             }
-            let work = bench::measure_pipeline(pipeline, &chunk);
+            let work = bench::measure_pipeline(pipeline, chunk);
             if index >= first_drop_chunk {
-                let overhead = bench::measure_loop_overhead(&chunk);
+                let overhead = bench::measure_loop_overhead(chunk);
                 checked_ticks += work.saturating_sub(overhead);
                 checked_events += chunk.len() as u32;
             }
@@ -369,11 +369,5 @@ mod app {
             metered as u32,
             pipeline.dropped()
         );
-        pipeline.restart();
-
-        // The deepest the stack went since `init` began: the factory calibration, building
-        // the configured scale, the replay above.
-        let (used, size) = bench::stack_used();
-        defmt::println!("bench stack used={=u32} size={=u32}", used, size);
     }
 }

@@ -33,7 +33,7 @@ mod app {
         gpio::{gpioa::PA0, Edge, Input},
         pac::{self, ADC1, DMA2, EXTI},
         prelude::*,
-        rcc::Config,
+        rcc::{Config, Rcc},
         timer::{CounterHz, Event, Flag},
     };
 
@@ -42,6 +42,8 @@ mod app {
 
     /// The 12-bit converter's rails.
     const MAX_CODE: u16 = 4095;
+    /// The readout task's vector, pended by the estimator task after each readout.
+    const READOUT: pac::Interrupt = pac::Interrupt::EXTI2;
 
     /// The KEY button and what debounces it: EXTI0 wakes on the first falling edge, then
     /// TIM3 polls the level at `KEY_POLL_HZ` until the button is released and settled.
@@ -50,6 +52,46 @@ mod app {
         exti: EXTI,
         poll_timer: CounterHz<pac::TIM3>,
         debouncer: KeyDebouncer,
+    }
+
+    impl Key {
+        /// PA0 to GND when pressed (active low, internal pull-up), falling edge on EXTI0;
+        /// TIM3 interrupts only while the key is being polled.
+        fn new(
+            pin: PA0,
+            mut exti: EXTI,
+            syscfg: pac::SYSCFG,
+            tim3: pac::TIM3,
+            rcc: &mut Rcc,
+        ) -> Self {
+            let mut syscfg = syscfg.constrain(rcc);
+            let mut pin = pin.into_pull_up_input();
+            pin.make_interrupt_source(&mut syscfg);
+            pin.trigger_on_edge(&mut exti, Edge::Falling);
+            pin.enable_interrupt(&mut exti);
+            let mut poll_timer = tim3.counter_hz(rcc);
+            poll_timer.listen(Event::Update);
+            Self {
+                pin,
+                exti,
+                poll_timer,
+                debouncer: KeyDebouncer::new(KEY_POLL_HZ, KEY_DEBOUNCE_MS, KEY_LONG_PRESS_MS),
+            }
+        }
+    }
+
+    /// The config's counts (noise variance, rails) are those of the chain it was calibrated
+    /// on; this board's converter is 12 bits. The method and the model carry over, the
+    /// bias-compensated method's noise variance does not: say so when they differ.
+    fn note_config_converter() {
+        let config_max_code = pipeline::config::WEIGHING.onset.rail_high;
+        if config_max_code != ((1u32 << FRONT_END.adc_bits) - 1) as f64 {
+            defmt::println!(
+                "config note: calibrated on a converter with max code {=f32}, this board's is {=u32}: recalibrate with drops of this board (firmware/README.md)",
+                config_max_code as f32,
+                (1u32 << FRONT_END.adc_bits) - 1
+            );
+        }
     }
 
     #[shared]
@@ -78,7 +120,7 @@ mod app {
         estimator: EstimatorStorage = EstimatorStorage::uninit(),
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
-        let mut device = cx.device;
+        let device = cx.device;
         let mut core = cx.core;
         let mut rcc = device
             .RCC
@@ -89,28 +131,13 @@ mod app {
 
         let store = FlashCalibrationStore::new(device.FLASH);
         let (calibration, source) = store.load();
-        defmt::println!(
-            "calibration counts_per_gram={=f32} zero_counts={=f32} source={}",
-            calibration.counts_per_gram,
-            calibration.zero_counts,
-            source
-        );
+        pipeline::log_calibration(&calibration, &source);
         let scale = match pipeline::scale(calibration.counts_scale(), cx.local.estimator) {
             Ok(scale) => scale,
             Err(error) => defmt::panic!("weighing configuration refused: {}", error),
         };
         pipeline::log_config();
-        // The config's counts (noise variance, rails) are those of the chain it was
-        // calibrated on; this board's converter is 12 bits. The method and the model carry
-        // over, the bias-compensated method's noise variance does not.
-        let config_max_code = pipeline::config::WEIGHING.onset.rail_high;
-        if config_max_code != ((1u32 << FRONT_END.adc_bits) - 1) as f64 {
-            defmt::println!(
-                "config note: calibrated on a converter with max code {=f32}, this board's is {=u32}: recalibrate with drops of this board (firmware/README.md)",
-                config_max_code as f32,
-                (1u32 << FRONT_END.adc_bits) - 1
-            );
-        }
+        note_config_converter();
 
         // INA114 output on PA1 (ADC1_IN1), converted on every TIM2 update. (PA0 is the
         // Black Pill's KEY button.)
@@ -147,15 +174,7 @@ mod app {
         // update), a field the HAL's counter does not use.
         unsafe { (*pac::TIM2::ptr()).cr2().modify(|_, w| w.mms().update()) };
 
-        // KEY: PA0 to GND when pressed (active low, internal pull-up), falling edge on
-        // EXTI0; TIM3 interrupts only while the key is being polled.
-        let mut syscfg = device.SYSCFG.constrain(&mut rcc);
-        let mut pin = gpioa.pa0.into_pull_up_input();
-        pin.make_interrupt_source(&mut syscfg);
-        pin.trigger_on_edge(&mut device.EXTI, Edge::Falling);
-        pin.enable_interrupt(&mut device.EXTI);
-        let mut poll_timer = device.TIM3.counter_hz(&mut rcc);
-        poll_timer.listen(Event::Update);
+        let key = Key::new(gpioa.pa0, device.EXTI, device.SYSCFG, device.TIM3, &mut rcc);
         defmt::println!(
             "KEY: short press tare (or cancel a calibration), long press (>= {=u32} ms) calibrate with {=f32} g",
             KEY_LONG_PRESS_MS,
@@ -167,12 +186,7 @@ mod app {
             Shared {
                 latest: None,
                 pipeline: Pipeline::new(scale),
-                key: Key {
-                    pin,
-                    exti: device.EXTI,
-                    poll_timer,
-                    debouncer: KeyDebouncer::new(KEY_POLL_HZ, KEY_DEBOUNCE_MS, KEY_LONG_PRESS_MS),
-                },
+                key,
             },
             Local {
                 transfer,
@@ -223,25 +237,10 @@ mod app {
 
     /// The estimator task: drains the queue (bounded by its capacity) into the weighing core.
     #[task(binds = EXTI1, priority = 2, local = [consumer], shared = [latest, pipeline])]
-    fn estimate(cx: estimate::Context) {
-        let estimate::SharedResources {
-            mut latest,
-            mut pipeline,
-            ..
-        } = cx.shared;
+    fn estimate(mut cx: estimate::Context) {
         let consumer = cx.local.consumer;
-        // The key and readout tasks run below this priority: the lock costs nothing here.
-        pipeline.lock(|pipeline| {
-            for _ in 0..QUEUE_CAPACITY {
-                let Some(message) = consumer.dequeue() else {
-                    break;
-                };
-                if let Some(readout) = pipeline.accept(message) {
-                    latest.lock(|latest| *latest = Some(readout));
-                    rtic::pend(pac::Interrupt::EXTI2);
-                }
-            }
-        });
+        let shared = &mut cx.shared;
+        pipeline::estimate(&mut shared.pipeline, &mut shared.latest, consumer, READOUT);
     }
 
     /// The readout task: 20 lines a second over RTT; after each, the commands' regular

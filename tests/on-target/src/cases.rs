@@ -1,6 +1,7 @@
 //! The estimator configurations the on-target check runs, shared by the bare-metal
-//! `core_check` binary and the host test that compares against it (included there with
-//! `#[path]`), so the two sides cannot drift apart.
+//! `core_check` binary and the host test that compares against it (`tests::core_check`,
+//! through this crate), so the two sides cannot drift apart. Plain constants: nothing here
+//! may depend on the target.
 
 /// The stored step response: `f32` little-endian raw samples (zero offset removed),
 /// written by `tests::core_check::generate_response_bytes` (see that module).

@@ -16,9 +16,10 @@ use anyhow::{bail, Context, Result};
 
 use crate::util::{build_on_target, cargo, run_checked};
 
-/// Goal from issue 2: instructions per update at n = 7 on the Cortex-M4F.
+/// The core's speed goal: instructions per update at n = 7 on the Cortex-M4F (a 4 kHz
+/// update must leave the MCU most of its time).
 const GOAL_INSTRUCTIONS_AT_N7: f64 = 1_500.0;
-/// Goal from issue 2: bytes of a `StepEstimator<f32, 7>`.
+/// The core's size goal: bytes of a `StepEstimator<f32, 7>`.
 const GOAL_BYTES_AT_N7: usize = 512;
 
 /// One row of `bench_core`'s output.

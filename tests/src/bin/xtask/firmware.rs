@@ -10,7 +10,7 @@
 
 use std::io::{Read, Write as _};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::{Child, ChildStdin, Command, Stdio};
 use std::sync::mpsc;
 use std::thread;
 use std::time::{Duration, Instant};
@@ -19,6 +19,7 @@ use tests::weighing_constants::CONSTANTS_VAR;
 use anyhow::{anyhow, bail, Context, Result};
 use tests::commands::{self, CommandScript};
 use tests::e2e::{self, RunLog, Scene};
+use tests::firmware_log;
 use tests::qemu::{MACHINE_ARGS, QEMU};
 
 use crate::util::{cargo, run_checked, target_dir, THUMB_TARGET};
@@ -61,12 +62,31 @@ pub fn demo() -> Result<()> {
 }
 
 /// The firmware checks of `cargo xtask test`: the STM32F411 image builds and leaves at least
-/// half the chip's flash free (issue 4), the demo scene in QEMU meets the readout criteria
+/// half the chip's flash free (the firmware's size budget), the demo scene in QEMU meets the readout criteria
 /// of `tests::e2e::check`, the command scene (tare, refused tare, calibration typed on
 /// UART 0) meets those of `tests::commands::check`, and the checked demo (the demo after
 /// 2 s more of empty pan) meters the empty pan's noise before its first drop and meets the
 /// demo's criteria with the consistency check live.
 pub fn e2e_test() -> Result<()> {
+    check_stm32_flash()?;
+    let elf = build(Board::Qemu, false)?;
+    check_replay_formats(&elf)?;
+    e2e_demo(&elf)?;
+    e2e_commands(&elf)?;
+    e2e_checked_demo(&elf)
+}
+
+/// Print a report's figures; fail with `what` and every failure unless there are none.
+fn require_passed(summary: &str, failures: &[String], what: &str) -> Result<()> {
+    print!("{summary}");
+    if !failures.is_empty() {
+        bail!("{what}:\n  - {}", failures.join("\n  - "));
+    }
+    Ok(())
+}
+
+/// The STM32F411 image leaves at least half the chip's flash free.
+fn check_stm32_flash() -> Result<()> {
     let stm32_elf = build(Board::Stm32f411, false)?;
     let stm32_size = image_size(&stm32_elf)?;
     let flash_free = 1.0 - stm32_size.flash as f64 / STM32F411_FLASH_BYTES as f64;
@@ -82,43 +102,72 @@ pub fn e2e_test() -> Result<()> {
             STM32F411_FLASH_BYTES / 1024
         );
     }
-    let elf = build(Board::Qemu, false)?;
-    let run = run_firmware(&elf, &ICOUNT_FAST, false, None)?;
-    let report = e2e::check(&Scene::demo(), &run);
-    print!("{}", report.summary());
-    if !report.passed() {
+    Ok(())
+}
+
+/// The host replays write every line with a format string the QEMU image logs
+/// (`tests::firmware_log`), letter for letter.
+fn check_replay_formats(elf: &Path) -> Result<()> {
+    let bytes = std::fs::read(elf).with_context(|| format!("reading {}", elf.display()))?;
+    let missing = firmware_log::missing_from_image(&bytes)?;
+    if !missing.is_empty() {
         bail!(
-            "the firmware's readout fails the acceptance criteria:\n  - {}",
-            report.failures.join("\n  - ")
+            "the host replays write lines the firmware does not log (tests/src/firmware_log.rs):\n  - {}",
+            missing.join("\n  - ")
         );
     }
-    println!("firmware end-to-end: all criteria met");
+    println!(
+        "host replay formats: all {} are the firmware's",
+        firmware_log::ALL.len()
+    );
+    Ok(())
+}
 
+/// The demo scene meets the readout criteria of `tests::e2e::check`.
+fn e2e_demo(elf: &Path) -> Result<()> {
+    let run = run_firmware(elf, &ICOUNT_FAST, false, None)?;
+    let report = e2e::check(&Scene::demo(), &run);
+    require_passed(
+        &report.summary(),
+        &report.failures,
+        "the firmware's readout fails the acceptance criteria",
+    )?;
+    println!("firmware end-to-end: all criteria met");
+    Ok(())
+}
+
+/// The command scene, the harness typing on UART 0, meets `tests::commands::check`.
+fn e2e_commands(elf: &Path) -> Result<()> {
     println!(
         "command scene: the harness types t (stable), t (sliding load), c (empty pan) on UART 0"
     );
     let mut script = CommandScript::new();
-    let run = run_firmware(&elf, &ICOUNT_FAST, false, Some(&mut script))?;
+    let run = run_firmware(elf, &ICOUNT_FAST, false, Some(&mut script))?;
     for line in run.lines.iter().filter(|line| line.starts_with("command ")) {
         println!("  {line}");
     }
     let report = commands::check(&run);
-    print!("{}", report.summary());
-    if !report.passed() {
-        bail!(
-            "the command path fails its criteria ({} of 3 commands typed):\n  - {}",
-            script.sent(),
-            report.failures.join("\n  - ")
-        );
-    }
+    require_passed(
+        &report.summary(),
+        &report.failures,
+        &format!(
+            "the command path fails its criteria ({} of 3 commands typed)",
+            script.sent()
+        ),
+    )?;
     println!("firmware command path end-to-end: all criteria met");
+    Ok(())
+}
 
+/// The checked demo meters the empty pan's noise before its first drop and meets the
+/// demo's criteria with the consistency check live.
+fn e2e_checked_demo(elf: &Path) -> Result<()> {
     let scene = Scene::checked_demo();
     println!(
         "checked demo: the demo after {:.1} s more of empty pan, the consistency check live from the first drop",
         scene.loads[1].0 - Scene::demo().loads[1].0
     );
-    let run = run_firmware_scene(&elf, &ICOUNT_FAST, false, "checked-demo", None)?;
+    let run = run_firmware_scene(elf, &ICOUNT_FAST, false, "checked-demo", None)?;
     let mut report = e2e::check(&scene, &run);
     let metered = run
         .lines
@@ -137,13 +186,11 @@ pub fn e2e_test() -> Result<()> {
             .failures
             .push("the empty pan's noise was never metered: no run was checked".to_string()),
     }
-    print!("{}", report.summary());
-    if !report.passed() {
-        bail!(
-            "the checked demo fails the acceptance criteria:\n  - {}",
-            report.failures.join("\n  - ")
-        );
-    }
+    require_passed(
+        &report.summary(),
+        &report.failures,
+        "the checked demo fails the acceptance criteria",
+    )?;
     println!("firmware checked demo end-to-end: all criteria met");
     Ok(())
 }
@@ -176,7 +223,7 @@ pub fn bench() -> Result<()> {
 
     // Other methods on the shipped file's calibration (model, noise, constants), each built as
     // a config of its own and benched the same way: the step estimator at n = 7, D = 16 (the
-    // order issue 4's goal names, and the firmware's earlier default) and the model bank.
+    // order the speed goal names, and the firmware's earlier default) and the model bank.
     let result = (|| -> Result<()> {
         let shipped = shipped_config()?;
         for variant in bench_variants(&shipped)? {
@@ -466,33 +513,9 @@ fn run_firmware_scene(
         .context("reading the defmt table")?
         .ok_or_else(|| anyhow!("{} has no defmt data", elf.display()))?;
     let mut decoder = table.new_stream_decoder();
+    let can_recover = table.encoding().can_recover();
 
-    let mut command = Command::new(QEMU);
-    command
-        .args(MACHINE_ARGS)
-        .args(["-nographic", "-monitor", "none"]);
-    if script.is_some() {
-        let semihosting = format!(
-            "enable=on,target=native,arg={QEMU_BIN},arg={}",
-            commands::SCENE_NAME
-        );
-        command
-            .args(["-serial", "stdio", "-semihosting-config", &semihosting])
-            .stdin(Stdio::piped());
-    } else {
-        let semihosting = format!("enable=on,target=native,arg={QEMU_BIN},arg={scene}");
-        command
-            .args(["-serial", "none", "-semihosting-config", &semihosting])
-            .stdin(Stdio::null());
-    }
-    let mut child = command
-        .args(icount)
-        .arg("-kernel")
-        .arg(elf)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .with_context(|| format!("cannot start {QEMU} (cargo xtask install)"))?;
+    let mut child = spawn_qemu(elf, icount, scene, script.is_some())?;
     let mut console = child.stdin.take();
     let mut stdout = child
         .stdout
@@ -524,38 +547,11 @@ fn run_firmware_scene(
         match received.recv_timeout(Duration::from_millis(50)) {
             Ok(chunk) => {
                 decoder.received(&chunk);
-                loop {
-                    match decoder.decode() {
-                        Ok(frame) => {
-                            let prefix = match frame.level() {
-                                Some(defmt_parser::Level::Error) => "ERROR ",
-                                _ => "",
-                            };
-                            let line = format!("{prefix}{}", frame.display_message());
-                            if live {
-                                println!("{}", pretty(&line));
-                                let _ = std::io::stdout().flush();
-                            }
-                            let typed =
-                                match (script.as_deref_mut(), e2e::ReadoutLine::parse(&line)) {
-                                    (Some(script), Some(readout)) => script.respond(&readout),
-                                    _ => None,
-                                };
-                            if let (Some(byte), Some(console)) = (typed, console.as_mut()) {
-                                // A broken pipe means QEMU is gone; how it ended is reported below.
-                                let _ = console.write_all(&[byte]).and_then(|()| console.flush());
-                            }
-                            lines.push(line);
-                        }
-                        Err(defmt_decoder::DecodeError::UnexpectedEof) => break,
-                        Err(defmt_decoder::DecodeError::Malformed) => {
-                            lines.push("ERROR malformed defmt frame".into());
-                            if !table.encoding().can_recover() {
-                                break;
-                            }
-                        }
-                    }
-                }
+                let mut on_line = |line: String| {
+                    answer_line(&line, live, script.as_deref_mut(), console.as_mut());
+                    lines.push(line);
+                };
+                decode_lines(decoder.as_mut(), can_recover, &mut on_line);
             }
             Err(mpsc::RecvTimeoutError::Disconnected) => break,
             Err(mpsc::RecvTimeoutError::Timeout) => {}
@@ -583,6 +579,80 @@ fn run_firmware_scene(
         lines,
         exited_successfully: status.success() && !timed_out,
     })
+}
+
+/// Start QEMU on `elf` playing `scene`, its stdout and stderr piped. With a `console`,
+/// QEMU plays the command scene and its stdin is UART 0 (`-serial stdio`).
+fn spawn_qemu(elf: &Path, icount: &[&str], scene: &str, console: bool) -> Result<Child> {
+    let mut command = Command::new(QEMU);
+    command
+        .args(MACHINE_ARGS)
+        .args(["-nographic", "-monitor", "none"]);
+    if console {
+        let semihosting = format!(
+            "enable=on,target=native,arg={QEMU_BIN},arg={}",
+            commands::SCENE_NAME
+        );
+        command
+            .args(["-serial", "stdio", "-semihosting-config", &semihosting])
+            .stdin(Stdio::piped());
+    } else {
+        let semihosting = format!("enable=on,target=native,arg={QEMU_BIN},arg={scene}");
+        command
+            .args(["-serial", "none", "-semihosting-config", &semihosting])
+            .stdin(Stdio::null());
+    }
+    command
+        .args(icount)
+        .arg("-kernel")
+        .arg(elf)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .with_context(|| format!("cannot start {QEMU} (cargo xtask install)"))
+}
+
+/// Every whole frame the decoder holds, as log lines, to `on_line`; a malformed frame is
+/// an `ERROR` line, and ends decoding when the encoding cannot resynchronise.
+fn decode_lines(
+    decoder: &mut dyn defmt_decoder::StreamDecoder,
+    can_recover: bool,
+    on_line: &mut dyn FnMut(String),
+) {
+    loop {
+        match decoder.decode() {
+            Ok(frame) => on_line(e2e::frame_line(&frame)),
+            Err(defmt_decoder::DecodeError::UnexpectedEof) => break,
+            Err(defmt_decoder::DecodeError::Malformed) => {
+                on_line("ERROR malformed defmt frame".into());
+                if !can_recover {
+                    break;
+                }
+            }
+        }
+    }
+}
+
+/// Print `line` when `live`; after a readout line, type the byte the script asks for on
+/// the console.
+fn answer_line(
+    line: &str,
+    live: bool,
+    script: Option<&mut CommandScript>,
+    console: Option<&mut ChildStdin>,
+) {
+    if live {
+        println!("{}", pretty(line));
+        let _ = std::io::stdout().flush();
+    }
+    let typed = match (script, e2e::ReadoutLine::parse(line)) {
+        (Some(script), Some(readout)) => script.respond(&readout),
+        _ => None,
+    };
+    if let (Some(byte), Some(console)) = (typed, console) {
+        // A broken pipe means QEMU is gone; how it ended is reported with the run.
+        let _ = console.write_all(&[byte]).and_then(|()| console.flush());
+    }
 }
 
 /// A readout line as a person reads it; other lines unchanged.

@@ -1,15 +1,16 @@
-//! The QEMU board's simulated load cell: host-sim's `no_std` model of the reference chain
-//! (load cell, INA114, 3rd-order Butterworth, 16-bit ADC), the same code the host studies
-//! run, and the scenes it plays.
+//! The QEMU board's simulated load cell and the scenes it plays: the reference chain
+//! (load cell, INA114, 3rd-order Butterworth, 16-bit ADC) as [`SimulatedAdc`], scripted
+//! with the demo, the checked demo and the command scene, plus the factory calibration the
+//! board stores at boot.
 //!
-//! Only `estimator_core` and `host_sim` are used here, so the host tests compile this very
-//! file (`tests::commands` includes it by path) and replay exactly what QEMU runs. It must
-//! never depend on the board.
+//! It is here, in the `no_std` part, so the QEMU firmware plays these scenes and the host
+//! tests replay exactly the same ones through the same code. It must never depend on a
+//! board, allocate, or draw noise from anything but the fixed seeds below.
 
+use crate::simulated::{REFERENCE_SNR_DB, REFERENCE_STEP_G, SNR_WINDOW_SAMPLES};
+use crate::{white_noise_for_snr, Disturbances, LoadEvent, Script, SensorChain, SimulatedAdc};
 use estimator_core::sensor::AdcSource;
-
 use estimator_core::weighing::{Calibration, CalibrationError};
-use host_sim::{white_noise_for_snr, Disturbances, LoadEvent, Script, SensorChain, SimulatedAdc};
 
 /// The simulated cell with room for sixteen scripted load changes (the command scene
 /// pours a load on in portions).
@@ -72,9 +73,9 @@ pub const COMMAND_SCENE_EVENTS: [LoadEvent; COMMAND_SCENE_POUR_PORTIONS + 3] = {
 fn reference_disturbances() -> Disturbances {
     let mut disturbances = Disturbances::white(white_noise_for_snr(
         &SensorChain::reference(),
-        host_sim::simulated::REFERENCE_STEP_G,
-        host_sim::simulated::REFERENCE_SNR_DB,
-        host_sim::simulated::SNR_WINDOW_SAMPLES,
+        REFERENCE_STEP_G,
+        REFERENCE_SNR_DB,
+        SNR_WINDOW_SAMPLES,
     ));
     disturbances.amplifier_noise = true;
     disturbances
@@ -99,11 +100,21 @@ pub fn command_scene_with_seed(seed: u64) -> LoadCell {
     SimulatedAdc::new(chain, script, reference_disturbances(), seed)
 }
 
-/// Issue 4's demo scene: empty 0.3 s, 138.32 g, removed at 2.0 s, 250 g at 2.5 s, end
-/// at 4.0 s, 50 dB SNR. Built as `SimulatedAdc::reference_demo` builds it, in the larger
-/// script (`tests::commands` checks that the codes are the same).
+/// The demo scene: empty 0.3 s, 138.32 g, removed at 2.0 s, 250 g at 2.5 s, end at 4.0 s,
+/// 50 dB SNR. Built as `SimulatedAdc::reference_demo` builds it, in the larger script
+/// (`tests::commands` checks that the codes are the same).
 pub fn demo_scene() -> LoadCell {
     demo_scene_with_empty_start(0.0)
+}
+
+/// How much longer the checked demo holds the empty pan before the demo's events, s: the
+/// scale's noise metering needs 1.5 s settled plus a 0.3 s window and its 50 ms guard, so
+/// the consistency check is live from the first drop on.
+pub const CHECKED_DEMO_EMPTY_S: f64 = 2.0;
+
+/// The checked demo: the demo after [`CHECKED_DEMO_EMPTY_S`] more of empty pan.
+pub fn checked_demo_scene() -> LoadCell {
+    demo_scene_with_empty_start(CHECKED_DEMO_EMPTY_S)
 }
 
 /// The demo scene with the empty pan held `empty_s` longer at the start: the first drop
@@ -112,7 +123,7 @@ pub fn demo_scene() -> LoadCell {
 pub fn demo_scene_with_empty_start(empty_s: f64) -> LoadCell {
     SimulatedAdc::new(
         SensorChain::reference(),
-        host_sim::simulated::reference_demo_script(empty_s),
+        crate::simulated::reference_demo_script(empty_s),
         reference_disturbances(),
         DEMO_SEED,
     )
@@ -137,14 +148,7 @@ pub fn factory_calibration() -> Result<Calibration, CalibrationError> {
     script
         .push(LoadEvent::step(2.0, CALIBRATION_MASS_G))
         .map_err(|_| CalibrationError::NoSpan)?;
-    let mut disturbances = Disturbances::white(white_noise_for_snr(
-        &chain,
-        host_sim::simulated::REFERENCE_STEP_G,
-        host_sim::simulated::REFERENCE_SNR_DB,
-        host_sim::simulated::SNR_WINDOW_SAMPLES,
-    ));
-    disturbances.amplifier_noise = true;
-    let mut cell = SimulatedAdc::new(chain, script, disturbances, CALIBRATION_SEED);
+    let mut cell = SimulatedAdc::new(chain, script, reference_disturbances(), CALIBRATION_SEED);
     let (mut empty_sum, mut empty_count) = (0u64, 0u32);
     let (mut loaded_sum, mut loaded_count) = (0u64, 0u32);
     for sample in 0..6 * RATE {

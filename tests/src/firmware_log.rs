@@ -1,0 +1,243 @@
+//! The firmware's log lines as the host replays write them (`e2e::host_replay`,
+//! `commands::host_replay`): the firmware's own defmt format strings (those of
+//! `firmware::pipeline` and the QEMU board's end line), rendered here with the arguments the
+//! replay computed.
+//!
+//! Why the format strings and not a second `format!` per line: the firmware formats on the
+//! host through defmt's decoder, so its format strings are the one description of each
+//! line. `cargo xtask test` checks that every string here is in the firmware image's defmt
+//! table ([`missing_from_image`]), so a replay cannot drift from what QEMU prints. Nothing
+//! here judges a line; the checkers parse what this writes exactly as they parse QEMU's.
+
+use std::fmt::Write as _;
+
+use anyhow::{anyhow, Context, Result};
+use estimator_core::weighing::{
+    Calibration, CalibrationFailure, CalibrationSource, Command, CommandOutcome, CommandRefusal,
+    ScaleReading,
+};
+
+/// `pipeline::log_readout` with a mass.
+pub const READOUT: &str =
+    "readout sample={=u32} mass_g={=f32} state={} since={=u32} dropped={=u32} changes={=u32}";
+/// `pipeline::log_readout` without one.
+pub const READOUT_NO_MASS: &str =
+    "readout sample={=u32} mass_g=none state={} since={=u32} dropped={=u32} changes={=u32}";
+/// `pipeline::log_command`, a tare taken.
+pub const TARED: &str = "command sample={=u32} tare=ok tare_g={=f32}";
+/// `pipeline::log_command`, the tare cleared.
+pub const TARE_CLEARED: &str = "command sample={=u32} untare=ok";
+/// `pipeline::log_command`, a calibration's zero taken.
+pub const CALIBRATION_STARTED: &str = "command sample={=u32} calibrate=zero_taken zero_counts={=f32} known_mass_g={=f32} (put the mass on)";
+/// `pipeline::log_command`, a calibration cancelled.
+pub const CALIBRATION_CANCELLED: &str = "command sample={=u32} cancel=ok";
+/// `pipeline::log_command`, any command refused.
+pub const REFUSED: &str = "command sample={=u32} {=str}=refused ({})";
+/// `pipeline::finish_calibration`, the measurement failed.
+pub const CALIBRATION_FAILED: &str = "command sample={=u32} calibrate=failed ({})";
+/// `pipeline::finish_calibration`, the store failed.
+pub const STORE_FAILED: &str = "command sample={=u32} calibrate=failed (Store({}))";
+/// `pipeline::finish_calibration`, stored, read back and applied.
+pub const CALIBRATION_DONE: &str = "command sample={=u32} calibrate=done counts_per_gram={=f32} zero_counts={=f32} (stored, read back, applied)";
+/// `pipeline::log_calibration`: the calibration booted with.
+pub const BOOT_CALIBRATION: &str =
+    "calibration counts_per_gram={=f32} zero_counts={=f32} source={}";
+/// The QEMU board's end of the scene.
+pub const END: &str = "end samples={=u32} dropped={=u32}";
+
+/// Every format string above.
+pub const ALL: [&str; 12] = [
+    READOUT,
+    READOUT_NO_MASS,
+    TARED,
+    TARE_CLEARED,
+    CALIBRATION_STARTED,
+    CALIBRATION_CANCELLED,
+    REFUSED,
+    CALIBRATION_FAILED,
+    STORE_FAILED,
+    CALIBRATION_DONE,
+    BOOT_CALIBRATION,
+    END,
+];
+
+/// One argument of a line, by the type its parameter names.
+#[derive(Clone, Debug)]
+pub enum Arg {
+    /// `{=u32}`.
+    U32(u32),
+    /// `{=f32}`.
+    F32(f32),
+    /// `{=str}`.
+    Str(&'static str),
+    /// `{}`: a value the firmware logs through its `defmt::Format`, which for these enums
+    /// prints what `Debug` prints.
+    Format(String),
+}
+
+/// `format` with `args` in its parameters, as the host writes numbers (Rust's shortest
+/// `f32` form; the checkers parse any).
+///
+/// # Panics
+/// If `format` is not a defmt format string or lacks an argument: a bug in this module.
+pub fn render(format: &str, args: &[Arg]) -> String {
+    let fragments = defmt_parser::parse(format, defmt_parser::ParserMode::Strict)
+        .unwrap_or_else(|error| panic!("{format:?} is no defmt format string: {error:?}"));
+    let mut line = String::new();
+    for fragment in fragments {
+        match fragment {
+            defmt_parser::Fragment::Literal(text) => line.push_str(&text),
+            defmt_parser::Fragment::Parameter(parameter) => {
+                let _ = match &args[parameter.index] {
+                    Arg::U32(value) => write!(line, "{value}"),
+                    Arg::F32(value) => write!(line, "{value}"),
+                    Arg::Str(text) => write!(line, "{text}"),
+                    Arg::Format(text) => write!(line, "{text}"),
+                };
+            }
+        }
+    }
+    line
+}
+
+/// `pipeline::log_readout`: one readout line.
+pub fn readout(sample: u32, reading: &ScaleReading, dropped: u32) -> String {
+    let tail = [
+        Arg::Format(format!("{:?}", reading.state)),
+        Arg::U32(reading.samples_since_change),
+        Arg::U32(dropped),
+        Arg::U32(reading.load_changes),
+    ];
+    match reading.mass_g {
+        Some(mass_g) => {
+            let mut args = vec![Arg::U32(sample), Arg::F32(mass_g)];
+            args.extend(tail);
+            render(READOUT, &args)
+        }
+        None => {
+            let mut args = vec![Arg::U32(sample)];
+            args.extend(tail);
+            render(READOUT_NO_MASS, &args)
+        }
+    }
+}
+
+/// `pipeline::log_command`: one command's outcome.
+pub fn command(
+    sample: u32,
+    command: Command,
+    result: &Result<CommandOutcome, CommandRefusal>,
+) -> String {
+    let action = match command {
+        Command::Tare => "tare",
+        Command::ClearTare => "untare",
+        Command::Calibrate { .. } => "calibrate",
+        Command::CancelCalibration => "cancel",
+    };
+    let at = Arg::U32(sample);
+    match result {
+        Ok(CommandOutcome::Tared { tare_g }) => render(TARED, &[at, Arg::F32(*tare_g)]),
+        Ok(CommandOutcome::TareCleared) => render(TARE_CLEARED, &[at]),
+        Ok(CommandOutcome::CalibrationStarted {
+            zero_counts,
+            known_mass_g,
+        }) => render(
+            CALIBRATION_STARTED,
+            &[at, Arg::F32(*zero_counts), Arg::F32(*known_mass_g)],
+        ),
+        Ok(CommandOutcome::CalibrationCancelled) => render(CALIBRATION_CANCELLED, &[at]),
+        Err(refusal) => render(
+            REFUSED,
+            &[at, Arg::Str(action), Arg::Format(format!("{refusal:?}"))],
+        ),
+    }
+}
+
+/// `pipeline::finish_calibration`'s lines: the measurement failed.
+pub fn calibration_failed(sample: u32, failure: &CalibrationFailure) -> String {
+    render(
+        CALIBRATION_FAILED,
+        &[Arg::U32(sample), Arg::Format(format!("{failure:?}"))],
+    )
+}
+
+/// `pipeline::finish_calibration`'s lines: the store failed (`failure` as `Debug` prints it).
+pub fn store_failed(sample: u32, failure: &impl std::fmt::Debug) -> String {
+    render(
+        STORE_FAILED,
+        &[Arg::U32(sample), Arg::Format(format!("{failure:?}"))],
+    )
+}
+
+/// `pipeline::finish_calibration`'s lines: `stored` applied.
+pub fn calibration_done(sample: u32, stored: &Calibration) -> String {
+    render(
+        CALIBRATION_DONE,
+        &[
+            Arg::U32(sample),
+            Arg::F32(stored.counts_per_gram),
+            Arg::F32(stored.zero_counts),
+        ],
+    )
+}
+
+/// `pipeline::log_calibration`: the calibration in use and where it came from.
+pub fn boot_calibration(calibration: &Calibration, source: &CalibrationSource) -> String {
+    render(
+        BOOT_CALIBRATION,
+        &[
+            Arg::F32(calibration.counts_per_gram),
+            Arg::F32(calibration.zero_counts),
+            Arg::Format(format!("{source:?}")),
+        ],
+    )
+}
+
+/// The end of the scene.
+pub fn end(samples: u32, dropped: u32) -> String {
+    render(END, &[Arg::U32(samples), Arg::U32(dropped)])
+}
+
+/// The format strings here that the firmware image `elf` does not log: each must be one of
+/// its defmt table's strings, letter for letter.
+pub fn missing_from_image(elf: &[u8]) -> Result<Vec<&'static str>> {
+    let table = defmt_decoder::Table::parse(elf)
+        .context("reading the defmt table")?
+        .ok_or_else(|| anyhow!("the image has no defmt data"))?;
+    // Each raw symbol is a JSON object whose `data` is the format string, quoted.
+    Ok(ALL
+        .into_iter()
+        .filter(|format| {
+            let quoted = format!("\"{format}\"");
+            !table.raw_symbols().any(|symbol| symbol.contains(&quoted))
+        })
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_format_string_parses_and_renders_its_arguments() {
+        for format in ALL {
+            defmt_parser::parse(format, defmt_parser::ParserMode::Strict)
+                .unwrap_or_else(|error| panic!("{format:?}: {error:?}"));
+        }
+        assert_eq!(
+            render(TARED, &[Arg::U32(1800), Arg::F32(139.70123)]),
+            "command sample=1800 tare=ok tare_g=139.70123"
+        );
+        assert_eq!(
+            render(
+                REFUSED,
+                &[
+                    Arg::U32(5),
+                    Arg::Str("tare"),
+                    Arg::Format("Invalid(Saturated)".into())
+                ]
+            ),
+            "command sample=5 tare=refused (Invalid(Saturated))"
+        );
+    }
+}
