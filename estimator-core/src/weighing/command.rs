@@ -263,7 +263,7 @@ impl Commands {
 
     /// Refine a fresh tare and advance a calibration in progress; call it regularly (each
     /// readout). `Some` when a calibration ends: the measured calibration, which the board
-    /// stores with [`store_calibration`] and applies with [`Scale::recalibrate`], or why it
+    /// stores with [`crate::weighing::store_calibration`] and applies with [`Scale::recalibrate`], or why it
     /// failed. The known mass counts once a load change happened after the zero and the
     /// reading has been stable for `calibration_settle_samples` since that change; an empty
     /// pan after a bump does not.
@@ -449,10 +449,10 @@ mod tests {
         let Ok(CommandOutcome::Tared { tare_g }) = bench.command(Command::Tare) else {
             panic!("tare refused on a stable reading");
         };
-        // The 0.1 % at the readout; the tare is the gross estimate itself.
+        // The 0.1 % target at the readout; the tare is the gross estimate itself.
         assert!((tare_g - 138.32).abs() < 0.1383, "tare {tare_g}");
         let net = bench.run_s(0.5).mass_g.unwrap();
-        // The empty-pan criterion applies to a tared reading too.
+        // The empty-pan criterion applies to a tared reading too.
         assert!(net.abs() <= 0.05, "net {net}");
 
         assert_eq!(
@@ -544,7 +544,7 @@ mod tests {
     }
 
     /// The whole procedure on a cell 2 % more sensitive than the calibration in use: the
-    /// known mass reads 2 % high before, within the 0.1 % after the new record is
+    /// known mass reads 2 % high before, within the 0.1 % target after the new record is
     /// stored, read back and applied; a different mass then reads right too.
     #[test]
     fn calibration_with_a_known_mass_corrects_the_gain() {

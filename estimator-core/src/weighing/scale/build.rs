@@ -10,7 +10,7 @@ use crate::weighing::method::{WeighingConfig, WeighingEstimator};
 
 impl<const N: usize> Scale<StepEstimator<f32, N>> {
     /// The step estimator of `order`, `decimation` and `forgetting` in counts (gain 1, no
-    /// range limit: the ADC's rails arrive as [`RawSample::Saturated`]).
+    /// range limit: the ADC's rails arrive as [`super::RawSample::Saturated`]).
     pub fn step_estimator(
         order: usize,
         decimation: u16,
@@ -103,12 +103,9 @@ mod tests {
             onset: OnsetConfig::new(FS as f64).with_rails(0.0, 65_535.0),
             detection_lag_samples: 10.0,
             model: LoadCellModel {
-                natural_frequency_hz: 25.0,
-                damping_ratio: 0.03,
-                filter_order: 3,
-                filter_cutoff_hz: 100.0,
                 counts_per_gram: CPG as f64,
                 sample_rate_hz: FS as f64,
+                ..crate::weighing::reference_cell()
             },
             identified_counts_per_gram: CPG as f64,
             calibration_mass_g: 138.32,
