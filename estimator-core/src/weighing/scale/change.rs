@@ -75,13 +75,12 @@ impl<E: ScaleEstimator> Scale<E> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::test_scene::{new_scale, run, Cell};
+    use super::super::test_scene::{run, scene};
     use super::*;
 
     #[test]
     fn a_slow_creep_is_caught_by_the_raw_test() {
-        let mut scale = new_scale();
-        let mut cell = Cell::new(0.2);
+        let (mut scale, mut cell) = scene(0.2);
         run(&mut scale, &mut cell, 1000);
         cell.load_g = 100.0;
         run(&mut scale, &mut cell, 12_000);

@@ -139,7 +139,7 @@ impl<E: ScaleEstimator> Scale<E> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::test_scene::{calibration, new_scale, run, Cell, FS, ZERO};
+    use super::super::test_scene::{calibration, run, scene, Cell, FS, ZERO};
     use super::super::{CountsScale, ScaleConfig, ScaleEstimator, StepScale};
     use super::*;
     use crate::estimators::consistency::NoiseReference;
@@ -148,8 +148,7 @@ mod tests {
 
     #[test]
     fn empty_pan_reads_empty_near_zero() {
-        let mut scale = new_scale();
-        let mut cell = Cell::new(0.4);
+        let (mut scale, mut cell) = scene(0.4);
         let readings = run(&mut scale, &mut cell, 4000);
         let last = readings.last().unwrap();
         assert_eq!(last.state, ScaleState::Empty);
@@ -159,8 +158,7 @@ mod tests {
 
     #[test]
     fn a_drop_is_detected_and_the_mass_follows() {
-        let mut scale = new_scale();
-        let mut cell = Cell::new(0.4);
+        let (mut scale, mut cell) = scene(0.4);
         run(&mut scale, &mut cell, 2000);
         cell.load_g = 138.32;
         let readings = run(&mut scale, &mut cell, 4000);
@@ -176,8 +174,7 @@ mod tests {
 
     #[test]
     fn removal_is_detected_and_reads_empty_again() {
-        let mut scale = new_scale();
-        let mut cell = Cell::new(0.4);
+        let (mut scale, mut cell) = scene(0.4);
         run(&mut scale, &mut cell, 1000);
         cell.load_g = 250.0;
         run(&mut scale, &mut cell, 8000);
@@ -295,8 +292,7 @@ mod tests {
 
     #[test]
     fn saturation_is_invalid_with_its_reason_and_recovers() {
-        let mut scale = new_scale();
-        let mut cell = Cell::new(0.4);
+        let (mut scale, mut cell) = scene(0.4);
         run(&mut scale, &mut cell, 2000);
         let reading = scale.push(RawSample::Saturated);
         assert_eq!(reading.state, ScaleState::Invalid(ScaleFault::Saturated));
@@ -307,8 +303,7 @@ mod tests {
 
     #[test]
     fn a_lost_sample_is_shown_and_the_estimator_restarts() {
-        let mut scale = new_scale();
-        let mut cell = Cell::new(0.4);
+        let (mut scale, mut cell) = scene(0.4);
         cell.load_g = 50.0;
         run(&mut scale, &mut cell, 6000);
         let reading = scale.push(RawSample::Lost);

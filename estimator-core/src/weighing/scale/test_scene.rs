@@ -95,3 +95,8 @@ pub(crate) fn run<E: ScaleEstimator>(
 pub(crate) fn new_scale() -> StepScale<8> {
     Scale::step_default(FS, calibration()).unwrap()
 }
+
+/// The default scale and the cell with `noise_g` of noise, the pan empty.
+pub(crate) fn scene(noise_g: f64) -> (StepScale<8>, Cell) {
+    (new_scale(), Cell::new(noise_g))
+}

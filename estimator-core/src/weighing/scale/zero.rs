@@ -61,13 +61,12 @@ pub(super) fn round_to_i32(value: f32) -> i32 {
 
 #[cfg(test)]
 mod tests {
-    use super::super::test_scene::{new_scale, run, Cell, CPG, ZERO};
+    use super::super::test_scene::{run, scene, CPG, ZERO};
     use super::*;
 
     #[test]
     fn tare_needs_a_stable_reading_and_subtracts() {
-        let mut scale = new_scale();
-        let mut cell = Cell::new(0.2);
+        let (mut scale, mut cell) = scene(0.2);
         assert_eq!(scale.tare(), Err(TareError::NotStable));
         cell.load_g = 40.0;
         run(&mut scale, &mut cell, 8000);
@@ -80,8 +79,7 @@ mod tests {
 
     #[test]
     fn zero_tracking_follows_a_small_offset_slowly() {
-        let mut scale = new_scale();
-        let mut cell = Cell::new(0.2);
+        let (mut scale, mut cell) = scene(0.2);
         // The pan's real zero sits 0.1 g above the calibrated one.
         cell.offset_counts += 0.1 * CPG as f64;
         run(&mut scale, &mut cell, 8000);
@@ -92,8 +90,7 @@ mod tests {
 
     #[test]
     fn zero_tracking_ignores_a_load() {
-        let mut scale = new_scale();
-        let mut cell = Cell::new(0.2);
+        let (mut scale, mut cell) = scene(0.2);
         cell.load_g = 5.0;
         run(&mut scale, &mut cell, 8000);
         assert_eq!(scale.zero_counts(), ZERO);
