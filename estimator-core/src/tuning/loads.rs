@@ -26,9 +26,8 @@
 //! The target is relative: `|error| ≤ target·M` at every load. A method meets it when the
 //! 95%/95% bound of [`super::synthetic`] holds **at every scored scene**, each scene with its
 //! own runs. Not pooled: a pooled 95th percentile lets the loads a method is good at hide
-//! the ones it is not (the old choice `n = 2, D = 32, λ = 0.852` met the bound at 138 g and
-//! missed 0.1% at 50 g in 63 of 400 fresh simulator drops). Requiring every scene keeps each
-//! claim at its 95% confidence:
+//! the ones it is not (a method can meet the bound at the calibration mass and miss it
+//! often at a light load). Requiring every scene keeps each claim at its 95% confidence:
 //! a method whose true 95th percentile misses the target at one scene is accepted with
 //! probability at most 5% (that scene's bound alone must pass), whatever the other scenes.
 //!
@@ -36,9 +35,8 @@
 //! Each scene also gets the error no method can beat there: the Cramér–Rao bound of the
 //! known model with the onset known (`σ²/Σ ∂y/∂M²` over the samples up to the readout), plus
 //! the variance of the tare from the empty stretch. It says whether a miss at a light load is
-//! the method's or the sensor's: at 50 dB (σ = 0.445 g) it is about 0.026 g at any load, so
-//! 0.1% of a 41 g load (0.041 g) is beyond the reach of every method at its 95th percentile
-//! (1.96 × 0.026 = 0.051 g).
+//! the method's or the sensor's: where 1.96 times the floor exceeds the target at a load, no
+//! method can meet it there at its 95th percentile.
 
 use crate::reading::ConfigError;
 use crate::sensor::LoadCellModel;
@@ -282,14 +280,7 @@ mod tests {
     use super::*;
 
     fn cell() -> LoadCellModel {
-        LoadCellModel {
-            natural_frequency_hz: 25.0,
-            damping_ratio: 0.03,
-            filter_order: 3,
-            filter_cutoff_hz: 100.0,
-            counts_per_gram: 73.25,
-            sample_rate_hz: 4000.0,
-        }
+        crate::weighing::reference_cell()
     }
 
     #[test]

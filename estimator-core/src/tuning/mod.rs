@@ -31,9 +31,8 @@
 //!    detection and tare, then the method twice: from the detected onset and from the
 //!    landing itself, the two ends of where a scale may start it; the larger |error| at
 //!    `readout_s` after the landing counts. (A model of too low an order can be right from
-//!    one start and far off from the other: `n = 2, D = 32` on the reference cell is within
-//!    0.02% from 5 samples after the landing and 0.6% off from 10 before it. Requiring both
-//!    keeps the choice from hanging on one detector's lag.) A method meets the target when,
+//!    one start and far off from the other. Requiring both keeps the choice from hanging on
+//!    one detector's lag.) A method meets the target when,
 //!    **at every scene**, an upper 95% confidence bound on the 95th percentile of |error| is
 //!    within the target at that load (at most 12 of 400 runs outside), counting an invalid
 //!    reading or a failed detection as outside. The calibration mass is scored first (the
@@ -71,6 +70,7 @@
 mod candidates;
 mod loads;
 mod onset;
+mod search;
 pub(crate) mod synthetic;
 
 pub use candidates::{CandidateGrid, STANDARD_DECIMATIONS};
@@ -78,18 +78,15 @@ pub use loads::{
     platform_mass_from_resonances, DEFAULT_LOADS, DEFAULT_RANGE_RELATIVE, SATURATION_MARGIN_SIGMA,
 };
 pub use onset::{summarise, summarise_drop, DropError, DropSummary};
+pub use search::{identify_drops, tune};
 pub use synthetic::{upper_order_statistic, RunSlot, MIN_RUNS};
 
-use crate::estimators::noise_meter::NoiseMeter;
-use crate::numerics::real::Real;
-use crate::reading::{ConfigError, Estimator};
-use crate::sensor::{identify, Identified, IdentifyConfig, IdentifyError};
+use crate::reading::ConfigError;
+use crate::sensor::{Identified, IdentifyConfig, IdentifyError};
 use crate::weighing::{
-    cover_ratios, readout_samples, LoadCoverage, LoadScore, OnsetConfig, Prediction, RegionError,
-    WeighingConfig, WeighingEstimator, WeighingMethod, MAX_LOADS, MAX_SCENES,
+    readout_samples, LoadScore, OnsetConfig, Prediction, RegionError, WeighingConfig,
+    WeighingMethod, MAX_LOADS, MAX_SCENES,
 };
-
-use synthetic::{run_key, score, Scoring, Synthetic};
 
 /// The most drops one calibration takes.
 pub const MAX_DROPS: usize = 16;
@@ -215,7 +212,7 @@ pub struct CandidateScore {
     pub method: WeighingMethod,
     /// The Monte Carlo's figures at the calibration mass (always scored first).
     pub prediction: Prediction,
-    /// The figures at each scene scored, in the order of [`LoadCoverage::scores`] (by mass
+    /// The figures at each scene scored, in the order of [`LoadCoverage::scores`](crate::weighing::LoadCoverage::scores) (by mass
     /// then ratio; `None`: not scored, because the method had already failed elsewhere).
     pub loads: [Option<LoadScore>; MAX_SCENES],
     /// Scenes at which the 95%/95% bound met the target.
@@ -347,535 +344,12 @@ impl From<ConfigError> for TuningError {
     }
 }
 
-fn check_settings(settings: &TuningSettings) -> Result<(), ConfigError> {
-    let positive = |v: f64| v.is_finite() && v > 0.0;
-    if !positive(settings.mass_g) || settings.identify.mass_g != settings.mass_g {
-        return Err(ConfigError::Gain);
-    }
-    if let Some(gain) = settings.counts_per_gram {
-        if !gain.is_finite() || gain == 0.0 {
-            return Err(ConfigError::Gain);
-        }
-    }
-    if !positive(settings.readout_s)
-        || settings.readout_samples() == 0
-        || !positive(settings.target_relative)
-        || !settings.onset.is_valid()
-    {
-        return Err(ConfigError::Model);
-    }
-    let range_ok = settings.min_load_g.is_none_or(positive)
-        && settings.max_load_g.is_none_or(positive)
-        && match (settings.min_load_g, settings.max_load_g) {
-            (Some(low), Some(high)) => low <= high,
-            _ => true,
-        };
-    let platform_ok = settings
-        .platform_mass_g
-        .is_none_or(|m| m.is_finite() && m >= 0.0);
-    if !range_ok || !platform_ok || !(1..=MAX_LOADS).contains(&settings.loads) {
-        return Err(ConfigError::Range);
-    }
-    Ok(())
-}
-
-/// The pooled noise variance over the drops' empty stretches with block means of
-/// `decimation`, and its relative standard error.
-fn pooled_noise<T: Real>(
-    drops: &[&mut [T]],
-    summaries: &[Option<DropSummary>; MAX_DROPS],
-    decimation: u16,
-) -> Option<(f64, f64)> {
-    let mut meter = NoiseMeter::<f64>::new(decimation).ok()?;
-    for (drop, summary) in drops.iter().zip(summaries.iter()) {
-        let summary = summary.as_ref()?;
-        for &y in &drop[..summary.empty_samples] {
-            meter.push(y.to_f64()).ok()?;
-        }
-        meter.push_missing();
-    }
-    Some((meter.noise_variance()?, meter.relative_standard_error()?))
-}
-
-/// Run `method` on each drop (tared) from its detected onset and from `lag` samples before
-/// it (the estimate of the landing), read both at the readout after the earlier start, and
-/// keep the larger |error|.
-fn confirm<T: Real, E: Estimator<T>>(
-    estimator: &mut E,
-    drops: &[&mut [T]],
-    summaries: &[Option<DropSummary>; MAX_DROPS],
-    lag: usize,
-    readout: usize,
-    mass_g: f64,
-    target_g: f64,
-) -> RecordedCheck {
-    let mut check = RecordedCheck {
-        drops: 0,
-        errors_g: [0.0; MAX_DROPS],
-        failing: 0,
-        worst_drop: 0,
-        worst_error_g: 0.0,
-    };
-    for (index, (drop, summary)) in drops.iter().zip(summaries.iter()).enumerate() {
-        let Some(summary) = summary else { continue };
-        let landing = summary.onset.saturating_sub(lag);
-        // The caller checked that every drop holds the readout after its onset.
-        let end = (landing + readout + 1).min(drop.len());
-        let mut error = 0.0f64;
-        for start in [summary.onset, landing] {
-            estimator.reset();
-            let mut last = None;
-            for &y in &drop[start.min(end)..end] {
-                last = estimator.push(y).estimate;
-            }
-            let this = match last {
-                Some(estimate) if estimate.is_finite() => estimate.to_f64() - mass_g,
-                _ => f64::INFINITY,
-            };
-            if !(libm::fabs(this) <= libm::fabs(error)) {
-                error = this;
-            }
-        }
-        check.errors_g[index] = error;
-        check.drops += 1;
-        if !(libm::fabs(error) <= target_g) {
-            check.failing += 1;
-        }
-        if !(libm::fabs(error) <= check.worst_error_g) {
-            check.worst_error_g = libm::fabs(error);
-            check.worst_drop = index as u32;
-        }
-    }
-    check
-}
-
-/// Steps 1 and 2 of [`tune`] on their own: each drop checked (and required to hold the
-/// readout after its onset), its zero, noise and onset found and the drop tared **in
-/// place**, then the model identified from the onsets at `settings.mass_g`. Calibration
-/// calls it; a caller that has drops of a second mass uses it to identify the resonance there
-/// and then the platform mass ([`platform_mass_from_resonances`]).
-// The error is ~200 bytes (the best candidate's figures where it failed) and there is no
-// heap to box it into; it is returned once per calibration.
-#[allow(clippy::result_large_err)]
-pub fn identify_drops<T: Real, const S: usize>(
-    drops: &mut [&mut [T]],
-    settings: &TuningSettings,
-) -> Result<(Identified, [Option<DropSummary>; MAX_DROPS]), TuningError> {
-    check_settings(settings)?;
-    if drops.is_empty() {
-        return Err(TuningError::NoDrops);
-    }
-    if drops.len() > MAX_DROPS {
-        return Err(TuningError::TooManyDrops { drops: drops.len() });
-    }
-    let readout = settings.readout_samples();
-    // 1. Each drop: checks, zero, noise, onset; then tare in place.
-    let mut summaries: [Option<DropSummary>; MAX_DROPS] = [None; MAX_DROPS];
-    for (index, drop) in drops.iter_mut().enumerate() {
-        let summary = summarise_drop(drop, &settings.onset)
-            .map_err(|error| TuningError::Drop { drop: index, error })?;
-        let needed = summary.onset + readout + 1;
-        if drop.len() < needed {
-            return Err(TuningError::Drop {
-                drop: index,
-                error: DropError::TooShort {
-                    samples: drop.len(),
-                    needed,
-                },
-            });
-        }
-        for y in drop.iter_mut() {
-            *y = T::from_f64(y.to_f64() - summary.zero);
-        }
-        summaries[index] = Some(summary);
-    }
-    let count = drops.len();
-
-    // 2. The sensor, from each drop's onset.
-    let identified = {
-        let mut slices: [&[T]; MAX_DROPS] = [&[]; MAX_DROPS];
-        for ((slice, drop), summary) in slices.iter_mut().zip(drops.iter()).zip(&summaries) {
-            if let Some(summary) = summary {
-                *slice = &drop[summary.onset..];
-            }
-        }
-        identify::<T, S>(&slices[..count], &settings.identify).map_err(TuningError::Identify)?
-    };
-    Ok((identified, summaries))
-}
-
-/// Calibrate: see the module docs. `drops` are raw samples (ADC codes) in `T`, each an
-/// empty-pan stretch then the drop of `settings.mass_g`; they are tared in place. `runs`
-/// holds the Monte Carlo's slots: `runs.len() / settings.max_scenes()` runs for each scene
-/// (at least [`MIN_RUNS`] each; 400 gives the figures in host-sim's README). `report` sees
-/// every candidate evaluated, in order. `N` is the capacity of the data-driven estimators,
-/// `S` the model's states (2 + filter order), `K` the bank's size.
-// See `identify_drops` on the error's size.
-#[allow(clippy::result_large_err)]
-pub fn tune<T: Real, const N: usize, const S: usize, const K: usize>(
-    drops: &mut [&mut [T]],
-    settings: &TuningSettings,
-    grid: &CandidateGrid<'_>,
-    runs: &mut [RunSlot],
-    mut report: impl FnMut(&CandidateScore),
-) -> Result<Tuned, TuningError> {
-    check_settings(settings)?;
-    if drops.is_empty() {
-        return Err(TuningError::NoDrops);
-    }
-    if drops.len() > MAX_DROPS {
-        return Err(TuningError::TooManyDrops { drops: drops.len() });
-    }
-    let max_scenes = settings.max_scenes();
-    let runs_per_scene = runs.len() / max_scenes;
-    let Some(upper_index) = upper_order_statistic(runs_per_scene, QUANTILE, CONFIDENCE) else {
-        return Err(TuningError::TooFewRuns {
-            runs: runs.len(),
-            needed: MIN_RUNS * max_scenes,
-        });
-    };
-    if grid.is_empty() {
-        return Err(TuningError::NoCandidates);
-    }
-    let sample_rate_hz = settings.identify.sample_rate_hz;
-    let readout = settings.readout_samples();
-    let mass_g = settings.mass_g;
-    let target = settings.target_relative;
-
-    let (identified, summaries) = identify_drops::<T, S>(drops, settings)?;
-    let count = drops.len();
-    let identified_gain = identified.model.counts_per_gram;
-    let gain = settings.counts_per_gram.unwrap_or(identified_gain);
-
-    // 3. The noise.
-    let (raw_variance, relative_error) =
-        pooled_noise(drops, &summaries, 1).ok_or(TuningError::Settings(ConfigError::Model))?;
-    let monte_carlo_variance = raw_variance * (1.0 + 2.0 * relative_error);
-    let sigma = libm::sqrt(monte_carlo_variance);
-    let (mut zero_sum, mut zero_weight) = (0.0, 0.0);
-    let mut shortest_empty = usize::MAX;
-    for summary in summaries.iter().flatten() {
-        zero_sum += summary.zero * summary.empty_samples as f64;
-        zero_weight += summary.empty_samples as f64;
-        shortest_empty = shortest_empty.min(summary.onset);
-    }
-    let zero_counts = zero_sum / zero_weight;
-
-    // 4. The loads: the range (its top within what the converter takes) and the scenes.
-    let saturation = |high_g: f64| {
-        loads::saturation_limit::<S>(
-            &identified.model,
-            mass_g,
-            high_g,
-            settings.platform_mass_g,
-            zero_counts,
-            (settings.onset.rail_low, settings.onset.rail_high),
-            libm::sqrt(raw_variance),
-            readout,
-        )
-    };
-    let (default_low, default_high) = DEFAULT_RANGE_RELATIVE;
-    let max_g = match settings.max_load_g {
-        Some(high) => {
-            let limit_g = saturation(high)?;
-            if limit_g < high {
-                return Err(TuningError::LoadSaturates {
-                    mass_g: high,
-                    limit_g,
-                });
-            }
-            high.max(mass_g)
-        }
-        None => saturation(default_high * mass_g)?,
-    };
-    let min_g = settings
-        .min_load_g
-        .unwrap_or(default_low * mass_g)
-        .min(mass_g);
-    if min_g > max_g {
-        return Err(TuningError::Settings(ConfigError::Range));
-    }
-    let plan = if settings.calibration_mass_only() {
-        loads::Plan::new(mass_g, mass_g, mass_g, 1, Some(0.0))
-    } else {
-        loads::Plan::new(
-            mass_g,
-            min_g,
-            max_g,
-            settings.loads,
-            settings.platform_mass_g,
-        )
-    };
-    let (mut ratio_low, mut ratio_high) = (1.0f64, 1.0f64);
-    for scene in &plan.scenes[..plan.count] {
-        ratio_low = ratio_low.min(scene.frequency_ratio);
-        ratio_high = ratio_high.max(scene.frequency_ratio);
-    }
-
-    // 5. The synthetic drops of every scene and their onsets (once: they do not depend on
-    // the method). The scene scored k-th in the plan's order takes the slots
-    // [k·R, (k + 1)·R), so the calibration mass has runs 0..R.
-    let reference = settings.onset.min_empty_samples;
-    let empty = shortest_empty
-        .min(2 * reference)
-        .max(reference + settings.onset.guard_samples + 1);
-    let tare_samples = empty - settings.onset.guard_samples;
-    let mut synthetics: [Option<Synthetic<S>>; MAX_SCENES] = [None; MAX_SCENES];
-    let mut floors = [0.0f64; MAX_SCENES];
-    for (index, scene) in plan.scenes[..plan.count].iter().enumerate() {
-        let synthetic = Synthetic {
-            model: identified
-                .model
-                .with_frequency_ratio(scene.frequency_ratio)
-                .sensor_model::<f64, S>()?,
-            mass_g: scene.mass_g,
-            sigma,
-            empty,
-            length: empty + readout + 1,
-        };
-        floors[index] = loads::noise_floor_g(&synthetic, readout, tare_samples, identified_gain);
-        synthetics[index] = Some(synthetic);
-    }
-    // The synthetic drops have no rails.
-    let mut synthetic_onset = settings.onset;
-    synthetic_onset.rail_low = f64::NEG_INFINITY;
-    synthetic_onset.rail_high = f64::INFINITY;
-    let (mut lag_sum, mut detected) = (0.0, 0usize);
-    for (position, &scene) in plan.order[..plan.count].iter().enumerate() {
-        let Some(synthetic) = &synthetics[scene] else {
-            continue;
-        };
-        let first = position * runs_per_scene;
-        for (run, slot) in runs[first..first + runs_per_scene].iter_mut().enumerate() {
-            let run = (first + run) as u32;
-            let key = run_key(settings.seed, u64::from(run));
-            *slot = RunSlot {
-                run,
-                ..RunSlot::EMPTY
-            };
-            if let Ok(summary) = summarise(|| synthetic.samples(key, 0), &synthetic_onset) {
-                slot.onset = summary.onset as u32;
-                slot.zero = summary.zero;
-                if scene == plan.calibration {
-                    lag_sum += summary.onset as f64 - empty as f64;
-                    detected += 1;
-                }
-            }
-        }
-    }
-    let detection_lag = lag_sum / detected.max(1) as f64;
-    let recorded_lag = libm::round(detection_lag).max(0.0) as usize;
-
-    let mut model = identified.model;
-    model.counts_per_gram = gain;
-    let mut config = WeighingConfig {
-        method: grid
-            .get(0, sample_rate_hz)
-            .ok_or(TuningError::NoCandidates)?,
-        counts_per_gram: gain,
-        zero_counts,
-        noise_variance_counts2: raw_variance,
-        raw_noise_variance_counts2: raw_variance,
-        onset: settings.onset,
-        detection_lag_samples: detection_lag,
-        model,
-        identified_counts_per_gram: identified_gain,
-        calibration_mass_g: mass_g,
-        readout_s: settings.readout_s,
-        target_relative: target,
-        prediction: Prediction {
-            runs: 0,
-            planned_runs: runs_per_scene as u32,
-            valid_runs: 0,
-            within_target_runs: 0,
-            detection_failures: 0,
-            bias_g: 0.0,
-            rms_g: 0.0,
-            p95_g: f64::INFINITY,
-            p95_upper_g: f64::INFINITY,
-        },
-        recorded_drops: count as u32,
-        recorded_worst_error_g: f64::INFINITY,
-        loads: LoadCoverage {
-            min_g,
-            max_g,
-            loads: if settings.calibration_mass_only() {
-                1
-            } else {
-                settings.loads as u32
-            },
-            platform_mass_g: settings.platform_mass_g,
-            scores: [None; MAX_SCENES],
-        },
-    };
-
-    // 6–7. Candidates, smallest first; at each, the scenes in the plan's order, except that
-    // the scene that stopped the previous candidate comes right after the calibration mass
-    // (neighbouring candidates tend to fail at the same load, and a failing one stops there).
-    let mut chosen: Option<(CandidateScore, f64)> = None;
-    let mut best: Option<CandidateScore> = None;
-    let mut evaluated = 0usize;
-    let mut last_failed: Option<usize> = None;
-    for index in 0..grid.len() {
-        let Some(mut method) = grid.get(index, sample_rate_hz) else {
-            break;
-        };
-        if let WeighingMethod::ModelBank {
-            candidates,
-            ratio_min,
-            ratio_max,
-            ..
-        } = &mut method
-        {
-            cover_ratios(*candidates, ratio_min, ratio_max, ratio_low, ratio_high);
-        }
-        // The bias-compensated method takes the noise as its block means see it.
-        let method_variance = pooled_noise(drops, &summaries, method.decimation())
-            .map(|(variance, _)| variance)
-            .unwrap_or(raw_variance);
-        let mut candidate = config;
-        candidate.method = method;
-        candidate.noise_variance_counts2 = method_variance;
-        // Tared data, and neither the synthetic nor the (checked) recorded drops reach a rail.
-        candidate.onset.rail_low = f64::NEG_INFINITY;
-        candidate.onset.rail_high = f64::INFINITY;
-        let mut estimator = WeighingEstimator::<T, N, S, K>::with_method(&candidate, &method, 0.0)
-            .map_err(|error| TuningError::Candidate { method, error })?;
-        evaluated += 1;
-
-        let mut sequence = [0usize; MAX_SCENES];
-        let mut length = 0;
-        let mut push = |scene: usize| {
-            if !sequence[..length].contains(&scene) {
-                sequence[length] = scene;
-                length += 1;
-            }
-        };
-        push(plan.calibration);
-        if let Some(scene) = last_failed {
-            push(scene);
-        }
-        for &scene in &plan.order[..plan.count] {
-            push(scene);
-        }
-        let mut load_scores = [None; MAX_SCENES];
-        let (mut loads_met, mut failed_load) = (0u32, None);
-        for &scene in &sequence[..length] {
-            let Some(synthetic) = &synthetics[scene] else {
-                continue;
-            };
-            let position = plan.order[..plan.count]
-                .iter()
-                .position(|&s| s == scene)
-                .unwrap_or(0);
-            let first = position * runs_per_scene;
-            let target_g = target * synthetic.mass_g;
-            let scoring = Scoring {
-                readout_samples: readout,
-                target_g,
-                upper_index,
-                min_runs: MIN_RUNS_WHEN_FAILING,
-            };
-            let prediction = score(
-                &mut estimator,
-                synthetic,
-                settings.seed,
-                &mut runs[first..first + runs_per_scene],
-                &scoring,
-            );
-            let load_score = LoadScore {
-                scene: plan.scenes[scene],
-                noise_floor_g: floors[scene],
-                prediction,
-            };
-            load_scores[scene] = Some(load_score);
-            if prediction.p95_upper_g <= target_g {
-                loads_met += 1;
-            } else {
-                failed_load = Some(load_score);
-                last_failed = Some(scene);
-                break;
-            }
-        }
-        let prediction =
-            load_scores[plan.calibration].map_or(config.prediction, |s: LoadScore| s.prediction);
-        let recorded = failed_load.is_none().then(|| {
-            confirm(
-                &mut estimator,
-                drops,
-                &summaries,
-                recorded_lag,
-                readout,
-                mass_g,
-                target * mass_g,
-            )
-        });
-        // Never choose a configuration outside the stability map's valid region, whatever it
-        // scored: its failures there would not be flagged at run time
-        // (`WeighingConfig::check_region`).
-        let outside_region = candidate.check_region().err();
-        let meets =
-            matches!(recorded, Some(check) if check.failing == 0) && outside_region.is_none();
-        let scored = CandidateScore {
-            index,
-            method,
-            prediction,
-            loads: load_scores,
-            loads_met,
-            failed_load,
-            recorded,
-            meets,
-            outside_region,
-        };
-        report(&scored);
-        if best.is_none_or(|b| scored.rank(target) < b.rank(target)) {
-            best = Some(scored);
-        }
-        if meets && chosen.is_none() {
-            chosen = Some((scored, method_variance));
-            if !settings.evaluate_all {
-                break;
-            }
-        }
-    }
-
-    let Some((chosen, method_variance)) = chosen else {
-        return Err(match best {
-            Some(best) => TuningError::NoneMeetsTarget {
-                best: best.method,
-                prediction: best.prediction,
-                failed_load: best.failed_load,
-                recorded_failing: best.recorded.map(|check| check.failing),
-                evaluated,
-            },
-            None => TuningError::NoCandidates,
-        });
-    };
-    config.method = chosen.method;
-    config.noise_variance_counts2 = method_variance;
-    config.prediction = chosen.prediction;
-    config.loads.scores = chosen.loads;
-    if let Some(check) = chosen.recorded {
-        config.recorded_worst_error_g = check.worst_error_g;
-    }
-    Ok(Tuned {
-        config,
-        chosen,
-        identified,
-        drops: summaries,
-        evaluated,
-        noise_relative_standard_error: relative_error,
-        monte_carlo_noise_variance_counts2: monte_carlo_variance,
-        synthetic_empty_samples: empty,
-        runs_per_scene,
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::sensor::LoadCellModel;
-    use crate::weighing::BankCandidate;
+    use crate::weighing::{cover_ratios, BankCandidate};
+    use synthetic::{run_key, Synthetic};
 
     const MASS_G: f64 = 138.32;
     const ZERO: f64 = 16_764.0;
@@ -884,14 +358,7 @@ mod tests {
     const RESPONSE: usize = 2000;
 
     fn cell() -> LoadCellModel {
-        LoadCellModel {
-            natural_frequency_hz: 25.0,
-            damping_ratio: 0.03,
-            filter_order: 3,
-            filter_cutoff_hz: 100.0,
-            counts_per_gram: 73.25,
-            sample_rate_hz: 4000.0,
-        }
+        crate::weighing::reference_cell()
     }
 
     /// A recorded drop of the reference cell: 0.15 s empty, then 0.5 s of the response, white

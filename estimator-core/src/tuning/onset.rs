@@ -10,8 +10,8 @@
 //!    and threshold `h` (both in units of `σ₀`): `S⁺ ← max(0, S⁺ + z − ν)`, the same for
 //!    `−z`. White noise alone crosses `h = 12` with drift `ν = 1` about once in 10¹¹ samples
 //!    (Siegmund's approximation of the average run length, `(e^{2ν(h+1.166)} − 2ν(h+1.166) −
-//!    1)/(2ν²)`), while the 138 g step of the reference cell (σ = 0.445 g) crosses it about
-//!    3 ms after it lands.
+//!    1)/(2ν²)`), while a step of the calibration mass crosses it within milliseconds of
+//!    landing.
 //! 4. **Onset.** Backed off from the alarm to the first sample of the excursion that raised
 //!    it: the sample after the last one at which the alarming sum was zero, i.e. the last
 //!    point still consistent with "no change" (the CUSUM change-point estimate). On the

@@ -1,5 +1,7 @@
 //! The calibration record: counts per gram and the empty-pan zero, versioned and
-//! CRC-protected, as the firmware keeps it in flash (hardware) or a RAM store (QEMU).
+//! CRC-protected, as the firmware keeps it in flash (hardware) or a RAM store (QEMU), and
+//! the store both boards implement ([`CalibrationStore`]): only what it gives back intact
+//! is ever applied ([`store_calibration`]).
 //!
 //! A record that is missing (erased flash), corrupted, of an unknown version or holding an
 //! impossible value is never used: [`load_or_default`] then returns the board's nominal
@@ -214,8 +216,99 @@ pub fn crc32(bytes: &[u8]) -> u32 {
     !crc
 }
 
+/// Where a board keeps its calibration record: flash on hardware, RAM under QEMU.
+pub trait CalibrationStore {
+    /// Why a write failed.
+    type Error;
+    /// Replace the stored record.
+    fn write_record(&mut self, record: &[u8; RECORD_LEN]) -> Result<(), Self::Error>;
+    /// The stored bytes, `None` when the store has no room for a record at all.
+    fn read_record(&self) -> Option<[u8; RECORD_LEN]>;
+}
+
+/// Why a calibration was not stored. The calibration in use stays.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StoreFailure<E> {
+    /// The store refused the write.
+    Write(E),
+    /// What the store gave back is not a valid record.
+    ReadBack(CalibrationError),
+    /// The store gave back a valid record, but not the one written.
+    Mismatch,
+}
+
+/// Write `calibration` as a record, read it back through the CRC decoder, and return what
+/// the store really holds; only that may be applied.
+pub fn store_calibration<S: CalibrationStore>(
+    store: &mut S,
+    calibration: &Calibration,
+) -> Result<Calibration, StoreFailure<S::Error>> {
+    store
+        .write_record(&calibration.encode())
+        .map_err(StoreFailure::Write)?;
+    let stored = store
+        .read_record()
+        .ok_or(StoreFailure::ReadBack(CalibrationError::Missing))?;
+    let read_back = Calibration::decode(&stored).map_err(StoreFailure::ReadBack)?;
+    // Bit-exact: the record holds the very f32 values written.
+    let same = read_back.counts_per_gram.to_bits() == calibration.counts_per_gram.to_bits()
+        && read_back.zero_counts.to_bits() == calibration.zero_counts.to_bits();
+    if same {
+        Ok(read_back)
+    } else {
+        Err(StoreFailure::Mismatch)
+    }
+}
+
+/// The calibration to use at boot: the stored record if valid, else `defaults` and why.
+pub fn load_calibration<S: CalibrationStore>(
+    store: &S,
+    defaults: Calibration,
+) -> (Calibration, CalibrationSource) {
+    let stored = store.read_record();
+    load_or_default(stored.as_ref().map(|record| &record[..]), defaults)
+}
+
+/// A RAM store, with switchable faults, for the tests of the store and of the commands.
+#[cfg(test)]
+pub(crate) mod test_store {
+    use super::{Calibration, CalibrationStore, RECORD_LEN};
+
+    /// A RAM store, with switchable faults.
+    #[derive(Default)]
+    pub(crate) struct RamStore {
+        pub(crate) record: Option<[u8; RECORD_LEN]>,
+        pub(crate) refuse_writes: bool,
+        pub(crate) flip_bit: Option<usize>,
+        pub(crate) replace_with: Option<Calibration>,
+    }
+
+    impl CalibrationStore for RamStore {
+        type Error = &'static str;
+        fn write_record(&mut self, record: &[u8; RECORD_LEN]) -> Result<(), Self::Error> {
+            if self.refuse_writes {
+                return Err("write protected");
+            }
+            let mut stored = *record;
+            if let Some(bit) = self.flip_bit {
+                stored[bit / 8] ^= 1 << (bit % 8);
+            }
+            if let Some(other) = self.replace_with {
+                stored = other.encode();
+            }
+            self.record = Some(stored);
+            Ok(())
+        }
+        fn read_record(&self) -> Option<[u8; RECORD_LEN]> {
+            self.record
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    use super::test_store::RamStore;
     use super::*;
 
     const GOOD: Calibration = Calibration {
@@ -337,6 +430,57 @@ mod tests {
         assert_eq!(
             Calibration::from_known_mass(f32::NAN, 40_000.0, 200.0),
             Err(CalibrationError::NoSpan)
+        );
+    }
+
+    #[test]
+    fn only_what_the_store_gives_back_intact_is_returned() {
+        let measured = Calibration {
+            counts_per_gram: 51.234,
+            zero_counts: 30_012.5,
+        };
+        let mut refusing = RamStore {
+            refuse_writes: true,
+            ..RamStore::default()
+        };
+        assert_eq!(
+            store_calibration(&mut refusing, &measured),
+            Err(StoreFailure::Write("write protected"))
+        );
+        for bit in [0, 77, 159] {
+            let mut corrupting = RamStore {
+                flip_bit: Some(bit),
+                ..RamStore::default()
+            };
+            assert!(
+                matches!(
+                    store_calibration(&mut corrupting, &measured),
+                    Err(StoreFailure::ReadBack(_))
+                ),
+                "bit {bit}"
+            );
+        }
+        let mut foreign = RamStore {
+            replace_with: Some(Calibration {
+                counts_per_gram: 50.0,
+                zero_counts: 30_000.0,
+            }),
+            ..RamStore::default()
+        };
+        assert_eq!(
+            store_calibration(&mut foreign, &measured),
+            Err(StoreFailure::Mismatch)
+        );
+        let defaults = Calibration {
+            counts_per_gram: 50.0,
+            zero_counts: 32_768.0,
+        };
+        assert_eq!(
+            load_calibration(&RamStore::default(), defaults),
+            (
+                defaults,
+                CalibrationSource::Defaults(CalibrationError::Missing)
+            )
         );
     }
 }

@@ -1,9 +1,7 @@
-//! Operator commands around a [`Scale`]: tare, clear tare, calibration with a known mass,
-//! the calibration store both boards implement, and the debouncer of the hardware board's
-//! KEY button.
+//! Operator commands around a [`Scale`]: tare, clear tare, calibration with a known mass.
 //!
 //! The boards only move bytes and button levels here: a UART byte becomes a [`Command`]
-//! (QEMU), a debounced [`KeyPress`] becomes one (STM32F411), and [`Commands::handle`]
+//! (QEMU), a debounced [`crate::weighing::KeyPress`] becomes one (STM32F411), and [`Commands::handle`]
 //! decides against the scale's current reading, with a typed [`CommandRefusal`] when it says
 //! no. A tare is taken from the estimate when the reading is stable, which can be as early
 //! as 50 ms into a load; while that load stays on, [`Commands::poll`] re-takes it from the
@@ -12,7 +10,7 @@
 //! change, and the band bounds what a slow, undetected change could pull into it).
 //! Calibration takes two settled readings in ADC counts: the empty pan when the command
 //! arrives, then the known mass once it is on and settled ([`Commands::poll`]); the result
-//! goes through [`store_calibration`] (encode, write, read back through the CRC decoder) and
+//! goes through [`crate::weighing::store_calibration`] (encode, write, read back through the CRC decoder) and
 //! only what the store gives back is applied ([`Scale::recalibrate`]), so the calibration
 //! in use is always the one the board would load after a reset.
 //!
@@ -21,7 +19,7 @@
 //! one in use), apply a record the store cannot give back intact, or block: every function
 //! returns at once, so a board may call it from any task.
 
-use super::calibration::{self, Calibration, CalibrationError, CalibrationSource, RECORD_LEN};
+use super::calibration::Calibration;
 use super::scale::{Scale, ScaleEstimator, ScaleFault, ScaleReading, ScaleState};
 
 /// What the operator asked for.
@@ -265,7 +263,7 @@ impl Commands {
 
     /// Refine a fresh tare and advance a calibration in progress; call it regularly (each
     /// readout). `Some` when a calibration ends: the measured calibration, which the board
-    /// stores with [`store_calibration`] and applies with [`Scale::recalibrate`], or why it
+    /// stores with [`crate::weighing::store_calibration`] and applies with [`Scale::recalibrate`], or why it
     /// failed. The known mass counts once a load change happened after the zero and the
     /// reading has been stable for `calibration_settle_samples` since that change; an empty
     /// pan after a bump does not.
@@ -353,194 +351,16 @@ fn settled(reading: &ScaleReading, min_samples: u32) -> Result<(), CommandRefusa
     }
 }
 
-/// Where a board keeps its calibration record: flash on hardware, RAM under QEMU.
-pub trait CalibrationStore {
-    /// Why a write failed.
-    type Error;
-    /// Replace the stored record.
-    fn write_record(&mut self, record: &[u8; RECORD_LEN]) -> Result<(), Self::Error>;
-    /// The stored bytes, `None` when the store has no room for a record at all.
-    fn read_record(&self) -> Option<[u8; RECORD_LEN]>;
-}
-
-/// Why a calibration was not stored. The calibration in use stays.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum StoreFailure<E> {
-    /// The store refused the write.
-    Write(E),
-    /// What the store gave back is not a valid record.
-    ReadBack(CalibrationError),
-    /// The store gave back a valid record, but not the one written.
-    Mismatch,
-}
-
-/// Write `calibration` as a record, read it back through the CRC decoder, and return what
-/// the store really holds; only that may be applied.
-pub fn store_calibration<S: CalibrationStore>(
-    store: &mut S,
-    calibration: &Calibration,
-) -> Result<Calibration, StoreFailure<S::Error>> {
-    store
-        .write_record(&calibration.encode())
-        .map_err(StoreFailure::Write)?;
-    let stored = store
-        .read_record()
-        .ok_or(StoreFailure::ReadBack(CalibrationError::Missing))?;
-    let read_back = Calibration::decode(&stored).map_err(StoreFailure::ReadBack)?;
-    // Bit-exact: the record holds the very f32 values written.
-    let same = read_back.counts_per_gram.to_bits() == calibration.counts_per_gram.to_bits()
-        && read_back.zero_counts.to_bits() == calibration.zero_counts.to_bits();
-    if same {
-        Ok(read_back)
-    } else {
-        Err(StoreFailure::Mismatch)
-    }
-}
-
-/// The calibration to use at boot: the stored record if valid, else `defaults` and why.
-pub fn load_calibration<S: CalibrationStore>(
-    store: &S,
-    defaults: Calibration,
-) -> (Calibration, CalibrationSource) {
-    let stored = store.read_record();
-    calibration::load_or_default(stored.as_ref().map(|record| &record[..]), defaults)
-}
-
-/// A debounced press of a push button.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum KeyPress {
-    /// Released before the long-press time.
-    Short,
-    /// Held at least the long-press time.
-    Long,
-}
-
-/// A push-button debouncer polled at a fixed rate (Ganssle's integrator): the raw level
-/// moves a counter between 0 and `settle_polls`, and the debounced state only flips at the
-/// ends, so contact bounce and glitches shorter than the settle time never make a press.
-/// The press is reported on release, as short or long by how long it was held. Polling
-/// only while the button is active is the board's business ([`KeyDebouncer::is_idle`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct KeyDebouncer {
-    settle_polls: u16,
-    long_press_polls: u32,
-    integrator: u16,
-    pressed: bool,
-    held_polls: u32,
-}
-
-impl KeyDebouncer {
-    /// A debouncer polled at `poll_hz`; the level must hold for `debounce_ms` to count, a
-    /// press held `long_press_ms` or longer is long. At least one poll each.
-    pub fn new(poll_hz: u32, debounce_ms: u32, long_press_ms: u32) -> Self {
-        let polls = |ms: u32| ((ms as u64 * poll_hz as u64).div_ceil(1000)).max(1);
-        Self {
-            settle_polls: polls(debounce_ms).min(u16::MAX as u64) as u16,
-            long_press_polls: polls(long_press_ms).min(u32::MAX as u64) as u32,
-            integrator: 0,
-            pressed: false,
-            held_polls: 0,
-        }
-    }
-
-    /// One poll of the raw level (`true` = pressed). `Some` when a press ends.
-    pub fn poll(&mut self, raw_pressed: bool) -> Option<KeyPress> {
-        if raw_pressed {
-            self.integrator = (self.integrator + 1).min(self.settle_polls);
-        } else {
-            self.integrator = self.integrator.saturating_sub(1);
-        }
-        if self.pressed {
-            self.held_polls = self.held_polls.saturating_add(1);
-            if self.integrator == 0 {
-                self.pressed = false;
-                return Some(if self.held_polls >= self.long_press_polls {
-                    KeyPress::Long
-                } else {
-                    KeyPress::Short
-                });
-            }
-        } else if self.integrator == self.settle_polls {
-            self.pressed = true;
-            self.held_polls = 0;
-        }
-        None
-    }
-
-    /// True when the button is released and settled: nothing to poll for until it moves.
-    pub fn is_idle(&self) -> bool {
-        !self.pressed && self.integrator == 0
-    }
-
-    /// True while a debounced press is held.
-    pub fn is_pressed(&self) -> bool {
-        self.pressed
-    }
-}
-
 #[cfg(test)]
 mod tests {
     extern crate std;
     use super::*;
+    use crate::weighing::calibration::test_store::RamStore;
+    use crate::weighing::calibration::{load_calibration, store_calibration, CalibrationSource};
+    use crate::weighing::scale::test_scene::{calibration, Cell, CPG, FS, ZERO};
     use crate::weighing::{CountsScale, RawSample, StepScale};
 
-    const FS: f32 = 4000.0;
-    /// The calibration the scale starts with.
-    const CPG: f32 = 50.0;
-    const ZERO: f32 = 30_000.0;
     const KNOWN_MASS_G: f32 = 200.0;
-
-    /// A second-order cell (25 Hz, ζ = 0.03) with deterministic near-Gaussian noise whose
-    /// true gain is `gain_factor` times the scale's calibration: a replaced cell.
-    struct Cell {
-        position_g: f64,
-        velocity: f64,
-        load_g: f64,
-        noise_state: u64,
-        noise_g: f64,
-        gain_factor: f64,
-    }
-
-    impl Cell {
-        fn new(noise_g: f64, gain_factor: f64) -> Self {
-            Self {
-                position_g: 0.0,
-                velocity: 0.0,
-                load_g: 0.0,
-                noise_state: 0x2545_F491_4F6C_DD1D,
-                noise_g,
-                gain_factor,
-            }
-        }
-
-        fn noise(&mut self) -> f64 {
-            let mut sum = 0.0;
-            for _ in 0..4 {
-                self.noise_state = self
-                    .noise_state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                sum += (self.noise_state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
-            }
-            sum * 3.0f64.sqrt()
-        }
-
-        fn sample(&mut self) -> RawSample {
-            let omega = 2.0 * std::f64::consts::PI * 25.0;
-            let dt = 1.0 / FS as f64 / 4.0;
-            for _ in 0..4 {
-                let accel = omega * omega * (self.load_g - self.position_g)
-                    - 2.0 * 0.03 * omega * self.velocity;
-                self.velocity += accel * dt;
-                self.position_g += self.velocity * dt;
-            }
-            let grams = self.position_g + self.noise_g * self.noise();
-            let counts = ZERO as f64 + grams * self.gain_factor * CPG as f64;
-            RawSample::Counts(counts.round() as i32)
-        }
-    }
 
     /// A scale, its cell, the command machine and a sample clock.
     struct Bench {
@@ -552,13 +372,9 @@ mod tests {
 
     impl Bench {
         fn new(gain_factor: f64) -> Self {
-            let calibration = CountsScale {
-                counts_per_gram: CPG,
-                zero_counts: ZERO,
-            };
             Self {
-                scale: StepScale::step_default(FS, calibration).unwrap(),
-                cell: Cell::new(0.2, gain_factor),
+                scale: StepScale::step_default(FS, calibration()).unwrap(),
+                cell: Cell::replaced(0.2, gain_factor),
                 commands: Commands::new(CommandConfig::weighing_default(FS)),
                 now: 0,
             }
@@ -587,36 +403,6 @@ mod tests {
                 }
             }
             None
-        }
-    }
-
-    /// A RAM store, with switchable faults.
-    #[derive(Default)]
-    struct RamStore {
-        record: Option<[u8; RECORD_LEN]>,
-        refuse_writes: bool,
-        flip_bit: Option<usize>,
-        replace_with: Option<Calibration>,
-    }
-
-    impl CalibrationStore for RamStore {
-        type Error = &'static str;
-        fn write_record(&mut self, record: &[u8; RECORD_LEN]) -> Result<(), Self::Error> {
-            if self.refuse_writes {
-                return Err("write protected");
-            }
-            let mut stored = *record;
-            if let Some(bit) = self.flip_bit {
-                stored[bit / 8] ^= 1 << (bit % 8);
-            }
-            if let Some(other) = self.replace_with {
-                stored = other.encode();
-            }
-            self.record = Some(stored);
-            Ok(())
-        }
-        fn read_record(&self) -> Option<[u8; RECORD_LEN]> {
-            self.record
         }
     }
 
@@ -663,10 +449,10 @@ mod tests {
         let Ok(CommandOutcome::Tared { tare_g }) = bench.command(Command::Tare) else {
             panic!("tare refused on a stable reading");
         };
-        // The 0.1 % at the readout; the tare is the gross estimate itself.
+        // The 0.1 % target at the readout; the tare is the gross estimate itself.
         assert!((tare_g - 138.32).abs() < 0.1383, "tare {tare_g}");
         let net = bench.run_s(0.5).mass_g.unwrap();
-        // The empty-pan criterion applies to a tared reading too.
+        // The empty-pan criterion applies to a tared reading too.
         assert!(net.abs() <= 0.05, "net {net}");
 
         assert_eq!(
@@ -758,7 +544,7 @@ mod tests {
     }
 
     /// The whole procedure on a cell 2 % more sensitive than the calibration in use: the
-    /// known mass reads 2 % high before, within the 0.1 % after the new record is
+    /// known mass reads 2 % high before, within the 0.1 % target after the new record is
     /// stored, read back and applied; a different mass then reads right too.
     #[test]
     fn calibration_with_a_known_mass_corrects_the_gain() {
@@ -943,109 +729,5 @@ mod tests {
             bench.poll_for_s(2.0),
             Some(Err(CalibrationFailure::TimedOut))
         );
-    }
-
-    #[test]
-    fn only_what_the_store_gives_back_intact_is_returned() {
-        let measured = Calibration {
-            counts_per_gram: 51.234,
-            zero_counts: 30_012.5,
-        };
-        let mut refusing = RamStore {
-            refuse_writes: true,
-            ..RamStore::default()
-        };
-        assert_eq!(
-            store_calibration(&mut refusing, &measured),
-            Err(StoreFailure::Write("write protected"))
-        );
-        for bit in [0, 77, 159] {
-            let mut corrupting = RamStore {
-                flip_bit: Some(bit),
-                ..RamStore::default()
-            };
-            assert!(
-                matches!(
-                    store_calibration(&mut corrupting, &measured),
-                    Err(StoreFailure::ReadBack(_))
-                ),
-                "bit {bit}"
-            );
-        }
-        let mut foreign = RamStore {
-            replace_with: Some(Calibration {
-                counts_per_gram: 50.0,
-                zero_counts: 30_000.0,
-            }),
-            ..RamStore::default()
-        };
-        assert_eq!(
-            store_calibration(&mut foreign, &measured),
-            Err(StoreFailure::Mismatch)
-        );
-        let defaults = Calibration {
-            counts_per_gram: 50.0,
-            zero_counts: 32_768.0,
-        };
-        assert_eq!(
-            load_calibration(&RamStore::default(), defaults),
-            (
-                defaults,
-                CalibrationSource::Defaults(CalibrationError::Missing)
-            )
-        );
-    }
-
-    /// Polls at 100 Hz, 30 ms debounce, 2 s long press.
-    fn debouncer() -> KeyDebouncer {
-        KeyDebouncer::new(100, 30, 2000)
-    }
-
-    fn feed(key: &mut KeyDebouncer, levels: &[bool]) -> std::vec::Vec<KeyPress> {
-        levels.iter().filter_map(|&level| key.poll(level)).collect()
-    }
-
-    #[test]
-    fn a_bouncing_short_press_is_one_short_press() {
-        let mut key = debouncer();
-        assert!(key.is_idle());
-        let mut levels = std::vec![true, false, true, false, true];
-        levels.extend([true; 30]);
-        levels.extend([false, true, false]);
-        levels.extend([false; 10]);
-        assert_eq!(feed(&mut key, &levels), [KeyPress::Short]);
-        assert!(key.is_idle());
-    }
-
-    #[test]
-    fn a_glitch_shorter_than_the_debounce_time_is_no_press() {
-        let mut key = debouncer();
-        assert!(feed(&mut key, &[true, true, false, false, false, false]).is_empty());
-        assert!(key.is_idle());
-        assert!(!key.is_pressed());
-    }
-
-    #[test]
-    fn long_press_starts_at_two_seconds_of_holding() {
-        // Press and release are both debounced by 3 polls, so the held time counted from
-        // one to the other is the raw press: 199 polls (1.99 s) short, 200 long.
-        let mut key = debouncer();
-        let mut just_short = std::vec![true; 199];
-        just_short.extend([false; 3]);
-        assert_eq!(feed(&mut key, &just_short), [KeyPress::Short]);
-        let mut long = std::vec![true; 200];
-        long.extend([false; 3]);
-        assert_eq!(feed(&mut key, &long), [KeyPress::Long]);
-        assert!(key.is_idle());
-    }
-
-    #[test]
-    fn debounce_times_round_up_to_at_least_one_poll() {
-        let key = KeyDebouncer::new(100, 0, 0);
-        assert_eq!(key.settle_polls, 1);
-        assert_eq!(key.long_press_polls, 1);
-        let key = KeyDebouncer::new(100, 25, 2001);
-        assert_eq!(key.settle_polls, 3);
-        assert_eq!(key.long_press_polls, 201);
     }
 }

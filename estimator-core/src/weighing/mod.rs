@@ -1,7 +1,8 @@
 //! The weighing application on top of the estimators: the [`Scale`] that finds load
 //! changes, tares, tracks the zero and runs the configured method; the operator's
-//! [`Commands`] (tare, calibration with a known mass); the [`Calibration`] record (gain and
-//! zero, CRC-protected) the board stores; and the configured method ([`WeighingConfig`],
+//! [`Commands`] (tare, calibration with a known mass) and the KEY button's
+//! [`KeyDebouncer`]; the [`Calibration`] record (gain and zero, CRC-protected) and the
+//! [`CalibrationStore`] the board keeps it in; and the configured method ([`WeighingConfig`],
 //! what tuning chose and the firmware builds).
 //!
 //! This layer never imports the method search ([`crate::tuning`]): the firmware runs it
@@ -9,19 +10,22 @@
 
 mod calibration;
 mod command;
+mod key;
 mod method;
 mod scale;
 
 pub use calibration::{
-    load_or_default, Calibration, CalibrationError, CalibrationSource, FrontEnd, RECORD_LEN,
-    RECORD_VERSION,
+    load_calibration, load_or_default, store_calibration, Calibration, CalibrationError,
+    CalibrationSource, CalibrationStore, FrontEnd, StoreFailure, RECORD_LEN, RECORD_VERSION,
 };
 pub use command::{
-    load_calibration, store_calibration, CalibrationFailure, CalibrationStore, Command,
-    CommandConfig, CommandOutcome, CommandRefusal, Commands, KeyDebouncer, KeyPress, StoreFailure,
+    CalibrationFailure, Command, CommandConfig, CommandOutcome, CommandRefusal, Commands,
 };
+pub use key::{KeyDebouncer, KeyPress};
 pub(crate) use method::cover_ratios;
 pub(crate) use method::readout_samples;
+#[cfg(test)]
+pub(crate) use method::reference_cell;
 pub use method::{
     BankCandidate, LoadCoverage, LoadScene, LoadScore, OnsetConfig, Prediction, RegionError,
     WeighingConfig, WeighingEstimator, WeighingMethod, MAX_LOADS, MAX_NYQUIST_OVER_BANDWIDTH,

@@ -11,23 +11,22 @@
 //! the data at run time, so a configuration that invites them is refused before it runs
 //! ([`RegionError`]): by [`WeighingEstimator::new`] and [`WeighingEstimator::in_counts`]
 //! (what the firmware and `estimate --config` build), and calibration never chooses one.
-//! Each rule is the map's measured boundary on the reference cell:
+//! Each rule is the map's measured boundary on the reference cell (the figures are in
+//! host-sim's README, beside `study stability`):
 //! - **Decimation**: a data-driven method needs its decimated Nyquist frequency
 //!   `f_s/(2D)` at most [`MAX_NYQUIST_OVER_BANDWIDTH`] times the model's bandwidth (the
 //!   higher of the filter's cut-off and the resonance). At full rate the one-sample
-//!   differences drown in noise and least squares is biased by errors in variables (200–500×
-//!   the Cramér–Rao bound at 1.5 s, 50–80 dB), while its residuals stay near the noise
-//!   after the first 0.1 s, so the run-time check cannot see it then. Measured at n = 7,
-//!   100 ms: D = 4 (Nyquist 5× the 100 Hz cut-off) 17× the bound at 60 dB and 85× at
-//!   80 dB; D = 8 (2.5×) at most 9.3×; D = 16: 1.3–1.5×.
+//!   differences drown in noise and least squares is biased by errors in variables, while
+//!   its residuals stay near the noise after the first 0.1 s, so the run-time check cannot
+//!   see it then; the error falls towards the Cramér–Rao bound as `D` grows to this limit.
 //! - **Order**: a data-driven order of at least [`MIN_DATA_DRIVEN_ORDER`] for a sensor with
-//!   a mechanical mode and a filter (n = 2 at D = 16 was 21–4,000× the bound from 50 dB;
-//!   n = 3 within 10× from 10 to 80 dB), 2 for a mechanical mode alone (whose bandwidth is
-//!   then its resonance). The run-time check flags n ≤ 2 too, from 40–50 dB.
+//!   a mechanical mode and a filter (a lower order is far off the bound at any noise), 2
+//!   for a mechanical mode alone (whose bandwidth is then its resonance). The run-time
+//!   check flags too low an order as well, but only at low noise.
 //! - **Bank span**: a model bank's candidates must cover the resonances of the configured
 //!   load range with one candidate to spare at each end (a best fit on the edge is flagged
 //!   `OutsideModelRange`), and a single model (`K = 1`) serves only its calibration mass
-//!   (13–10⁴× the bound at ×0.9–×1.5 of its resonance, from 50 dB).
+//!   (away from its resonance it is far off the bound).
 
 use crate::sensor::LoadCellModel;
 use core::fmt;
@@ -321,6 +320,20 @@ pub(crate) fn cover_ratios(
     *ratio_max = high * step;
 }
 
+/// The reference cell of the tests (25 Hz, ζ = 0.03, a third-order 100 Hz filter,
+/// 73.25 counts/g at 4 kHz): one fixture for the weighing and tuning tests.
+#[cfg(test)]
+pub(crate) fn reference_cell() -> LoadCellModel {
+    LoadCellModel {
+        natural_frequency_hz: 25.0,
+        damping_ratio: 0.03,
+        filter_order: 3,
+        filter_cutoff_hz: 100.0,
+        counts_per_gram: 73.25,
+        sample_rate_hz: 4000.0,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -341,14 +354,7 @@ mod tests {
             raw_noise_variance_counts2: 1_050.0,
             onset: OnsetConfig::new(4000.0).with_rails(0.0, 65_535.0),
             detection_lag_samples: 10.0,
-            model: LoadCellModel {
-                natural_frequency_hz: 25.0,
-                damping_ratio: 0.03,
-                filter_order: 3,
-                filter_cutoff_hz: 100.0,
-                counts_per_gram: 73.25,
-                sample_rate_hz: 4000.0,
-            },
+            model: reference_cell(),
             identified_counts_per_gram: 73.25,
             calibration_mass_g: 138.32,
             readout_s: 0.1,

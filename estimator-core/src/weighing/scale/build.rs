@@ -1,0 +1,194 @@
+//! The scales the firmware and the tests build: around the step estimator, or around the
+//! configured method (what tuning chose), owned or in storage of its own.
+
+use core::mem::MaybeUninit;
+
+use super::{CountsScale, Scale, ScaleConfig};
+use crate::estimators::step::{StepConfig, StepEstimator};
+use crate::reading::ConfigError;
+use crate::weighing::method::{WeighingConfig, WeighingEstimator};
+
+impl<const N: usize> Scale<StepEstimator<f32, N>> {
+    /// The step estimator of `order`, `decimation` and `forgetting` in counts (gain 1, no
+    /// range limit: the ADC's rails arrive as [`super::RawSample::Saturated`]).
+    pub fn step_estimator(
+        order: usize,
+        decimation: u16,
+        forgetting: f32,
+    ) -> Result<StepEstimator<f32, N>, ConfigError> {
+        StepEstimator::new(
+            StepConfig::new(order, 1.0)
+                .with_decimation(decimation)
+                .with_forgetting(forgetting),
+        )
+    }
+
+    /// [`ScaleConfig::weighing_default`] around the step estimator of
+    /// [`ScaleConfig::DEFAULT_METHOD`] (n = 7, D = 16, λ = 1).
+    pub fn step_default(
+        sample_rate_hz: f32,
+        calibration: CountsScale,
+    ) -> Result<Self, ConfigError> {
+        Ok(Self::new(
+            ScaleConfig::weighing_default(sample_rate_hz),
+            Self::step_estimator(7, 16, 1.0)?,
+            calibration,
+        ))
+    }
+}
+
+impl<const N: usize, const S: usize, const K: usize> Scale<WeighingEstimator<f32, N, S, K>> {
+    /// The scale running the configured method of `weighing` (what calibration chose), with
+    /// the decisions' thresholds for that method ([`ScaleConfig::for_method`]) at the
+    /// method's sample rate, converting counts with `calibration` (the board's record, not
+    /// the gain in `weighing`: that is the calibrating chain's).
+    pub fn configured(
+        weighing: &WeighingConfig,
+        calibration: CountsScale,
+    ) -> Result<Self, ConfigError> {
+        Ok(Self::new(
+            decisions_for(weighing)?,
+            WeighingEstimator::in_counts(weighing)?,
+            calibration,
+        ))
+    }
+}
+
+impl<'a, const N: usize, const S: usize, const K: usize>
+    Scale<&'a mut WeighingEstimator<f32, N, S, K>>
+{
+    /// [`Scale::configured`] with the estimator written into `storage` (a zero-initialised
+    /// `static` on a microcontroller) and the scale holding a reference to it. A model bank
+    /// is 20 KB: written into its storage, it is not moved again with the scale (into a
+    /// pipeline, into the RTIC resources), each move a copy on a stack of about 100 KB. A
+    /// value already in `storage` is overwritten, not dropped (the estimators own nothing).
+    pub fn configured_in(
+        weighing: &WeighingConfig,
+        storage: &'a mut MaybeUninit<WeighingEstimator<f32, N, S, K>>,
+        calibration: CountsScale,
+    ) -> Result<Self, ConfigError> {
+        let config = decisions_for(weighing)?;
+        let estimator = storage.write(WeighingEstimator::in_counts(weighing)?);
+        Ok(Self::new(config, estimator, calibration))
+    }
+}
+
+/// The decisions' thresholds for the method of `weighing`, at the method's sample rate.
+fn decisions_for(weighing: &WeighingConfig) -> Result<ScaleConfig, ConfigError> {
+    let sample_rate_hz = weighing.sample_rate_hz() as f32;
+    if !(sample_rate_hz.is_finite() && sample_rate_hz > 0.0) {
+        return Err(ConfigError::Model);
+    }
+    Ok(ScaleConfig::for_method(&weighing.method, sample_rate_hz))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_scene::{calibration, run, Cell, CPG, FS, ZERO};
+    use super::super::ScaleState;
+    use super::*;
+    use crate::weighing::method::WeighingMethod;
+
+    /// A weighing configuration of `method` for the test cell (gain and noise in counts).
+    fn weighing(method: WeighingMethod) -> WeighingConfig {
+        use crate::sensor::LoadCellModel;
+        use crate::weighing::{LoadCoverage, OnsetConfig, Prediction};
+        let prediction = Prediction::default();
+        WeighingConfig {
+            method,
+            counts_per_gram: CPG as f64,
+            zero_counts: ZERO as f64,
+            noise_variance_counts2: (0.4 * CPG as f64).powi(2),
+            raw_noise_variance_counts2: (0.4 * CPG as f64).powi(2),
+            onset: OnsetConfig::new(FS as f64).with_rails(0.0, 65_535.0),
+            detection_lag_samples: 10.0,
+            model: LoadCellModel {
+                counts_per_gram: CPG as f64,
+                sample_rate_hz: FS as f64,
+                ..crate::weighing::reference_cell()
+            },
+            identified_counts_per_gram: CPG as f64,
+            calibration_mass_g: 138.32,
+            readout_s: 0.1,
+            target_relative: 0.001,
+            prediction,
+            recorded_drops: 0,
+            recorded_worst_error_g: 0.0,
+            loads: LoadCoverage::calibration_mass_only(138.32, prediction),
+        }
+    }
+
+    /// The configured methods run behind the same decisions: the step estimator (as the
+    /// default) and instrumental variables at the cell's own order, each from
+    /// `Scale::configured`: the empty pan reads empty, a drop is one load change and the mass
+    /// follows within the tolerance of `a_drop_is_detected_and_the_mass_follows`. The
+    /// scale's gain is the board's calibration, not the config's: a config with another gain
+    /// reads the same.
+    #[test]
+    fn configured_methods_run_behind_the_same_decisions() {
+        for method in [
+            ScaleConfig::DEFAULT_METHOD,
+            WeighingMethod::InstrumentalVariable {
+                order: 2,
+                decimation: 32,
+            },
+        ] {
+            for config_gain in [CPG as f64, 2.0 * CPG as f64] {
+                let mut config = WeighingConfig {
+                    counts_per_gram: config_gain,
+                    ..weighing(method)
+                };
+                if method != ScaleConfig::DEFAULT_METHOD {
+                    // The test cell as it is, a mechanical mode without a filter: its valid
+                    // region (`WeighingConfig::check_region`) takes n = 2 at D ≥ 32.
+                    config.model.filter_order = 0;
+                }
+                let mut scale =
+                    Scale::<WeighingEstimator<f32, 8, 5, 1>>::configured(&config, calibration())
+                        .unwrap();
+                let mut cell = Cell::new(0.4);
+                let empty = *run(&mut scale, &mut cell, 4000).last().unwrap();
+                assert_eq!(empty.state, ScaleState::Empty, "{method}: {empty:?}");
+                assert!(empty.mass_g.unwrap().abs() < 0.05, "{method}: {empty:?}");
+                cell.load_g = 138.32;
+                let last = *run(&mut scale, &mut cell, 4000).last().unwrap();
+                // Stable needs the estimate to hold ±0.05 g for 50 ms: the step estimator
+                // does by 1 s; instrumental variables trade variance for no bias and may
+                // still move that much, so for it the reading must only be valid.
+                if method == ScaleConfig::DEFAULT_METHOD {
+                    assert_eq!(last.state, ScaleState::Stable, "{method}: {last:?}");
+                } else {
+                    assert!(!matches!(last.state, ScaleState::Invalid(_)), "{last:?}");
+                }
+                assert!(
+                    (last.mass_g.unwrap() - 138.32).abs() < 0.14,
+                    "{method}: {last:?}"
+                );
+                assert_eq!(last.load_changes, 1, "{method}: {last:?}");
+            }
+        }
+        // With the estimator in storage of its own (the firmware's static), the same readings.
+        let config = weighing(ScaleConfig::DEFAULT_METHOD);
+        let mut owned =
+            Scale::<WeighingEstimator<f32, 8, 5, 1>>::configured(&config, calibration()).unwrap();
+        let mut storage = MaybeUninit::<WeighingEstimator<f32, 8, 5, 1>>::uninit();
+        let mut borrowing = Scale::configured_in(&config, &mut storage, calibration()).unwrap();
+        let mut cell = Cell::new(0.4);
+        for k in 0..6000 {
+            if k == 2000 {
+                cell.load_g = 50.0;
+            }
+            let sample = cell.sample();
+            assert_eq!(owned.push(sample), borrowing.push(sample), "sample {k}");
+        }
+        // A method the estimator type cannot hold is refused, not truncated.
+        let too_big = weighing(WeighingMethod::Step {
+            order: 9,
+            decimation: 16,
+            forgetting: 1.0,
+        });
+        assert!(
+            Scale::<WeighingEstimator<f32, 8, 5, 1>>::configured(&too_big, calibration()).is_err()
+        );
+    }
+}

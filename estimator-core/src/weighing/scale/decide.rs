@@ -1,0 +1,328 @@
+//! The decisions on one raw sample, step by step: faults, the estimator's answer, the
+//! load-change tests, the displayed state, then what an empty, settled pan allows (noise
+//! metering, zero tracking).
+//!
+//! Never a number the estimator flagged, never a number without its state.
+
+use super::{RawSample, Scale, ScaleEstimator, ScaleFault, ScaleReading, ScaleState};
+use crate::reading::{InvalidReason, State};
+
+impl<E: ScaleEstimator> Scale<E> {
+    /// Feed one raw sample and get the reading after it.
+    pub fn push(&mut self, sample: RawSample) -> ScaleReading {
+        self.noise_metered = false;
+        let reading = self.decide(sample);
+        if !self.noise_metered {
+            self.noise.interrupt();
+        }
+        reading
+    }
+
+    fn decide(&mut self, sample: RawSample) -> ScaleReading {
+        let counts = match self.accept(sample) {
+            Ok(counts) => counts,
+            Err(fault) => return self.set_fault(fault),
+        };
+        self.start_sample();
+        // The zero is removed in integer arithmetic, so the conversion is exact (|counts| is
+        // far below 2^24 for any converter this runs).
+        let centred_counts = counts.saturating_sub(self.run_zero_counts);
+        let reading = self.estimator.push(centred_counts as f32);
+        if let State::Invalid(reason) = reading.state {
+            return self.flagged(reason);
+        }
+        if self.residual_alarm(reading.residual) || self.raw_alarm(counts) {
+            return self.load_changed();
+        }
+        let Some(estimate_counts) = reading.estimate else {
+            self.state = ScaleState::Estimating;
+            self.gross_g = None;
+            return self.reading();
+        };
+        // The tracked zero may have moved since the run started.
+        let zero_shift_g = (self.zero_counts - self.run_zero_counts as f32) * self.grams_per_count;
+        let estimate_g = estimate_counts * self.grams_per_count - zero_shift_g;
+        if self.show(estimate_g) {
+            self.meter_empty_pan(centred_counts);
+            self.track_zero(estimate_g);
+        }
+        self.reading()
+    }
+
+    /// The counts of a good sample, or the fault to show: an uncalibrated scale stays
+    /// faulted (nothing it measured could be trusted); a saturated or lost sample restarts
+    /// the run on the next good one.
+    fn accept(&mut self, sample: RawSample) -> Result<i32, ScaleFault> {
+        if let Some(fault) = self.fault {
+            return Err(fault);
+        }
+        match sample {
+            RawSample::Counts(counts) => Ok(counts),
+            RawSample::Saturated => {
+                self.restart_pending = true;
+                Err(ScaleFault::Saturated)
+            }
+            RawSample::Lost => {
+                self.restart_pending = true;
+                Err(ScaleFault::SampleLost)
+            }
+        }
+    }
+
+    /// Count a good sample; after a fault it starts a new run, as after a load change.
+    fn start_sample(&mut self) {
+        if self.restart_pending {
+            self.restart_as_load_change();
+        }
+        self.samples_since_change = self.samples_since_change.saturating_add(1);
+    }
+
+    /// The estimator flagged its reading: show why. A latched fault needs a restart;
+    /// ill-conditioning and a bank's best fit on its edge describe the data so far and may
+    /// clear with more of it.
+    fn flagged(&mut self, reason: InvalidReason) -> ScaleReading {
+        if reason.latches() {
+            self.restart_pending = true;
+        } else if self.valid_in_run && reason != InvalidReason::OutsideModelRange {
+            // A fit of this run broke down: after a while, take it as a new load.
+            self.flagged_samples = self.flagged_samples.saturating_add(1);
+            if self.flagged_samples >= self.config.flag_restart_samples {
+                return self.load_changed();
+            }
+        }
+        // A flag interrupts stability: the band must hold again over valid readings.
+        self.stable_samples = 0;
+        self.state = ScaleState::Invalid(ScaleFault::Estimator(reason));
+        self.gross_g = None;
+        self.reading()
+    }
+
+    /// Show a valid gross estimate: the stability band, the state, the settling that arms
+    /// the raw test. True when the pan is empty and stable.
+    fn show(&mut self, estimate_g: f32) -> bool {
+        self.gross_g = Some(estimate_g);
+        self.valid_in_run = true;
+        self.flagged_samples = 0;
+
+        let band = self.config.stable_band_g + self.config.stable_band_relative * estimate_g.abs();
+        if (estimate_g - self.stable_centre_g).abs() <= band {
+            self.stable_samples = self.stable_samples.saturating_add(1);
+        } else {
+            self.stable_centre_g = estimate_g;
+            self.stable_samples = 0;
+        }
+        let stable = self.stable_samples >= self.config.stable_hold_samples;
+        let empty = estimate_g.abs() <= self.config.empty_band_g;
+        self.state = if empty {
+            ScaleState::Empty
+        } else if stable {
+            ScaleState::Stable
+        } else {
+            ScaleState::Estimating
+        };
+        if stable || (empty && self.samples_since_change > self.config.stable_hold_samples) {
+            self.settled_samples = self.settled_samples.saturating_add(1);
+        } else {
+            self.settled_samples = 0;
+        }
+        empty && stable
+    }
+
+    /// Show `fault`: no mass.
+    fn set_fault(&mut self, fault: ScaleFault) -> ScaleReading {
+        self.state = ScaleState::Invalid(fault);
+        self.gross_g = None;
+        self.samples_since_change = self.samples_since_change.saturating_add(1);
+        self.reading()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_scene::{calibration, run, scene, Cell, FS, ZERO};
+    use super::super::{CountsScale, ScaleConfig, ScaleEstimator, StepScale};
+    use super::*;
+    use crate::estimators::consistency::NoiseReference;
+    use crate::estimators::step::StepEstimator;
+    use crate::reading::{ConfigError, Estimator};
+
+    #[test]
+    fn empty_pan_reads_empty_near_zero() {
+        let (mut scale, mut cell) = scene(0.4);
+        let readings = run(&mut scale, &mut cell, 4000);
+        let last = readings.last().unwrap();
+        assert_eq!(last.state, ScaleState::Empty);
+        assert!(last.mass_g.unwrap().abs() < 0.05, "{last:?}");
+        assert_eq!(last.load_changes, 0, "no load change on an empty pan");
+    }
+
+    #[test]
+    fn a_drop_is_detected_and_the_mass_follows() {
+        let (mut scale, mut cell) = scene(0.4);
+        run(&mut scale, &mut cell, 2000);
+        cell.load_g = 138.32;
+        let readings = run(&mut scale, &mut cell, 4000);
+        // Detected within 25 ms of the drop (the cell needs a few ms to move at all).
+        assert!(readings[..100].iter().any(|r| r.samples_since_change < 100));
+        let last = readings.last().unwrap();
+        assert_eq!(last.state, ScaleState::Stable, "{last:?}");
+        let mass = last.mass_g.unwrap();
+        assert!((mass - 138.32).abs() < 0.14, "mass {mass}");
+        // The ringing of the fresh load must not look like further load changes.
+        assert_eq!(last.load_changes, 1, "{last:?}");
+    }
+
+    #[test]
+    fn removal_is_detected_and_reads_empty_again() {
+        let (mut scale, mut cell) = scene(0.4);
+        run(&mut scale, &mut cell, 1000);
+        cell.load_g = 250.0;
+        run(&mut scale, &mut cell, 8000);
+        cell.load_g = 0.0;
+        let readings = run(&mut scale, &mut cell, 4000);
+        let last = readings.last().unwrap();
+        assert_eq!(last.state, ScaleState::Empty, "{last:?}");
+        assert!(last.mass_g.unwrap().abs() < 0.05, "{last:?}");
+        assert_eq!(last.load_changes, 2);
+    }
+
+    /// The step estimator, its readings flagged `IllConditioned` (not latched) from the
+    /// `from`-th to before the `to`-th sample of each run, as IV can be on a fresh drop.
+    struct FlaggedWindow {
+        inner: StepEstimator<f32, 8>,
+        from: u32,
+        to: u32,
+    }
+
+    impl Estimator<f32> for FlaggedWindow {
+        fn push(&mut self, sample: f32) -> crate::reading::Reading<f32> {
+            let mut reading = self.inner.push(sample);
+            if (self.from..self.to).contains(&reading.samples) {
+                reading.state = State::Invalid(InvalidReason::IllConditioned);
+                reading.estimate = None;
+                reading.residual = None;
+            }
+            reading
+        }
+
+        fn push_missing(&mut self) -> crate::reading::Reading<f32> {
+            self.inner.push_missing()
+        }
+
+        fn reset(&mut self) {
+            self.inner.reset();
+        }
+    }
+
+    impl ScaleEstimator for FlaggedWindow {
+        fn samples_per_update(&self) -> u32 {
+            self.inner.samples_per_update()
+        }
+
+        fn set_noise_reference(
+            &mut self,
+            reference: Option<NoiseReference<f32>>,
+        ) -> Result<(), ConfigError> {
+            self.inner.set_noise_reference(reference)
+        }
+    }
+
+    fn flagged_scale(from: u32, to: u32) -> Scale<FlaggedWindow> {
+        let estimator = FlaggedWindow {
+            inner: StepScale::<8>::step_estimator(7, 16, 1.0).unwrap(),
+            from,
+            to,
+        };
+        Scale::new(ScaleConfig::weighing_default(FS), estimator, calibration())
+    }
+
+    #[test]
+    fn a_flag_that_persists_after_a_valid_reading_restarts_the_run() {
+        let hold = ScaleConfig::weighing_default(FS).flag_restart_samples as usize;
+        // Valid (empty) from the warm-up on, flagged from the 2001st sample of each run on
+        // (readings[2000]; `Reading::samples` counts the push itself).
+        let mut scale = flagged_scale(2001, u32::MAX);
+        let mut cell = Cell::new(0.4);
+        let readings = run(&mut scale, &mut cell, 2000 + hold + 10);
+        assert_eq!(
+            readings[1990].state,
+            ScaleState::Empty,
+            "{:?}",
+            readings[1990]
+        );
+        assert_eq!(
+            readings[2000 + hold - 2].state,
+            ScaleState::Invalid(ScaleFault::Estimator(InvalidReason::IllConditioned)),
+            "flagged, not yet restarted"
+        );
+        assert_eq!(readings[2000 + hold - 2].load_changes, 0);
+        // After `hold` flagged samples: a change, and the estimator starts over.
+        let restarted = readings.last().unwrap();
+        assert_eq!(restarted.load_changes, 1, "{restarted:?}");
+        assert!(restarted.samples_since_change < 20, "{restarted:?}");
+        // The new run is valid again until its own flag, then restarts once more.
+        let more = run(&mut scale, &mut cell, 2000 + hold);
+        assert_eq!(more[1900].state, ScaleState::Empty, "{:?}", more[1900]);
+        assert_eq!(more.last().unwrap().load_changes, 2);
+    }
+
+    #[test]
+    fn a_short_flag_or_a_run_never_valid_is_not_a_load_change() {
+        let hold = ScaleConfig::weighing_default(FS).flag_restart_samples;
+        // A flicker shorter than the hold: the run goes on.
+        let mut scale = flagged_scale(2001, 2001 + hold - 1);
+        let mut cell = Cell::new(0.4);
+        let readings = run(&mut scale, &mut cell, 4000);
+        assert!(readings[2000..2000 + hold as usize - 1]
+            .iter()
+            .all(|r| r.mass_g.is_none()));
+        let last = readings.last().unwrap();
+        assert_eq!(
+            (last.state, last.load_changes),
+            (ScaleState::Empty, 0),
+            "{last:?}"
+        );
+        // Flagged from the first sample: never valid, so never restarted, but not a number.
+        let mut scale = flagged_scale(0, u32::MAX);
+        let readings = run(&mut scale, &mut cell, 4000);
+        assert!(readings
+            .iter()
+            .all(|r| r.load_changes == 0 && r.mass_g.is_none()));
+    }
+
+    #[test]
+    fn saturation_is_invalid_with_its_reason_and_recovers() {
+        let (mut scale, mut cell) = scene(0.4);
+        run(&mut scale, &mut cell, 2000);
+        let reading = scale.push(RawSample::Saturated);
+        assert_eq!(reading.state, ScaleState::Invalid(ScaleFault::Saturated));
+        assert_eq!(reading.mass_g, None);
+        let readings = run(&mut scale, &mut cell, 2000);
+        assert_eq!(readings.last().unwrap().state, ScaleState::Empty);
+    }
+
+    #[test]
+    fn a_lost_sample_is_shown_and_the_estimator_restarts() {
+        let (mut scale, mut cell) = scene(0.4);
+        cell.load_g = 50.0;
+        run(&mut scale, &mut cell, 6000);
+        let reading = scale.push(RawSample::Lost);
+        assert_eq!(reading.state, ScaleState::Invalid(ScaleFault::SampleLost));
+        let next = scale.push(cell.sample());
+        assert_eq!(next.samples_since_change, 1);
+        let last = *run(&mut scale, &mut cell, 4000).last().unwrap();
+        assert!((last.mass_g.unwrap() - 50.0).abs() < 0.1, "{last:?}");
+    }
+
+    #[test]
+    fn an_invalid_calibration_is_a_fault_not_a_number() {
+        let bad = CountsScale {
+            counts_per_gram: f32::NAN,
+            zero_counts: ZERO,
+        };
+        let mut scale = StepScale::<8>::step_default(FS, bad).unwrap();
+        let reading = scale.push(RawSample::Counts(30_000));
+        assert_eq!(reading.state, ScaleState::Invalid(ScaleFault::Uncalibrated));
+        assert_eq!(reading.mass_g, None);
+    }
+}

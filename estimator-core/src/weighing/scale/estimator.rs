@@ -1,0 +1,98 @@
+//! What the scale needs of an estimator beyond [`Estimator`]: when its residual is new, and
+//! where the metered noise goes.
+//!
+//! The estimator is fed ADC counts with the zero removed (in integer arithmetic) and answers
+//! **in counts** (it is built with a gain of 1); the scale converts to grams. So a new
+//! calibration only resets the estimator instead of rebuilding it, and what the estimator
+//! sees does not depend on the gain.
+
+use crate::estimators::bias_compensated::BiasCompensatedStepEstimator;
+use crate::estimators::consistency::NoiseReference;
+use crate::estimators::iv::IvStepEstimator;
+use crate::estimators::model::ModelBank;
+use crate::estimators::step::StepEstimator;
+use crate::reading::{ConfigError, Estimator};
+use crate::weighing::method::WeighingEstimator;
+
+/// An estimator the scale can run: fed ADC counts with the zero removed, answering in
+/// counts (built with a gain of 1), its residual a-priori and in counts.
+pub trait ScaleEstimator: Estimator<f32> {
+    /// Raw samples per regression update (the decimation `D`): the residual is new once
+    /// every this many samples after a reset.
+    fn samples_per_update(&self) -> u32;
+
+    /// Check the runs after the next reset against the noise `reference` in counts², at
+    /// this estimator's `D` (`None`: no check; see `crate::estimators::consistency`). A reference that
+    /// is not finite and positive is refused and nothing changes. Allocation-free.
+    fn set_noise_reference(
+        &mut self,
+        reference: Option<NoiseReference<f32>>,
+    ) -> Result<(), ConfigError>;
+}
+
+impl<E: ScaleEstimator + ?Sized> ScaleEstimator for &mut E {
+    fn samples_per_update(&self) -> u32 {
+        (**self).samples_per_update()
+    }
+
+    fn set_noise_reference(
+        &mut self,
+        reference: Option<NoiseReference<f32>>,
+    ) -> Result<(), ConfigError> {
+        (**self).set_noise_reference(reference)
+    }
+}
+
+/// `ScaleEstimator` for the estimators of this crate: `samples_per_update` is the
+/// decimation `$decimation` reads off the estimator `$e`; the noise reference goes to the
+/// estimator's own `set_noise_reference`. (A macro, not a trait default: the decimation
+/// sits in each estimator's own configuration, which no shared trait exposes.)
+macro_rules! scale_estimator {
+    ($([$($generics:tt)*] $estimator:ty => |$e:ident| $decimation:expr;)*) => {$(
+        impl<$($generics)*> ScaleEstimator for $estimator {
+            fn samples_per_update(&self) -> u32 {
+                let $e = self;
+                u32::from($decimation)
+            }
+
+            fn set_noise_reference(
+                &mut self,
+                reference: Option<NoiseReference<f32>>,
+            ) -> Result<(), ConfigError> {
+                Self::set_noise_reference(self, reference)
+            }
+        }
+    )*};
+}
+
+scale_estimator! {
+    [const N: usize] StepEstimator<f32, N> => |e| e.config().decimation;
+    [const N: usize] BiasCompensatedStepEstimator<f32, N> => |e| e.config().step.decimation;
+    [const N: usize] IvStepEstimator<f32, N> => |e| e.config().step.decimation;
+    [const S: usize, const K: usize] ModelBank<f32, S, K> => |e| e.decimation();
+}
+
+impl<const N: usize, const S: usize, const K: usize> ScaleEstimator
+    for WeighingEstimator<f32, N, S, K>
+{
+    fn samples_per_update(&self) -> u32 {
+        match self {
+            Self::Step(e) => e.samples_per_update(),
+            Self::BiasCompensated(e) => e.samples_per_update(),
+            Self::InstrumentalVariable(e) => e.samples_per_update(),
+            Self::ModelBank(e) => e.samples_per_update(),
+        }
+    }
+
+    fn set_noise_reference(
+        &mut self,
+        reference: Option<NoiseReference<f32>>,
+    ) -> Result<(), ConfigError> {
+        match self {
+            Self::Step(e) => e.set_noise_reference(reference),
+            Self::BiasCompensated(e) => e.set_noise_reference(reference),
+            Self::InstrumentalVariable(e) => e.set_noise_reference(reference),
+            Self::ModelBank(e) => e.set_noise_reference(reference),
+        }
+    }
+}

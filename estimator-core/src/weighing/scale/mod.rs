@@ -1,0 +1,255 @@
+//! The weighing decisions around an estimator: when a load changed, what the pan holds
+//! (empty, estimating, stable, invalid and why), tare and automatic zero tracking.
+//!
+//! The firmware is a thin shell around [`Scale`]: it hands over one raw ADC sample at a
+//! time and prints the [`ScaleReading`]. Everything here is `f32`, fixed-size and never
+//! panics, so the same decisions run on the host in tests and on the Cortex-M4F.
+//!
+//! The estimator is any method of this crate ([`ScaleEstimator`]): the step estimator, its
+//! bias-compensated and instrumental-variable forms, the model bank, or the configured one
+//! of them ([`crate::weighing::WeighingEstimator`], what tuning chose). It works in counts
+//! (`estimator`), so a new calibration only resets it instead of rebuilding it (a model
+//! bank is large and its build costly).
+//!
+//! What it must never do: show a number the estimator flagged, hide why it shows none,
+//! allocate, or panic on data.
+//!
+//! ## Load-change detection (`change`)
+//! Two two-sided CUSUM tests (Page 1954) decide that the load changed, and a change resets
+//! the estimator so that it only ever sees data of one load:
+//! - on the estimator's a-priori residuals (grams, one per decimated update). The residual
+//!   is what the fitted sensor model cannot explain, so the ringing of a fresh load does
+//!   not trip it but a new step does, within one or two decimated updates. The residuals of
+//!   a barely determined fit are large, so this test is armed only `residual_arm_samples`
+//!   after a reset;
+//! - on the raw samples against the displayed gross mass. A slowly placed load or creep
+//!   can hide in the residuals (the model absorbs it); a settled signal cannot hide it. The
+//!   raw signal only sits still once the cell stopped ringing, so this test is armed only
+//!   after the reading has been stable (or empty) for `raw_arm_samples`.
+//!
+//! Neither test runs on a flagged reading (a flagged fit has no residual to trust, and no
+//! mass to compare with). So a flag that persists after the run showed a valid reading —
+//! the fit of one load broke down, typically because a new load arrived before the
+//! residual test alarmed (instrumental variables go ill-conditioned on the ringing of a
+//! fresh drop) — is itself taken as a load change after `flag_restart_samples`
+//! consecutive flagged samples (a flag also ends stability): the estimator restarts on
+//! data of one load instead of staying blind. A run that never showed a valid reading is
+//! not restarted this way, nor is a latched fault (it restarts on the next good sample
+//! anyway), nor a model bank's `OutsideModelRange`: its best fit on the edge of its span
+//! would be there again after a restart, so an empty pan outside the bank's span would
+//! restart over and over.
+//!
+//! The residual carries the noise of `n + 1` block means scaled by the regression
+//! coefficients, so its thresholds are set in grams from a measurement of the residuals on
+//! the reference scene, not derived from the raw noise alone, and per method
+//! ([`ScaleConfig::for_method`]).
+//!
+//! ## The consistency check (`noise`)
+//! With [`ScaleConfig::consistency_check`] the scale meters the noise of the empty pan
+//! itself and checks every later run against it; see the `noise` module for when a metering
+//! is taken and when it is live.
+
+mod build;
+mod change;
+mod config;
+mod decide;
+mod estimator;
+mod noise;
+mod reading;
+#[cfg(test)]
+pub(crate) mod test_scene;
+mod zero;
+
+pub use config::ScaleConfig;
+pub use estimator::ScaleEstimator;
+pub use reading::{CountsScale, RawSample, ScaleFault, ScaleReading, ScaleState, TareError};
+
+use crate::estimators::step::StepEstimator;
+use change::TwoSidedCusum;
+use noise::NoiseMetering;
+use zero::round_to_i32;
+
+/// The weighing decisions around an estimator `E` (see [`ScaleEstimator`]).
+#[derive(Clone, Debug)]
+pub struct Scale<E> {
+    config: ScaleConfig,
+    estimator: E,
+    /// Raw samples per regression update of `estimator` (when its residual is new).
+    samples_per_update: u32,
+    counts_per_gram: f32,
+    grams_per_count: f32,
+    /// The tracked zero, in counts.
+    zero_counts: f32,
+    /// The zero the current estimator run subtracts (integer, so the subtraction is exact).
+    run_zero_counts: i32,
+    tare_g: f32,
+    residual_cusum: TwoSidedCusum,
+    raw_cusum: TwoSidedCusum,
+    samples_since_change: u32,
+    load_changes: u32,
+    /// Where the stability band is centred, and how long the estimate stayed in it.
+    stable_centre_g: f32,
+    stable_samples: u32,
+    /// Samples the reading has been stable or empty (arms the raw test).
+    settled_samples: u32,
+    /// The current run has shown a valid reading.
+    valid_in_run: bool,
+    /// Consecutive samples the estimator has flagged without latching.
+    flagged_samples: u32,
+    /// Restart the estimator on the next good sample (after a fault).
+    restart_pending: bool,
+    fault: Option<ScaleFault>,
+    gross_g: Option<f32>,
+    state: ScaleState,
+    /// The empty pan's noise, for the consistency check.
+    noise: NoiseMetering,
+    /// This sample went into the noise meter (else the window in progress is dropped).
+    noise_metered: bool,
+}
+
+/// The scale around the step estimator of capacity `N` (the firmware's method before the
+/// configuration was read at build time; the tests' reference).
+pub type StepScale<const N: usize> = Scale<StepEstimator<f32, N>>;
+
+impl<E: ScaleEstimator> Scale<E> {
+    /// A scale running `estimator` (built in counts, see [`ScaleEstimator`]) with the
+    /// decisions of `config`, converting counts with `calibration`. An impossible
+    /// calibration (zero or non-finite gain) shows `Invalid(Uncalibrated)`.
+    pub fn new(config: ScaleConfig, estimator: E, calibration: CountsScale) -> Self {
+        let samples_per_update = estimator.samples_per_update().max(1);
+        let mut scale = Self {
+            config,
+            samples_per_update,
+            estimator,
+            counts_per_gram: 1.0,
+            grams_per_count: 1.0,
+            zero_counts: 0.0,
+            run_zero_counts: 0,
+            tare_g: 0.0,
+            residual_cusum: TwoSidedCusum::default(),
+            raw_cusum: TwoSidedCusum::default(),
+            samples_since_change: 0,
+            load_changes: 0,
+            stable_centre_g: 0.0,
+            stable_samples: 0,
+            settled_samples: 0,
+            valid_in_run: false,
+            flagged_samples: 0,
+            restart_pending: false,
+            fault: None,
+            gross_g: None,
+            state: ScaleState::Estimating,
+            noise: NoiseMetering::new(samples_per_update, config.noise_window_samples),
+            noise_metered: false,
+        };
+        scale.start_with(calibration);
+        scale
+    }
+
+    /// Everything but the configuration, the estimator and the load-change count as a
+    /// fresh scale converting with `calibration` has it; the estimator restarts.
+    fn start_with(&mut self, calibration: CountsScale) {
+        let calibrated =
+            calibration.counts_per_gram.is_finite() && calibration.counts_per_gram != 0.0;
+        self.counts_per_gram = if calibrated {
+            calibration.counts_per_gram
+        } else {
+            1.0
+        };
+        self.grams_per_count = 1.0 / self.counts_per_gram;
+        self.zero_counts = if calibration.zero_counts.is_finite() {
+            calibration.zero_counts
+        } else {
+            0.0
+        };
+        self.tare_g = 0.0;
+        self.stable_centre_g = 0.0;
+        self.restart();
+        (self.fault, self.state) = if calibrated {
+            (None, ScaleState::Estimating)
+        } else {
+            (
+                Some(ScaleFault::Uncalibrated),
+                ScaleState::Invalid(ScaleFault::Uncalibrated),
+            )
+        };
+    }
+
+    /// The estimator in use.
+    pub fn estimator(&self) -> &E {
+        &self.estimator
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &ScaleConfig {
+        &self.config
+    }
+
+    /// The current reading, without pushing a sample.
+    pub fn reading(&self) -> ScaleReading {
+        ScaleReading {
+            mass_g: match self.state {
+                ScaleState::Invalid(_) => None,
+                _ => self.gross_g.map(|gross| gross - self.tare_g),
+            },
+            state: self.state,
+            samples_since_change: self.samples_since_change,
+            load_changes: self.load_changes,
+        }
+    }
+
+    /// The gain and (tracked) zero the scale converts counts with now.
+    pub fn counts_scale(&self) -> CountsScale {
+        CountsScale {
+            counts_per_gram: self.counts_per_gram,
+            zero_counts: self.zero_counts,
+        }
+    }
+
+    /// The current gross estimate expressed in ADC counts (what the estimator sees on the
+    /// pan, independent of the tare), `None` while it shows no mass. This is what a
+    /// calibration measures: counts, not grams of a calibration about to be replaced.
+    pub fn gross_counts(&self) -> Option<f32> {
+        match self.state {
+            ScaleState::Invalid(_) => None,
+            _ => self
+                .gross_g
+                .map(|gross| gross * self.counts_per_gram + self.zero_counts),
+        }
+    }
+
+    /// Convert with a new calibration from now on: the estimate restarts (the load may
+    /// have been moved meanwhile), the tare is cleared (it was grams of the old gain) and
+    /// the restart counts as a load change. An impossible calibration leaves the scale
+    /// showing `Invalid(Uncalibrated)`, as at boot. The estimator is reset, not rebuilt: it
+    /// works in counts, which a calibration does not change.
+    pub fn recalibrate(&mut self, calibration: CountsScale) {
+        self.start_with(calibration);
+        self.load_changes = self.load_changes.saturating_add(1);
+    }
+
+    /// Start a new estimator run: a load changed, or the data stream broke.
+    fn restart(&mut self) {
+        // Refused only when not finite and positive, which the metering never hands over;
+        // the estimator then keeps the reference it had.
+        let _ = self.estimator.set_noise_reference(self.noise_reference());
+        self.estimator.reset();
+        self.noise.interrupt();
+        self.run_zero_counts = round_to_i32(self.zero_counts);
+        self.residual_cusum = TwoSidedCusum::default();
+        self.raw_cusum = TwoSidedCusum::default();
+        self.samples_since_change = 0;
+        self.stable_samples = 0;
+        self.settled_samples = 0;
+        self.valid_in_run = false;
+        self.flagged_samples = 0;
+        self.gross_g = None;
+        self.restart_pending = false;
+    }
+
+    /// A new run that counts as a load change.
+    fn restart_as_load_change(&mut self) {
+        self.restart();
+        self.load_changes = self.load_changes.saturating_add(1);
+    }
+}

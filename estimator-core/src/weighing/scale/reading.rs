@@ -1,0 +1,79 @@
+//! What the scale takes in and answers: one raw sample, one reading per sample, the state
+//! the display shows and why a mass is missing; the gain and zero it converts with.
+//!
+//! A reading never carries a mass the scale cannot vouch for: `mass_g` is `None` whenever
+//! the state is invalid, and the state says why.
+
+use crate::reading::InvalidReason;
+
+/// One raw sample as the firmware hands it over.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum RawSample {
+    /// A conversion result in ADC counts (not on a rail).
+    Counts(i32),
+    /// The converter sat on a rail: the input is out of its range.
+    Saturated,
+    /// The sample was lost (ADC overrun, full queue, a gap in the sequence numbers).
+    Lost,
+}
+
+/// Why the scale cannot show a mass.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ScaleFault {
+    /// The ADC sat on a rail (overload, or a wiring fault).
+    Saturated,
+    /// A sample was lost; the estimator restarts on the samples after the gap.
+    SampleLost,
+    /// The estimator refused the data, with its reason.
+    Estimator(InvalidReason),
+    /// The calibration in use is not a valid record (non-finite or zero gain).
+    Uncalibrated,
+}
+
+/// What the pan holds, as the display says it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ScaleState {
+    /// The gross mass is within `empty_band_g` of zero.
+    Empty,
+    /// A load changed recently; the mass (if any) is the estimator's current answer.
+    Estimating,
+    /// The estimate has stayed within the stability band for `stable_hold_samples`.
+    Stable,
+    /// No mass can be shown, and why.
+    Invalid(ScaleFault),
+}
+
+/// One answer per raw sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ScaleReading {
+    /// Net mass in grams (gross minus tare); `None` while warming up or invalid.
+    pub mass_g: Option<f32>,
+    /// What the pan holds.
+    pub state: ScaleState,
+    /// Raw samples since the last detected load change (or restart).
+    pub samples_since_change: u32,
+    /// Load changes detected since boot (saturating).
+    pub load_changes: u32,
+}
+
+/// Why a tare command was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum TareError {
+    /// Tare needs a stable (or empty) reading; the pan is still moving or invalid.
+    NotStable,
+}
+
+/// Gain and zero the scale converts counts with (see `crate::weighing::calibration`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct CountsScale {
+    /// ADC counts per gram.
+    pub counts_per_gram: f32,
+    /// ADC counts of the empty pan.
+    pub zero_counts: f32,
+}

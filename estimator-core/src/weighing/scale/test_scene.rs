@@ -1,0 +1,102 @@
+//! The scene the weighing decisions are tested on: a second-order cell with known truth
+//! and deterministic pseudo-noise, and a scale calibrated for it.
+
+extern crate std;
+use std::vec::Vec;
+
+use super::{CountsScale, RawSample, Scale, ScaleEstimator, ScaleReading, StepScale};
+
+pub(crate) const FS: f32 = 4000.0;
+/// The calibration the scale starts with.
+pub(crate) const CPG: f32 = 50.0;
+pub(crate) const ZERO: f32 = 30_000.0;
+
+pub(crate) fn calibration() -> CountsScale {
+    CountsScale {
+        counts_per_gram: CPG,
+        zero_counts: ZERO,
+    }
+}
+
+/// A second-order cell (25 Hz, ζ = 0.03 loaded) with deterministic pseudo-noise: the
+/// decisions are tested on a scene with known truth, not on constants.
+pub(crate) struct Cell {
+    position_g: f64,
+    velocity: f64,
+    pub(crate) load_g: f64,
+    noise_state: u64,
+    noise_g: f64,
+    pub(crate) offset_counts: f64,
+    /// The cell's true gain over the scale's calibration (a replaced cell when not 1).
+    gain_factor: f64,
+}
+
+impl Cell {
+    pub(crate) fn new(noise_g: f64) -> Self {
+        Self {
+            position_g: 0.0,
+            velocity: 0.0,
+            load_g: 0.0,
+            noise_state: 0x9E37_79B9_7F4A_7C15,
+            noise_g,
+            offset_counts: ZERO as f64,
+            gain_factor: 1.0,
+        }
+    }
+
+    /// A cell whose true gain is `gain_factor` times the scale's calibration, with noise of
+    /// its own.
+    pub(crate) fn replaced(noise_g: f64, gain_factor: f64) -> Self {
+        Self {
+            noise_state: 0x2545_F491_4F6C_DD1D,
+            gain_factor,
+            ..Self::new(noise_g)
+        }
+    }
+
+    fn noise(&mut self) -> f64 {
+        // Sum of 4 uniforms: near-Gaussian, unit variance.
+        let mut sum = 0.0;
+        for _ in 0..4 {
+            self.noise_state = self
+                .noise_state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            sum += (self.noise_state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+        }
+        sum * (3.0f64).sqrt()
+    }
+
+    pub(crate) fn sample(&mut self) -> RawSample {
+        let omega = 2.0 * std::f64::consts::PI * 25.0;
+        let dt = 1.0 / FS as f64;
+        // Semi-implicit Euler is plenty for a decision test.
+        for _ in 0..4 {
+            let accel = omega * omega * (self.load_g - self.position_g)
+                - 2.0 * 0.03 * omega * self.velocity;
+            self.velocity += accel * dt / 4.0;
+            self.position_g += self.velocity * dt / 4.0;
+        }
+        let grams = self.position_g + self.noise_g * self.noise();
+        let counts = self.offset_counts + grams * self.gain_factor * CPG as f64;
+        RawSample::Counts(counts.round() as i32)
+    }
+}
+
+pub(crate) fn run<E: ScaleEstimator>(
+    scale: &mut Scale<E>,
+    cell: &mut Cell,
+    samples: usize,
+) -> Vec<ScaleReading> {
+    (0..samples).map(|_| scale.push(cell.sample())).collect()
+}
+
+/// The default scale (step estimator, n = 7, D = 16) calibrated for the cell.
+pub(crate) fn new_scale() -> StepScale<8> {
+    Scale::step_default(FS, calibration()).unwrap()
+}
+
+/// The default scale and the cell with `noise_g` of noise, the pan empty.
+pub(crate) fn scene(noise_g: f64) -> (StepScale<8>, Cell) {
+    (new_scale(), Cell::new(noise_g))
+}

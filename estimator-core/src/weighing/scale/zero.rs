@@ -1,0 +1,106 @@
+//! Tare and automatic zero tracking.
+//!
+//! A tare is only taken from a stable (or empty) reading. Zero tracking moves the zero only
+//! while the pan is empty, stable and near zero, and never faster than
+//! `zero_tracking_rate_g_per_s` (OIML R76 style), so a slowly added load is never tracked
+//! away.
+
+use super::{Scale, ScaleEstimator, ScaleState, TareError};
+
+impl<E: ScaleEstimator> Scale<E> {
+    /// The tracked zero in counts (moves only by zero tracking).
+    pub fn zero_counts(&self) -> f32 {
+        self.zero_counts
+    }
+
+    /// The tare in grams (subtracted from the gross mass).
+    pub fn tare_g(&self) -> f32 {
+        self.tare_g
+    }
+
+    /// Take the current gross mass as tare. Refused unless the reading is stable or empty.
+    pub fn tare(&mut self) -> Result<(), TareError> {
+        match (self.state, self.gross_g) {
+            (ScaleState::Stable | ScaleState::Empty, Some(gross)) => {
+                self.tare_g = gross;
+                Ok(())
+            }
+            _ => Err(TareError::NotStable),
+        }
+    }
+
+    /// Remove the tare.
+    pub fn clear_tare(&mut self) {
+        self.tare_g = 0.0;
+    }
+
+    /// Zero tracking on an empty, stable reading: only a pan near zero pulls the zero, and
+    /// slowly.
+    pub(super) fn track_zero(&mut self, estimate_g: f32) {
+        if estimate_g.abs() <= self.config.zero_tracking_band_g {
+            let max_step_g = self.config.zero_tracking_rate_g_per_s / self.config.sample_rate_hz;
+            let step_g = estimate_g.clamp(-max_step_g, max_step_g);
+            self.zero_counts += step_g * self.counts_per_gram;
+        }
+    }
+}
+
+/// Round to the nearest `i32`, saturating (no `std` `round` in `core`).
+pub(super) fn round_to_i32(value: f32) -> i32 {
+    if !value.is_finite() {
+        return 0;
+    }
+    let shifted = if value >= 0.0 {
+        value + 0.5
+    } else {
+        value - 0.5
+    };
+    // `as` saturates at the i32 range and truncates toward zero.
+    shifted as i32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_scene::{run, scene, CPG, ZERO};
+    use super::*;
+
+    #[test]
+    fn tare_needs_a_stable_reading_and_subtracts() {
+        let (mut scale, mut cell) = scene(0.2);
+        assert_eq!(scale.tare(), Err(TareError::NotStable));
+        cell.load_g = 40.0;
+        run(&mut scale, &mut cell, 8000);
+        assert_eq!(scale.tare(), Ok(()));
+        let net = scale.push(cell.sample()).mass_g.unwrap();
+        assert!(net.abs() < 0.05, "net {net}");
+        scale.clear_tare();
+        assert!((scale.push(cell.sample()).mass_g.unwrap() - 40.0).abs() < 0.1);
+    }
+
+    #[test]
+    fn zero_tracking_follows_a_small_offset_slowly() {
+        let (mut scale, mut cell) = scene(0.2);
+        // The pan's real zero sits 0.1 g above the calibrated one.
+        cell.offset_counts += 0.1 * CPG as f64;
+        run(&mut scale, &mut cell, 8000);
+        let moved_g = (scale.zero_counts() - ZERO) / CPG;
+        assert!((moved_g - 0.1).abs() < 0.03, "zero moved {moved_g} g");
+        assert!(scale.reading().mass_g.unwrap().abs() < 0.03);
+    }
+
+    #[test]
+    fn zero_tracking_ignores_a_load() {
+        let (mut scale, mut cell) = scene(0.2);
+        cell.load_g = 5.0;
+        run(&mut scale, &mut cell, 8000);
+        assert_eq!(scale.zero_counts(), ZERO);
+    }
+
+    #[test]
+    fn rounding_saturates() {
+        assert_eq!(round_to_i32(2.5), 3);
+        assert_eq!(round_to_i32(-2.5), -3);
+        assert_eq!(round_to_i32(1e20), i32::MAX);
+        assert_eq!(round_to_i32(f32::NAN), 0);
+    }
+}
