@@ -1,48 +1,42 @@
 //! `host-sim calibrate`: recorded drops (CSVs with a column `y`, as `simulate` writes them)
-//! in, a weighing configuration (TOML) out, through the core's
-//! [`estimator_core::tuning::tune`] (the same call the firmware can make). And the way
-//! back: [`load_config`] reads the TOML into the core's [`WeighingConfig`], and
-//! [`configured_estimator`] builds the configured method exactly as the firmware does
-//! ([`WeighingEstimator`]).
+//! in, a weighing configuration out, through the core's [`estimator_core::tuning::tune`]
+//! (the same call the firmware can make); and [`configured_estimator`], which builds a
+//! configured method exactly as the firmware does ([`WeighingEstimator`]). The file itself
+//! ([`to_toml`] writes it, [`load_config`] reads it back into the core's [`WeighingConfig`],
+//! [`rust_const`] prints it as the firmware's constant) lives in `weighing_file`.
 //!
 //! What this module must never do: choose anything itself (the choice is the core's), or
 //! write a configuration the core did not return.
-//!
-//! ## The TOML
-//! Plain tables of numbers and names that map one to one onto the fields of the core's
-//! `WeighingConfig`, so that a build script can turn the file into a `const` (see
-//! [`rust_const`], which prints that constant); comments say what was measured and how.
 
-use std::fmt::Write as _;
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufReader, Write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{anyhow, bail, Context, Result};
-use estimator_core::sensor::{IdentifyError, LoadCellModel};
+use anyhow::{anyhow, Context, Result};
+use estimator_core::sensor::IdentifyError;
 use estimator_core::tuning::{
     self, CandidateGrid, CandidateScore, DropError, RunSlot, Tuned, TuningError, TuningSettings,
 };
 use estimator_core::weighing::{
-    LoadCoverage, LoadScene, LoadScore, OnsetConfig, Prediction, RegionError, WeighingConfig,
-    WeighingEstimator, WeighingMethod, MAX_SCENES,
+    LoadScene, LoadScore, Prediction, WeighingConfig, WeighingEstimator, WeighingMethod,
 };
 use estimator_core::Real;
-use serde::Deserialize;
 
+use crate::estimate::y_fields;
 use crate::method::{BoxedEstimator, InF32, Method};
 use crate::montecarlo::{Precision, Setup, CAPACITY};
 use crate::sensor::STATES;
 
+// The weighing configuration file: written here, read by `estimate --config` and the
+// firmware's build.
+pub use crate::weighing_file::{
+    config_toml, firmware_constants, load_config, parse_config, rust_const, to_toml, FORMAT,
+    FORMAT_CALIBRATION_MASS_ONLY,
+};
+
 /// The bank size calibration offers (the core's bank is a const generic):
 /// [`tuning::BankCandidate::REFERENCE`].
 pub const BANK_CANDIDATES: usize = 33;
-
-/// The version of the TOML layout this module writes and reads.
-pub const FORMAT: u32 = 2;
-/// The layout before load ranges (no `[range]`, no `[[load]]`): still read, as a
-/// configuration scored at the calibration mass only.
-pub const FORMAT_CALIBRATION_MASS_ONLY: u32 = 1;
 
 /// What `host-sim calibrate` is asked to do.
 #[derive(Clone, Debug)]
@@ -212,24 +206,13 @@ pub fn platform_mass_from_drops(
 pub fn read_drop(path: &Path) -> Result<Vec<f64>> {
     let file = std::fs::File::open(path)
         .with_context(|| format!("cannot open drop {}", path.display()))?;
-    let name = path.display();
-    let mut lines = BufReader::new(file).lines();
-    let header = match lines.next() {
-        Some(line) => line.with_context(|| format!("{name}: cannot read the header"))?,
-        None => bail!("{name}: empty file, expected a header with a column `y`"),
-    };
-    let column = header
-        .split(',')
-        .position(|field| field.trim() == "y")
-        .with_context(|| format!("{name}: line 1: expected a column `y` in `{header}`"))?;
+    let name = path.display().to_string();
+    let rows = y_fields(BufReader::new(file), &name, |header| {
+        format!("{name}: line 1: expected a column `y` in `{header}`")
+    })?;
     let mut samples = Vec::new();
-    for (index, line) in lines.enumerate() {
-        let line_number = index + 2;
-        let line = line.with_context(|| format!("{name}: line {line_number}: cannot read"))?;
-        if line.trim().is_empty() {
-            continue;
-        }
-        let field = line.split(',').nth(column).map(str::trim).unwrap_or("");
+    for row in rows {
+        let (line_number, field) = row?;
         let value: f64 = field.parse().map_err(|_| {
             anyhow!("{name}: line {line_number}: column `y`: expected a number (calibration needs every sample), found `{field}`")
         })?;
@@ -315,7 +298,7 @@ pub fn calibrate_files(
 }
 
 /// A percentage with enough digits for the targets in use.
-fn percent(relative: f64) -> String {
+pub(crate) fn percent(relative: f64) -> String {
     format!("{:.4}%", relative * 100.0)
 }
 
@@ -415,27 +398,7 @@ pub fn describe_error(error: &TuningError, names: &[String], options: &Options) 
             )
         }
         TuningError::Drop { drop, error } => {
-            let what = match error {
-                DropError::TooShort { samples, needed } => format!(
-                    "too short: {samples} samples, {needed} needed (the empty stretch, the onset and the readout after it)"
-                ),
-                DropError::NonFinite { sample } => {
-                    format!("sample {sample} is not a finite number")
-                }
-                DropError::Saturated { sample } => format!(
-                    "sample {sample} is at a rail of the {}-bit converter (saturated)",
-                    options.adc_bits
-                ),
-                DropError::NoEmptyStretch {
-                    empty_samples,
-                    needed,
-                } => format!(
-                    "no empty-pan stretch: {empty_samples} samples before the onset, {needed} needed (start the recording before the mass lands)"
-                ),
-                DropError::NoStep => {
-                    "no step: the pan does not change from its empty level by more than 10 noise standard deviations".into()
-                }
-            };
+            let what = describe_drop_error(error, options.adc_bits);
             format!("drop {}: {what}", name(drop))
         }
         TuningError::Identify(e) => match e {
@@ -471,44 +434,86 @@ pub fn describe_error(error: &TuningError, names: &[String], options: &Options) 
             failed_load,
             recorded_failing,
             evaluated,
-        } => {
-            let recorded = match recorded_failing {
-                Some(failing) => format!("; {failing} recorded drops outside the target"),
-                None => String::new(),
-            };
-            // Where the best one failed: the calibration mass, or a load of the range.
-            let (where_, p, mass, floor) = match failed_load {
-                Some(load) => (
-                    format!(" at {}", scene_name(&load.scene)),
-                    load.prediction,
-                    load.scene.mass_g,
-                    Some(load.noise_floor_g),
-                ),
-                None => (String::new(), *prediction, options.mass_g, None),
-            };
-            // A method at the floor, unbiased and Gaussian, has its 95th percentile of
-            // |error| at 1.96 times it.
-            let floor = match floor {
-                Some(floor) => format!(
-                    "; no method beats an RMS of {floor:.4} g ({}) there (the noise floor: Cramér–Rao bound with the tare), whose 95th percentile is {} of the load",
-                    percent(floor / mass),
-                    percent(1.96 * floor / mass)
-                ),
-                None => String::new(),
-            };
-            format!(
-                "no candidate meets the target of {} at {} ms ({evaluated} evaluated); best is {best} with a 95th percentile{where_} of {} ({:.4} g, from {} runs), RMS {}, valid in {} of {} runs{floor}{recorded}",
-                percent(options.target_relative),
-                options.readout_s * 1e3,
-                percent(p.p95_g / mass),
-                p.p95_g,
-                p.runs,
-                percent(p.rms_g / mass),
-                p.valid_runs,
-                p.runs
-            )
+        } => describe_none_meets_target(
+            best,
+            prediction,
+            failed_load,
+            recorded_failing,
+            *evaluated,
+            options,
+        ),
+    }
+}
+
+/// Why the core refused a drop, in words.
+fn describe_drop_error(error: &DropError, adc_bits: u32) -> String {
+    match error {
+        DropError::TooShort { samples, needed } => format!(
+            "too short: {samples} samples, {needed} needed (the empty stretch, the onset and the readout after it)"
+        ),
+        DropError::NonFinite { sample } => {
+            format!("sample {sample} is not a finite number")
+        }
+        DropError::Saturated { sample } => format!(
+            "sample {sample} is at a rail of the {}-bit converter (saturated)",
+            adc_bits
+        ),
+        DropError::NoEmptyStretch {
+            empty_samples,
+            needed,
+        } => format!(
+            "no empty-pan stretch: {empty_samples} samples before the onset, {needed} needed (start the recording before the mass lands)"
+        ),
+        DropError::NoStep => {
+            "no step: the pan does not change from its empty level by more than 10 noise standard deviations".into()
         }
     }
+}
+
+/// The best candidate, and where it missed the target, when none meets it.
+fn describe_none_meets_target(
+    best: &WeighingMethod,
+    prediction: &Prediction,
+    failed_load: &Option<LoadScore>,
+    recorded_failing: &Option<u32>,
+    evaluated: usize,
+    options: &Options,
+) -> String {
+    let recorded = match recorded_failing {
+        Some(failing) => format!("; {failing} recorded drops outside the target"),
+        None => String::new(),
+    };
+    // Where the best one failed: the calibration mass, or a load of the range.
+    let (where_, p, mass, floor) = match failed_load {
+        Some(load) => (
+            format!(" at {}", scene_name(&load.scene)),
+            load.prediction,
+            load.scene.mass_g,
+            Some(load.noise_floor_g),
+        ),
+        None => (String::new(), *prediction, options.mass_g, None),
+    };
+    // A method at the floor, unbiased and Gaussian, has its 95th percentile of
+    // |error| at 1.96 times it.
+    let floor = match floor {
+        Some(floor) => format!(
+            "; no method beats an RMS of {floor:.4} g ({}) there (the noise floor: Cramér–Rao bound with the tare), whose 95th percentile is {} of the load",
+            percent(floor / mass),
+            percent(1.96 * floor / mass)
+        ),
+        None => String::new(),
+    };
+    format!(
+        "no candidate meets the target of {} at {} ms ({evaluated} evaluated); best is {best} with a 95th percentile{where_} of {} ({:.4} g, from {} runs), RMS {}, valid in {} of {} runs{floor}{recorded}",
+        percent(options.target_relative),
+        options.readout_s * 1e3,
+        percent(p.p95_g / mass),
+        p.p95_g,
+        p.runs,
+        percent(p.rms_g / mass),
+        p.valid_runs,
+        p.runs
+    )
 }
 
 // ---------------------------------------------------------------------------------------
@@ -577,967 +582,6 @@ pub fn configured_estimator(
                 .map_err(named)?,
         ))),
     })
-}
-
-// ---------------------------------------------------------------------------------------
-// The TOML.
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct ConfigFile {
-    format: u32,
-    method: MethodFile,
-    scale: ScaleFile,
-    model: ModelFile,
-    target: TargetFile,
-    onset: OnsetFile,
-    measured: MeasuredFile,
-    #[serde(default)]
-    range: Option<RangeFile>,
-    #[serde(default)]
-    load: Vec<LoadFile>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RangeFile {
-    min_g: f64,
-    max_g: f64,
-    loads: u32,
-    #[serde(default)]
-    platform_mass_g: Option<f64>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct LoadFile {
-    mass_g: f64,
-    frequency_ratio: f64,
-    noise_floor_g: f64,
-    runs: u32,
-    planned_runs: u32,
-    valid_runs: u32,
-    within_target_runs: u32,
-    detection_failures: u32,
-    bias_g: f64,
-    rms_g: f64,
-    p95_g: f64,
-    p95_upper_g: f64,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct MethodFile {
-    kind: String,
-    precision: String,
-    #[serde(default)]
-    spec: Option<String>,
-    order: Option<usize>,
-    decimation: u16,
-    forgetting: Option<f64>,
-    candidates: Option<usize>,
-    ratio_min: Option<f64>,
-    ratio_max: Option<f64>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct ScaleFile {
-    counts_per_gram: f64,
-    identified_counts_per_gram: f64,
-    zero_counts: f64,
-    noise_variance_counts2: f64,
-    raw_noise_variance_counts2: f64,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct OnsetFile {
-    min_empty_samples: usize,
-    drift_sigma: f64,
-    threshold_sigma: f64,
-    guard_samples: usize,
-    min_step_sigma: f64,
-    min_noise_rms: f64,
-    rail_low: f64,
-    rail_high: f64,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct ModelFile {
-    natural_frequency_hz: f64,
-    damping_ratio: f64,
-    filter_order: u8,
-    filter_cutoff_hz: f64,
-    sample_rate_hz: f64,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct TargetFile {
-    calibration_mass_g: f64,
-    readout_s: f64,
-    target_relative: f64,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct MeasuredFile {
-    runs: u32,
-    planned_runs: u32,
-    valid_runs: u32,
-    within_target_runs: u32,
-    detection_failures: u32,
-    bias_g: f64,
-    rms_g: f64,
-    p95_g: f64,
-    p95_upper_g: f64,
-    recorded_drops: u32,
-    detection_lag_samples: f64,
-    recorded_worst_error_g: f64,
-}
-
-const KINDS: &str = "step, bias_compensated, instrumental_variable, model_bank";
-
-fn kind_name(method: &WeighingMethod) -> &'static str {
-    match method {
-        WeighingMethod::Step { .. } => "step",
-        WeighingMethod::BiasCompensated { .. } => "bias_compensated",
-        WeighingMethod::InstrumentalVariable { .. } => "instrumental_variable",
-        WeighingMethod::ModelBank { .. } => "model_bank",
-    }
-}
-
-fn precision_name(precision: Precision) -> &'static str {
-    match precision {
-        Precision::F32 => "f32",
-        Precision::F64 => "f64",
-    }
-}
-
-/// A float as TOML writes it: shortest round-trip form, `inf`/`-inf`/`nan` spelled out.
-fn number(value: f64) -> String {
-    if value.is_nan() {
-        "nan".into()
-    } else if value.is_infinite() {
-        if value > 0.0 { "inf" } else { "-inf" }.into()
-    } else if value == value.trunc() && value.abs() < 1e15 {
-        // `1` would read back as an integer, which a float field refuses.
-        format!("{value:.1}")
-    } else {
-        format!("{value}")
-    }
-}
-
-/// The configuration as TOML, with comments that say what was measured. `command` is the
-/// command line that produced it, `names` the drop files.
-pub fn to_toml(outcome: &Outcome, names: &[String], command: &str) -> String {
-    let c = &outcome.calibrated;
-    let config = &c.config;
-    write_toml(
-        config,
-        outcome.precision,
-        Some(Provenance {
-            calibrated: c,
-            scores: &outcome.scores,
-            names,
-            command,
-            elapsed_s: outcome.elapsed_s,
-        }),
-    )
-}
-
-struct Provenance<'a> {
-    calibrated: &'a Tuned,
-    scores: &'a [CandidateScore],
-    names: &'a [String],
-    command: &'a str,
-    elapsed_s: f64,
-}
-
-fn write_toml(
-    config: &WeighingConfig,
-    precision: Precision,
-    provenance: Option<Provenance<'_>>,
-) -> String {
-    let mut s = String::new();
-    let mass = config.calibration_mass_g;
-    let target_g = config.target_relative * mass;
-    let p = &config.prediction;
-    let w = &mut s;
-    // Writing to a String cannot fail.
-    let _ = writeln!(
-        w,
-        "# Weighing configuration, written by `host-sim calibrate` (estimator-core tuning::tune)."
-    );
-    if let Some(prov) = &provenance {
-        let _ = writeln!(w, "# Command: {}", prov.command);
-        let _ = writeln!(
-            w,
-            "# From {} drops of {} g: {}. Calibration took {:.2} s ({} candidates scored).",
-            prov.names.len(),
-            mass,
-            prov.names.join(", "),
-            prov.elapsed_s,
-            prov.calibrated.evaluated
-        );
-    }
-    let _ = writeln!(w, "format = {FORMAT}\n");
-
-    let _ = writeln!(w, "[method]");
-    let _ = writeln!(
-        w,
-        "# The smallest candidate (model order n first, then the solver: least squares, with"
-    );
-    let _ = writeln!(w, "# forgetting, bias-compensated, instrumental variables; then the largest D; the model bank");
-    let _ = writeln!(
-        w,
-        "# last) whose 95th-percentile |error| at the readout is within the target with 95%"
-    );
-    let _ = writeln!(w, "# confidence over the Monte Carlo below, and that is within the target on every recorded drop.");
-    if let Some(prov) = &provenance {
-        let smaller: Vec<&CandidateScore> = prov
-            .scores
-            .iter()
-            .filter(|s| s.index < prov.calibrated.chosen.index)
-            .collect();
-        if !smaller.is_empty() {
-            let _ = writeln!(
-                w,
-                "# {} smaller candidates did not meet the target (the run log lists each).",
-                smaller.len()
-            );
-        }
-    }
-    let _ = writeln!(
-        w,
-        "kind = \"{}\"   # one of {KINDS}",
-        kind_name(&config.method)
-    );
-    let _ = writeln!(
-        w,
-        "precision = \"{}\"   # the arithmetic it was scored in",
-        precision_name(precision)
-    );
-    let _ = writeln!(
-        w,
-        "spec = \"{}\"   # the same as host-sim's --method spec",
-        method_spec(config, precision)
-    );
-    match config.method {
-        WeighingMethod::Step {
-            order,
-            decimation,
-            forgetting,
-        } => {
-            let _ = writeln!(
-                w,
-                "order = {order}\ndecimation = {decimation}\nforgetting = {}",
-                number(forgetting)
-            );
-        }
-        WeighingMethod::BiasCompensated { order, decimation }
-        | WeighingMethod::InstrumentalVariable { order, decimation } => {
-            let _ = writeln!(w, "order = {order}\ndecimation = {decimation}");
-        }
-        WeighingMethod::ModelBank {
-            decimation,
-            candidates,
-            ratio_min,
-            ratio_max,
-        } => {
-            let _ = writeln!(
-                w,
-                "decimation = {decimation}\ncandidates = {candidates}\nratio_min = {}\nratio_max = {}",
-                number(ratio_min),
-                number(ratio_max)
-            );
-        }
-    }
-
-    let _ = writeln!(w, "\n[scale]");
-    let derived = (config.counts_per_gram - config.identified_counts_per_gram).abs()
-        <= 1e-12 * config.counts_per_gram.abs();
-    if derived {
-        let _ = writeln!(
-            w,
-            "# Gain derived from the drops: the identified model's fitted step over the known mass"
-        );
-        let _ = writeln!(
-            w,
-            "# (the level the fitted transient settles to), mean over the drops."
-        );
-    } else {
-        let _ = writeln!(
-            w,
-            "# Gain given on the command line; the drops showed {} counts/g ({:+.4}%).",
-            config.identified_counts_per_gram,
-            (config.identified_counts_per_gram / config.counts_per_gram - 1.0) * 100.0
-        );
-    }
-    let _ = writeln!(w, "counts_per_gram = {}", number(config.counts_per_gram));
-    let _ = writeln!(
-        w,
-        "identified_counts_per_gram = {}",
-        number(config.identified_counts_per_gram)
-    );
-    let _ = writeln!(
-        w,
-        "# Mean of the empty-pan stretches before the onsets (re-tare before weighing)."
-    );
-    let _ = writeln!(w, "zero_counts = {}", number(config.zero_counts));
-    let _ = writeln!(
-        w,
-        "# White noise of one sample on the empty stretches (NoiseMeter), at the method's D: sigma = {:.3} counts = {:.4} g.",
-        config.noise_variance_counts2.sqrt(),
-        config.noise_variance_counts2.sqrt() / config.counts_per_gram
-    );
-    let _ = writeln!(
-        w,
-        "noise_variance_counts2 = {}",
-        number(config.noise_variance_counts2)
-    );
-    let _ = writeln!(
-        w,
-        "# The same at D = 1: sigma = {:.3} counts = {:.4} g.",
-        config.raw_noise_variance_counts2.sqrt(),
-        config.raw_noise_variance_counts2.sqrt() / config.counts_per_gram
-    );
-    let _ = writeln!(
-        w,
-        "raw_noise_variance_counts2 = {}",
-        number(config.raw_noise_variance_counts2)
-    );
-
-    let o = &config.onset;
-    let _ = writeln!(w, "\n[onset]");
-    let _ = writeln!(
-        w,
-        "# How the scale must find the landing (estimator-core tuning::onset): two-sided CUSUM on"
-    );
-    let _ = writeln!(w, "# the deviation from the zero in noise standard deviations, backed off to the start of the");
-    let _ = writeln!(
-        w,
-        "# excursion. The method was scored started there AND at the landing itself: start it"
-    );
-    let _ = writeln!(
-        w,
-        "# anywhere in between (not before the landing). A code at or beyond a rail is saturated."
-    );
-    let _ = writeln!(w, "min_empty_samples = {}", o.min_empty_samples);
-    let _ = writeln!(w, "drift_sigma = {}", number(o.drift_sigma));
-    let _ = writeln!(w, "threshold_sigma = {}", number(o.threshold_sigma));
-    let _ = writeln!(w, "guard_samples = {}", o.guard_samples);
-    let _ = writeln!(w, "min_step_sigma = {}", number(o.min_step_sigma));
-    let _ = writeln!(w, "min_noise_rms = {}", number(o.min_noise_rms));
-    let _ = writeln!(w, "rail_low = {}", number(o.rail_low));
-    let _ = writeln!(w, "rail_high = {}", number(o.rail_high));
-
-    let _ = writeln!(w, "\n[model]");
-    let _ = writeln!(w, "# Identified from the drops (estimator-core identify): the mechanical mode with the load on,");
-    let _ = writeln!(w, "# in series with the known Butterworth low-pass.");
-    if let Some(prov) = &provenance {
-        let i = &prov.calibrated.identified;
-        let _ = writeln!(
-            w,
-            "# Fit: {} model evaluations, residual {:.3} counts per raw sample.",
-            i.evaluations, i.noise_rms
-        );
-    }
-    let m = &config.model;
-    let _ = writeln!(
-        w,
-        "natural_frequency_hz = {}",
-        number(m.natural_frequency_hz)
-    );
-    let _ = writeln!(w, "damping_ratio = {}", number(m.damping_ratio));
-    let _ = writeln!(w, "filter_order = {}", m.filter_order);
-    let _ = writeln!(w, "filter_cutoff_hz = {}", number(m.filter_cutoff_hz));
-    let _ = writeln!(w, "sample_rate_hz = {}", number(m.sample_rate_hz));
-
-    let _ = writeln!(w, "\n[target]");
-    let _ = writeln!(
-        w,
-        "# {} of {} g = {:.4} g, {} ms after the mass lands.",
-        percent(config.target_relative),
-        mass,
-        target_g,
-        config.readout_s * 1e3
-    );
-    let _ = writeln!(w, "calibration_mass_g = {}", number(mass));
-    let _ = writeln!(w, "readout_s = {}", number(config.readout_s));
-    let _ = writeln!(w, "target_relative = {}", number(config.target_relative));
-
-    let _ = writeln!(w, "\n[measured]");
-    let _ = writeln!(
-        w,
-        "# Monte Carlo: {} synthetic drops of the identified model at the gain the drops showed,",
-        p.planned_runs
-    );
-    let _ = writeln!(w, "# white noise at the upper confidence value of the measured variance, each through the same");
-    let _ = writeln!(
-        w,
-        "# onset detection and tare, read {} ms after the landing.",
-        config.readout_s * 1e3
-    );
-    if let Some(prov) = &provenance {
-        let c = prov.calibrated;
-        let _ = writeln!(
-            w,
-            "# Noise used: sigma = {:.3} counts (measured {:.3}, relative standard error of the variance {:.1}%); {} empty samples before each drop.",
-            c.monte_carlo_noise_variance_counts2.sqrt(),
-            config.raw_noise_variance_counts2.sqrt(),
-            c.noise_relative_standard_error * 100.0,
-            c.synthetic_empty_samples
-        );
-    }
-    let _ = writeln!(
-        w,
-        "# Predicted at the readout: RMS {:.4} g ({}), 95th percentile {:.4} g ({}), its 95% upper bound {:.4} g ({}).",
-        p.rms_g,
-        percent(p.rms_g / mass),
-        p.p95_g,
-        percent(p.p95_g / mass),
-        p.p95_upper_g,
-        percent(p.p95_upper_g / mass)
-    );
-    let _ = writeln!(w, "runs = {}\nplanned_runs = {}\nvalid_runs = {}\nwithin_target_runs = {}\ndetection_failures = {}",
-        p.runs, p.planned_runs, p.valid_runs, p.within_target_runs, p.detection_failures);
-    let _ = writeln!(
-        w,
-        "bias_g = {}\nrms_g = {}\np95_g = {}\np95_upper_g = {}",
-        number(p.bias_g),
-        number(p.rms_g),
-        number(p.p95_g),
-        number(p.p95_upper_g)
-    );
-    if let Some(prov) = &provenance {
-        if let Some(check) = &prov.calibrated.chosen.recorded {
-            let each: Vec<String> = prov
-                .names
-                .iter()
-                .zip(check.errors_g.iter())
-                .map(|(name, e)| format!("{name} {e:+.4} g"))
-                .collect();
-            let _ = writeln!(
-                w,
-                "# Confirmed on the recorded drops (the larger error of the two starts): {}.",
-                each.join(", ")
-            );
-        }
-    }
-    let _ = writeln!(
-        w,
-        "# Mean lag of the detected onset behind the landing in the synthetic drops, samples."
-    );
-    let _ = writeln!(
-        w,
-        "detection_lag_samples = {}",
-        number(config.detection_lag_samples)
-    );
-    let _ = writeln!(w, "recorded_drops = {}", config.recorded_drops);
-    let _ = writeln!(
-        w,
-        "recorded_worst_error_g = {}",
-        number(config.recorded_worst_error_g)
-    );
-
-    let loads = &config.loads;
-    let _ = writeln!(w, "\n[range]");
-    let _ = writeln!(
-        w,
-        "# The target holds, relative to the load ({} of it), at every scene below: the calibration",
-        percent(config.target_relative)
-    );
-    let _ = writeln!(w, "# mass and `loads` loads spaced geometrically over [min_g, max_g], each with its own synthetic");
-    let _ = writeln!(w, "# drops of the identified model moved to that load by the physical law (stiffness and damping");
-    match loads.platform_mass_g {
-        Some(platform) => {
-            let _ = writeln!(w, "# fixed) with the platform's moving mass {platform} g.");
-        }
-        None => {
-            let _ = writeln!(w, "# fixed). The platform's moving mass is unknown: each load was scored at both ends of what");
-            let _ = writeln!(w, "# physics allows, as calibrated (mass -> infinity) and sqrt(calibration mass / load) times");
-            let _ = writeln!(
-                w,
-                "# faster (mass -> 0). `platform_mass_g` absent: unknown."
-            );
-        }
-    }
-    let _ = writeln!(w, "min_g = {}", number(loads.min_g));
-    let _ = writeln!(w, "max_g = {}", number(loads.max_g));
-    let _ = writeln!(w, "loads = {}", loads.loads);
-    if let Some(platform) = loads.platform_mass_g {
-        let _ = writeln!(w, "platform_mass_g = {}", number(platform));
-    }
-    for score in loads.scores.iter().flatten() {
-        let p = &score.prediction;
-        let mass = score.scene.mass_g;
-        let _ = writeln!(w, "\n[[load]]");
-        let _ = writeln!(
-            w,
-            "# {}: RMS {:.4} g ({}), 95th percentile {:.4} g ({}), bound {:.4} g ({}) <= {:.4} g; noise floor {:.4} g ({}).",
-            scene_name(&score.scene),
-            p.rms_g,
-            percent(p.rms_g / mass),
-            p.p95_g,
-            percent(p.p95_g / mass),
-            p.p95_upper_g,
-            percent(p.p95_upper_g / mass),
-            config.target_relative * mass,
-            score.noise_floor_g,
-            percent(score.noise_floor_g / mass)
-        );
-        let _ = writeln!(w, "mass_g = {}", number(mass));
-        let _ = writeln!(
-            w,
-            "frequency_ratio = {}",
-            number(score.scene.frequency_ratio)
-        );
-        let _ = writeln!(w, "noise_floor_g = {}", number(score.noise_floor_g));
-        let _ = writeln!(w, "runs = {}\nplanned_runs = {}\nvalid_runs = {}\nwithin_target_runs = {}\ndetection_failures = {}",
-            p.runs, p.planned_runs, p.valid_runs, p.within_target_runs, p.detection_failures);
-        let _ = writeln!(
-            w,
-            "bias_g = {}\nrms_g = {}\np95_g = {}\np95_upper_g = {}",
-            number(p.bias_g),
-            number(p.rms_g),
-            number(p.p95_g),
-            number(p.p95_upper_g)
-        );
-    }
-    s
-}
-
-/// The configuration as TOML without the provenance comments (for tests and round trips).
-pub fn config_toml(config: &WeighingConfig, precision: Precision) -> String {
-    write_toml(config, precision, None)
-}
-
-/// Read a configuration; every field is required, an unknown one is refused, and the
-/// values are checked by building the configured method.
-pub fn parse_config(path: &Path, text: &str) -> Result<(WeighingConfig, Precision)> {
-    let file: ConfigFile =
-        toml::from_str(text).map_err(|e| anyhow!("{}", describe_toml_error(path, text, &e)))?;
-    let bad = |key: &str, expected: &str| {
-        anyhow!(
-            "weighing config {}: key `{key}`: expected {expected}",
-            path.display()
-        )
-    };
-    if file.format != FORMAT && file.format != FORMAT_CALIBRATION_MASS_ONLY {
-        return Err(bad(
-            "format",
-            &format!(
-                "{FORMAT} (or {FORMAT_CALIBRATION_MASS_ONLY}), found {}",
-                file.format
-            ),
-        ));
-    }
-    let m = &file.method;
-    let precision: Precision = m
-        .precision
-        .parse()
-        .map_err(|_| bad("method.precision", "f32 or f64"))?;
-    let order = || m.order.ok_or_else(|| bad("method.order", "an order n"));
-    let method = match m.kind.as_str() {
-        "step" => WeighingMethod::Step {
-            order: order()?,
-            decimation: m.decimation,
-            forgetting: m.forgetting.unwrap_or(1.0),
-        },
-        "bias_compensated" => WeighingMethod::BiasCompensated {
-            order: order()?,
-            decimation: m.decimation,
-        },
-        "instrumental_variable" => WeighingMethod::InstrumentalVariable {
-            order: order()?,
-            decimation: m.decimation,
-        },
-        "model_bank" => WeighingMethod::ModelBank {
-            decimation: m.decimation,
-            candidates: m
-                .candidates
-                .ok_or_else(|| bad("method.candidates", "the bank's size K"))?,
-            ratio_min: m
-                .ratio_min
-                .ok_or_else(|| bad("method.ratio_min", "a frequency ratio"))?,
-            ratio_max: m
-                .ratio_max
-                .ok_or_else(|| bad("method.ratio_max", "a frequency ratio"))?,
-        },
-        other => {
-            return Err(bad(
-                "method.kind",
-                &format!("one of {KINDS}, found `{other}`"),
-            ))
-        }
-    };
-    let config = WeighingConfig {
-        method,
-        counts_per_gram: file.scale.counts_per_gram,
-        zero_counts: file.scale.zero_counts,
-        noise_variance_counts2: file.scale.noise_variance_counts2,
-        raw_noise_variance_counts2: file.scale.raw_noise_variance_counts2,
-        onset: OnsetConfig {
-            min_empty_samples: file.onset.min_empty_samples,
-            drift_sigma: file.onset.drift_sigma,
-            threshold_sigma: file.onset.threshold_sigma,
-            guard_samples: file.onset.guard_samples,
-            min_step_sigma: file.onset.min_step_sigma,
-            min_noise_rms: file.onset.min_noise_rms,
-            rail_low: file.onset.rail_low,
-            rail_high: file.onset.rail_high,
-        },
-        detection_lag_samples: file.measured.detection_lag_samples,
-        model: LoadCellModel {
-            natural_frequency_hz: file.model.natural_frequency_hz,
-            damping_ratio: file.model.damping_ratio,
-            filter_order: file.model.filter_order,
-            filter_cutoff_hz: file.model.filter_cutoff_hz,
-            counts_per_gram: file.scale.counts_per_gram,
-            sample_rate_hz: file.model.sample_rate_hz,
-        },
-        identified_counts_per_gram: file.scale.identified_counts_per_gram,
-        calibration_mass_g: file.target.calibration_mass_g,
-        readout_s: file.target.readout_s,
-        target_relative: file.target.target_relative,
-        prediction: Prediction {
-            runs: file.measured.runs,
-            planned_runs: file.measured.planned_runs,
-            valid_runs: file.measured.valid_runs,
-            within_target_runs: file.measured.within_target_runs,
-            detection_failures: file.measured.detection_failures,
-            bias_g: file.measured.bias_g,
-            rms_g: file.measured.rms_g,
-            p95_g: file.measured.p95_g,
-            p95_upper_g: file.measured.p95_upper_g,
-        },
-        recorded_drops: file.measured.recorded_drops,
-        recorded_worst_error_g: file.measured.recorded_worst_error_g,
-        loads: LoadCoverage::calibration_mass_only(
-            file.target.calibration_mass_g,
-            Prediction {
-                runs: file.measured.runs,
-                planned_runs: file.measured.planned_runs,
-                valid_runs: file.measured.valid_runs,
-                within_target_runs: file.measured.within_target_runs,
-                detection_failures: file.measured.detection_failures,
-                bias_g: file.measured.bias_g,
-                rms_g: file.measured.rms_g,
-                p95_g: file.measured.p95_g,
-                p95_upper_g: file.measured.p95_upper_g,
-            },
-        ),
-    };
-    let mut config = config;
-    if file.format == FORMAT {
-        let range = file
-            .range
-            .as_ref()
-            .ok_or_else(|| bad("range", "a [range] table (format 2)"))?;
-        if file.load.is_empty() || file.load.len() > MAX_SCENES {
-            return Err(bad(
-                "load",
-                &format!(
-                    "1 to {MAX_SCENES} [[load]] tables, found {}",
-                    file.load.len()
-                ),
-            ));
-        }
-        let mut scores = [None; MAX_SCENES];
-        for (slot, load) in scores.iter_mut().zip(&file.load) {
-            *slot = Some(LoadScore {
-                scene: LoadScene {
-                    mass_g: load.mass_g,
-                    frequency_ratio: load.frequency_ratio,
-                },
-                noise_floor_g: load.noise_floor_g,
-                prediction: Prediction {
-                    runs: load.runs,
-                    planned_runs: load.planned_runs,
-                    valid_runs: load.valid_runs,
-                    within_target_runs: load.within_target_runs,
-                    detection_failures: load.detection_failures,
-                    bias_g: load.bias_g,
-                    rms_g: load.rms_g,
-                    p95_g: load.p95_g,
-                    p95_upper_g: load.p95_upper_g,
-                },
-            });
-        }
-        config.loads = LoadCoverage {
-            min_g: range.min_g,
-            max_g: range.max_g,
-            loads: range.loads,
-            platform_mass_g: range.platform_mass_g,
-            scores,
-        };
-    } else if file.range.is_some() || !file.load.is_empty() {
-        return Err(bad(
-            "format",
-            "2 for a file with [range] and [[load]] tables, found 1",
-        ));
-    }
-    if let Some(spec) = &m.spec {
-        let written = method_spec(&config, precision).to_string();
-        if spec.trim() != written {
-            return Err(bad(
-                "method.spec",
-                &format!("`{written}` (what the other method keys say), found `{spec}`"),
-            ));
-        }
-    }
-    // Inside the stability map's valid region: a failure outside it is not flagged at run
-    // time (estimator-core `WeighingConfig::check_region`).
-    if let Err(region) = config.check_region() {
-        let key = match region {
-            RegionError::Decimation { .. } => "method.decimation",
-            RegionError::Order { .. } => "method.order",
-            RegionError::BankSpan { .. } => "method.ratio_min",
-            RegionError::Model => "model",
-        };
-        return Err(anyhow!(
-            "weighing config {}: key `{key}`: outside the valid region: {region}",
-            path.display()
-        ));
-    }
-    // The values must make the configured method.
-    configured_estimator(&config, precision, config.zero_counts)
-        .map_err(|e| anyhow!("weighing config {}: {e}", path.display()))?;
-    Ok((config, precision))
-}
-
-/// A TOML error of the config as `weighing config <file>: line L: key `table.key`: <what
-/// toml says, with what it expected>`, then toml's own excerpt. The key is found from the
-/// error's position: the key on that line, or for a missing key the table header toml
-/// points at and the field it names.
-fn describe_toml_error(path: &Path, text: &str, error: &toml::de::Error) -> String {
-    let message = error.message().trim();
-    let Some(span) = error.span() else {
-        return format!("weighing config {}: {message}", path.display());
-    };
-    let start = span.start.min(text.len());
-    let line_number = text[..start].matches('\n').count() + 1;
-    let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
-    let line = text[line_start..].lines().next().unwrap_or("").trim();
-    // The table the position is in: the last header at or before its line.
-    let table = text[..line_start + line.len()]
-        .lines()
-        .rev()
-        .map(str::trim)
-        .find(|l| l.starts_with('[') && l.ends_with(']'))
-        .map(|l| l.trim_matches(|c| c == '[' || c == ']').trim().to_string());
-    let missing = message
-        .strip_prefix("missing field `")
-        .and_then(|rest| rest.split('`').next());
-    let key = match (missing, line.split_once('=')) {
-        (Some(field), _) => Some(field.to_string()),
-        (None, Some((key, _))) if !line.starts_with('[') => Some(key.trim().to_string()),
-        _ => None,
-    };
-    let key = match (&table, key) {
-        (Some(table), Some(key)) => format!("key `{table}.{key}`"),
-        (None, Some(key)) => format!("key `{key}`"),
-        (Some(table), None) => format!("table `[{table}]`"),
-        (None, None) => "the file".into(),
-    };
-    let what = match missing {
-        Some(_) => format!("{message} (every key is required: expected it in this table, as `host-sim calibrate` writes it)"),
-        None => message.to_string(),
-    };
-    format!(
-        "weighing config {}: line {line_number}: {key}: {what}\n{error}",
-        path.display()
-    )
-}
-
-/// Read a configuration file.
-pub fn load_config(path: &Path) -> Result<(WeighingConfig, Precision)> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read weighing config {}", path.display()))?;
-    parse_config(path, &text)
-}
-
-/// What the firmware's build script (`firmware/build.rs`) generates from the text of its
-/// weighing config `path`: the parsed, checked configuration as [`rust_const`], and the
-/// sizes the firmware's estimator type takes from it (`ORDER_CAPACITY`: the configured
-/// order, 1 for the bank; `MODEL_STATES`: the identified model's states; `BANK_CANDIDATES`:
-/// the bank's K, 1 for the data-driven methods), so the image holds exactly the configured
-/// method.
-///
-/// One parser: this is [`parse_config`], the same that `estimate --config` uses, so the
-/// file the firmware accepts is the file host-sim accepts. On top of it the firmware asks
-/// for `precision = "f32"` (its FPU is single precision: a method scored in `f64` was not
-/// scored in the arithmetic it would run). Every refusal names the file, the key and what
-/// was expected.
-pub fn firmware_constants(path: &Path, text: &str) -> Result<String> {
-    let (config, precision) = parse_config(path, text)?;
-    if precision != Precision::F32 {
-        bail!(
-            "weighing config {}: key `method.precision`: expected \"f32\" (the firmware runs single precision; calibrate with --precision f32), found \"{}\"",
-            path.display(),
-            precision_name(precision)
-        );
-    }
-    let (order_capacity, bank_candidates) = match config.method {
-        WeighingMethod::ModelBank { candidates, .. } => (1, candidates),
-        method => (method.order().unwrap_or(1), 1),
-    };
-    let model_states = usize::from(config.model.filter_order) + 2;
-    let mut out = String::new();
-    let _ = writeln!(
-        out,
-        "// Generated from {} by host_sim::calibrate::firmware_constants; do not edit.",
-        path.display()
-    );
-    let _ = writeln!(
-        out,
-        "/// The weighing configuration the firmware runs (written by `host-sim calibrate`)."
-    );
-    out.push_str(&rust_const(&config));
-    let _ = writeln!(
-        out,
-        "/// Largest model order the estimator holds: the configured order (1 for the bank)."
-    );
-    let _ = writeln!(out, "pub const ORDER_CAPACITY: usize = {order_capacity};");
-    let _ = writeln!(
-        out,
-        "/// States of the identified model (the bank's candidates): 2 + the filter's order."
-    );
-    let _ = writeln!(out, "pub const MODEL_STATES: usize = {model_states};");
-    let _ = writeln!(
-        out,
-        "/// Candidates of the model bank (1 for the data-driven methods)."
-    );
-    let _ = writeln!(out, "pub const BANK_CANDIDATES: usize = {bank_candidates};");
-    Ok(out)
-}
-
-/// The configuration as a Rust constant, `pub const WEIGHING: WeighingConfig = ...;`, for a
-/// firmware build script (paths assume `use estimator_core::tuning::*` and
-/// `estimator_core::sensor::LoadCellModel` in scope).
-pub fn rust_const(config: &WeighingConfig) -> String {
-    let f = |v: f64| -> String {
-        if v.is_infinite() {
-            if v > 0.0 {
-                "f64::INFINITY"
-            } else {
-                "f64::NEG_INFINITY"
-            }
-            .into()
-        } else if v.is_nan() {
-            "f64::NAN".into()
-        } else {
-            format!("{v:?}")
-        }
-    };
-    let method = match config.method {
-        WeighingMethod::Step {
-            order,
-            decimation,
-            forgetting,
-        } => format!(
-            "WeighingMethod::Step {{ order: {order}, decimation: {decimation}, forgetting: {} }}",
-            f(forgetting)
-        ),
-        WeighingMethod::BiasCompensated { order, decimation } => format!(
-            "WeighingMethod::BiasCompensated {{ order: {order}, decimation: {decimation} }}"
-        ),
-        WeighingMethod::InstrumentalVariable { order, decimation } => format!(
-            "WeighingMethod::InstrumentalVariable {{ order: {order}, decimation: {decimation} }}"
-        ),
-        WeighingMethod::ModelBank {
-            decimation,
-            candidates,
-            ratio_min,
-            ratio_max,
-        } => format!(
-            "WeighingMethod::ModelBank {{ decimation: {decimation}, candidates: {candidates}, ratio_min: {}, ratio_max: {} }}",
-            f(ratio_min),
-            f(ratio_max)
-        ),
-    };
-    let prediction = |p: &Prediction| {
-        format!(
-            "Prediction {{ runs: {}, planned_runs: {}, valid_runs: {}, within_target_runs: {}, detection_failures: {}, bias_g: {}, rms_g: {}, p95_g: {}, p95_upper_g: {} }}",
-            p.runs,
-            p.planned_runs,
-            p.valid_runs,
-            p.within_target_runs,
-            p.detection_failures,
-            f(p.bias_g),
-            f(p.rms_g),
-            f(p.p95_g),
-            f(p.p95_upper_g)
-        )
-    };
-    let c = &config.loads;
-    let scores: Vec<String> = c
-        .scores
-        .iter()
-        .map(|score| match score {
-            Some(s) => format!(
-                "Some(LoadScore {{ scene: LoadScene {{ mass_g: {}, frequency_ratio: {} }}, noise_floor_g: {}, prediction: {} }})",
-                f(s.scene.mass_g),
-                f(s.scene.frequency_ratio),
-                f(s.noise_floor_g),
-                prediction(&s.prediction)
-            ),
-            None => "None".into(),
-        })
-        .collect();
-    let loads = format!(
-        "LoadCoverage {{\n        min_g: {},\n        max_g: {},\n        loads: {},\n        platform_mass_g: {},\n        scores: [\n            {},\n        ],\n    }}",
-        f(c.min_g),
-        f(c.max_g),
-        c.loads,
-        match c.platform_mass_g {
-            Some(m) => format!("Some({})", f(m)),
-            None => "None".into(),
-        },
-        scores.join(",\n            ")
-    );
-    let m = &config.model;
-    let p = &config.prediction;
-    format!(
-        "pub const WEIGHING: WeighingConfig = WeighingConfig {{\n    method: {method},\n    counts_per_gram: {},\n    zero_counts: {},\n    noise_variance_counts2: {},\n    raw_noise_variance_counts2: {},\n    onset: OnsetConfig {{ min_empty_samples: {}, drift_sigma: {}, threshold_sigma: {}, guard_samples: {}, min_step_sigma: {}, min_noise_rms: {}, rail_low: {}, rail_high: {} }},\n    detection_lag_samples: {},\n    model: LoadCellModel {{ natural_frequency_hz: {}, damping_ratio: {}, filter_order: {}, filter_cutoff_hz: {}, counts_per_gram: {}, sample_rate_hz: {} }},\n    identified_counts_per_gram: {},\n    calibration_mass_g: {},\n    readout_s: {},\n    target_relative: {},\n    prediction: Prediction {{ runs: {}, planned_runs: {}, valid_runs: {}, within_target_runs: {}, detection_failures: {}, bias_g: {}, rms_g: {}, p95_g: {}, p95_upper_g: {} }},\n    recorded_drops: {},\n    recorded_worst_error_g: {},\n    loads: {loads},\n}};\n",
-        f(config.counts_per_gram),
-        f(config.zero_counts),
-        f(config.noise_variance_counts2),
-        f(config.raw_noise_variance_counts2),
-        config.onset.min_empty_samples,
-        f(config.onset.drift_sigma),
-        f(config.onset.threshold_sigma),
-        config.onset.guard_samples,
-        f(config.onset.min_step_sigma),
-        f(config.onset.min_noise_rms),
-        f(config.onset.rail_low),
-        f(config.onset.rail_high),
-        f(config.detection_lag_samples),
-        f(m.natural_frequency_hz),
-        f(m.damping_ratio),
-        m.filter_order,
-        f(m.filter_cutoff_hz),
-        f(m.counts_per_gram),
-        f(m.sample_rate_hz),
-        f(config.identified_counts_per_gram),
-        f(config.calibration_mass_g),
-        f(config.readout_s),
-        f(config.target_relative),
-        p.runs,
-        p.planned_runs,
-        p.valid_runs,
-        p.within_target_runs,
-        p.detection_failures,
-        f(p.bias_g),
-        f(p.rms_g),
-        f(p.p95_g),
-        f(p.p95_upper_g),
-        config.recorded_drops,
-        f(config.recorded_worst_error_g),
-    )
 }
 
 /// Write `text` to `path`, creating its directory.

@@ -49,26 +49,12 @@ pub fn estimate_with(
     zero: f64,
     out: &mut impl Write,
 ) -> Result<()> {
-    let mut lines = input.lines();
-    let header = match lines.next() {
-        Some(line) => line.with_context(|| format!("{name}: cannot read the header"))?,
-        None => bail!("{name}: empty file, expected a header with a column `y`"),
-    };
-    let column = header
-        .split(',')
-        .position(|field| field.trim() == "y")
-        .with_context(|| {
-            format!("{name}: line 1: expected a column `y` in the header `{header}`")
-        })?;
+    let rows = y_fields(input, name, |header| {
+        format!("{name}: line 1: expected a column `y` in the header `{header}`")
+    })?;
     writeln!(out, "k,estimate,state")?;
-    let mut k = 0usize;
-    for (index, line) in lines.enumerate() {
-        let line_number = index + 2;
-        let line = line.with_context(|| format!("{name}: line {line_number}: cannot read"))?;
-        if line.trim().is_empty() {
-            continue;
-        }
-        let field = line.split(',').nth(column).map(str::trim).unwrap_or("");
+    for (k, row) in rows.enumerate() {
+        let (line_number, field) = row?;
         let reading = if field.is_empty() {
             estimator.push_missing()
         } else {
@@ -83,7 +69,38 @@ pub fn estimate_with(
             Some(value) => writeln!(out, "{k},{value:e},{}", state_name(reading.state))?,
             None => writeln!(out, "{k},,{}", state_name(reading.state))?,
         }
-        k += 1;
     }
     Ok(())
+}
+
+/// The `y` field of each row of a recording (a CSV whose header names a column `y`, as
+/// `simulate` writes it), with its line number; blank rows are passed over, a row without
+/// the column gives an empty field. An unreadable or empty file is an error naming `name`, a
+/// header without `y` the error `no_column` words from the header.
+pub(crate) fn y_fields<'a>(
+    input: impl BufRead + 'a,
+    name: &'a str,
+    no_column: impl FnOnce(&str) -> String,
+) -> Result<impl Iterator<Item = Result<(usize, String)>> + 'a> {
+    let mut lines = input.lines();
+    let header = match lines.next() {
+        Some(line) => line.with_context(|| format!("{name}: cannot read the header"))?,
+        None => bail!("{name}: empty file, expected a header with a column `y`"),
+    };
+    let column = header
+        .split(',')
+        .position(|field| field.trim() == "y")
+        .with_context(|| no_column(&header))?;
+    Ok(lines.enumerate().filter_map(move |(index, line)| {
+        let line_number = index + 2;
+        let line = match line.with_context(|| format!("{name}: line {line_number}: cannot read")) {
+            Ok(line) => line,
+            Err(e) => return Some(Err(e)),
+        };
+        if line.trim().is_empty() {
+            return None;
+        }
+        let field = line.split(',').nth(column).map(str::trim).unwrap_or("");
+        Some(Ok((line_number, field.to_string())))
+    }))
 }
