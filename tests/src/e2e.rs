@@ -721,6 +721,27 @@ mod host_replay_tests {
         }
     }
 
+    /// The demo replayed on seeds `1..=seeds` with the scale `build` makes: the runs that
+    /// passed, the worst figures, and each failing seed's failures.
+    fn replay_seeds<E: ScaleEstimator>(
+        seeds: u64,
+        build: impl Fn(CountsScale) -> Scale<E>,
+    ) -> (u64, Worst, Vec<String>) {
+        let mut passed = 0;
+        let mut worst = Worst::default();
+        let mut failures = Vec::new();
+        for seed in 1..=seeds {
+            let report = replay(seed, &build);
+            if report.passed() {
+                passed += 1;
+            } else {
+                failures.push(format!("seed {seed}: {}", report.failures.join("; ")));
+            }
+            worst.add(&report);
+        }
+        (passed, worst, failures)
+    }
+
     fn replay<E: ScaleEstimator>(seed: u64, build: impl Fn(CountsScale) -> Scale<E>) -> Report {
         let mut adc = SimulatedAdc::reference_demo(seed);
         let mut scale = build(calibration(&adc));
@@ -939,18 +960,7 @@ mod host_replay_tests {
     fn method_kinds_over_seeds() {
         let seeds = 40;
         for (name, weighing) in method_kinds() {
-            let mut passed = 0;
-            let mut worst = Worst::default();
-            let mut failures = Vec::new();
-            for seed in 1..=seeds {
-                let report = replay(seed, configured(weighing));
-                if report.passed() {
-                    passed += 1;
-                } else {
-                    failures.push(format!("seed {seed}: {}", report.failures.join("; ")));
-                }
-                worst.add(&report);
-            }
+            let (passed, worst, failures) = replay_seeds(seeds, configured(weighing));
             println!(
                 "{name:<48} {passed:>2}/{seeds}  worst t(0.1%) {:>5.0} / {:>5.0} ms  worst error after {:.4} / {:.4} g  worst empty {:.4} g",
                 worst.time_s[0] * 1e3,
@@ -1133,16 +1143,8 @@ mod host_replay_tests {
         println!("order decim  pass/seeds  worst t(0.1%) ms [138g, 250g]  worst err g [138, 250]  worst empty g");
         for order in [3usize, 4, 5, 6, 7, 8] {
             for decimation in [1u16, 4, 8, 12, 16] {
-                let mut passed = 0;
-                let mut worst = Worst::default();
                 let seeds = 10;
-                for seed in 1..=seeds {
-                    let report = replay(seed, step_scale(order, decimation));
-                    if report.passed() {
-                        passed += 1;
-                    }
-                    worst.add(&report);
-                }
+                let (passed, worst, _) = replay_seeds(seeds, step_scale(order, decimation));
                 println!(
                     "{order:>5} {decimation:>5}  {passed:>4}/{seeds:<4}  {:>8.0} {:>8.0}  {:>10.4} {:>10.4}  {:>10.4}",
                     worst.time_s[0] * 1e3,
