@@ -328,11 +328,7 @@ pub fn score_line(score: &CandidateScore, mass_g: f64, target_relative: f64) -> 
         let f = &failed.prediction;
         if failed.scene.mass_g == mass_g && failed.scene.frequency_ratio == 1.0 {
             if f.runs < f.planned_runs {
-                format!(
-                    "no ({} of {} runs outside the target: cannot meet it)",
-                    f.runs - f.within_target_runs,
-                    f.runs
-                )
+                cannot_meet(f)
             } else {
                 "no (95th-percentile bound above the target)".into()
             }
@@ -356,11 +352,7 @@ pub fn score_line(score: &CandidateScore, mass_g: f64, target_relative: f64) -> 
             None => "recorded check missing".into(),
         }
     } else if p.runs < p.planned_runs {
-        format!(
-            "no ({} of {} runs outside the target: cannot meet it)",
-            p.runs - p.within_target_runs,
-            p.runs
-        )
+        cannot_meet(p)
     } else {
         "no".into()
     };
@@ -376,6 +368,16 @@ pub fn score_line(score: &CandidateScore, mass_g: f64, target_relative: f64) -> 
         },
         percent(p.rms_g / mass_g),
         p.valid_runs,
+        p.runs
+    )
+}
+
+/// A candidate whose Monte Carlo stopped early: enough runs missed the target that it cannot
+/// meet it.
+fn cannot_meet(p: &Prediction) -> String {
+    format!(
+        "no ({} of {} runs outside the target: cannot meet it)",
+        p.runs - p.within_target_runs,
         p.runs
     )
 }

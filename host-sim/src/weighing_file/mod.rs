@@ -11,7 +11,8 @@
 //! accepted whose method the core would not build.
 
 use crate::montecarlo::Precision;
-use estimator_core::weighing::WeighingMethod;
+use estimator_core::sensor::LoadCellModel;
+use estimator_core::weighing::{OnsetConfig, WeighingMethod};
 
 mod read;
 mod rust_consts;
@@ -43,4 +44,56 @@ fn precision_name(precision: Precision) -> &'static str {
         Precision::F32 => "f32",
         Precision::F64 => "f64",
     }
+}
+
+/// The keys of `[method]` after its kind, in the file's order; `float` spells the float
+/// values (the file and the Rust constant spell them differently).
+fn method_keys(method: &WeighingMethod, float: fn(f64) -> String) -> Vec<(&'static str, String)> {
+    let mut keys = Vec::new();
+    if let Some(order) = method.order() {
+        keys.push(("order", order.to_string()));
+    }
+    keys.push(("decimation", method.decimation().to_string()));
+    match *method {
+        WeighingMethod::Step { forgetting, .. } => keys.push(("forgetting", float(forgetting))),
+        WeighingMethod::ModelBank {
+            candidates,
+            ratio_min,
+            ratio_max,
+            ..
+        } => keys.extend([
+            ("candidates", candidates.to_string()),
+            ("ratio_min", float(ratio_min)),
+            ("ratio_max", float(ratio_max)),
+        ]),
+        WeighingMethod::BiasCompensated { .. } | WeighingMethod::InstrumentalVariable { .. } => {}
+    }
+    keys
+}
+
+/// The keys of `[onset]`, in the file's order (the Rust constant's too); `float` as for
+/// [`method_keys`].
+fn onset_keys(onset: &OnsetConfig, float: fn(f64) -> String) -> Vec<(&'static str, String)> {
+    vec![
+        ("min_empty_samples", onset.min_empty_samples.to_string()),
+        ("drift_sigma", float(onset.drift_sigma)),
+        ("threshold_sigma", float(onset.threshold_sigma)),
+        ("guard_samples", onset.guard_samples.to_string()),
+        ("min_step_sigma", float(onset.min_step_sigma)),
+        ("min_noise_rms", float(onset.min_noise_rms)),
+        ("rail_low", float(onset.rail_low)),
+        ("rail_high", float(onset.rail_high)),
+    ]
+}
+
+/// The keys of `[model]`, in the file's order (its gain is `[scale]`'s); `float` as for
+/// [`method_keys`].
+fn model_keys(model: &LoadCellModel, float: fn(f64) -> String) -> Vec<(&'static str, String)> {
+    vec![
+        ("natural_frequency_hz", float(model.natural_frequency_hz)),
+        ("damping_ratio", float(model.damping_ratio)),
+        ("filter_order", model.filter_order.to_string()),
+        ("filter_cutoff_hz", float(model.filter_cutoff_hz)),
+        ("sample_rate_hz", float(model.sample_rate_hz)),
+    ]
 }

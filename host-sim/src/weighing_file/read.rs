@@ -43,23 +43,6 @@ struct RangeFile {
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct LoadFile {
-    mass_g: f64,
-    frequency_ratio: f64,
-    noise_floor_g: f64,
-    runs: u32,
-    planned_runs: u32,
-    valid_runs: u32,
-    within_target_runs: u32,
-    detection_failures: u32,
-    bias_g: f64,
-    rms_g: f64,
-    p95_g: f64,
-    p95_upper_g: f64,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
 struct MethodFile {
     kind: String,
     precision: String,
@@ -114,39 +97,58 @@ struct TargetFile {
     target_relative: f64,
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct MeasuredFile {
-    runs: u32,
-    planned_runs: u32,
-    valid_runs: u32,
-    within_target_runs: u32,
-    detection_failures: u32,
-    bias_g: f64,
-    rms_g: f64,
-    p95_g: f64,
-    p95_upper_g: f64,
-    recorded_drops: u32,
-    detection_lag_samples: f64,
-    recorded_worst_error_g: f64,
-}
+/// A table that holds a prediction's keys between its own (`[measured]`, each `[[load]]`),
+/// and its [`Prediction`]. The keys stay in the file's order: toml lists them in that order
+/// when it refuses an unknown one.
+macro_rules! prediction_table {
+    ($name:ident { $($before:ident: $b:ty,)* } { $($after:ident: $a:ty,)* }) => {
+        #[derive(Debug, Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct $name {
+            $($before: $b,)*
+            runs: u32,
+            planned_runs: u32,
+            valid_runs: u32,
+            within_target_runs: u32,
+            detection_failures: u32,
+            bias_g: f64,
+            rms_g: f64,
+            p95_g: f64,
+            p95_upper_g: f64,
+            $($after: $a,)*
+        }
 
-/// The core's prediction from a table that holds its keys ([measured] and each [[load]]).
-macro_rules! prediction {
-    ($table:expr) => {
-        Prediction {
-            runs: $table.runs,
-            planned_runs: $table.planned_runs,
-            valid_runs: $table.valid_runs,
-            within_target_runs: $table.within_target_runs,
-            detection_failures: $table.detection_failures,
-            bias_g: $table.bias_g,
-            rms_g: $table.rms_g,
-            p95_g: $table.p95_g,
-            p95_upper_g: $table.p95_upper_g,
+        impl $name {
+            fn prediction(&self) -> Prediction {
+                Prediction {
+                    runs: self.runs,
+                    planned_runs: self.planned_runs,
+                    valid_runs: self.valid_runs,
+                    within_target_runs: self.within_target_runs,
+                    detection_failures: self.detection_failures,
+                    bias_g: self.bias_g,
+                    rms_g: self.rms_g,
+                    p95_g: self.p95_g,
+                    p95_upper_g: self.p95_upper_g,
+                }
+            }
         }
     };
 }
+
+// `[measured]`: the prediction at the calibration mass.
+prediction_table!(MeasuredFile {} {
+    recorded_drops: u32,
+    detection_lag_samples: f64,
+    recorded_worst_error_g: f64,
+});
+
+// One `[[load]]`: a scene of the range and its prediction.
+prediction_table!(LoadFile {
+    mass_g: f64,
+    frequency_ratio: f64,
+    noise_floor_g: f64,
+} {});
 
 /// A refusal naming the file, the key and what was expected.
 fn bad(path: &Path, key: &str, expected: &str) -> anyhow::Error {
@@ -277,13 +279,6 @@ impl ModelFile {
     }
 }
 
-impl MeasuredFile {
-    /// `[measured]`: the prediction at the calibration mass.
-    fn prediction(&self) -> Prediction {
-        prediction!(self)
-    }
-}
-
 impl LoadFile {
     /// One `[[load]]`: a scene of the range and its score.
     fn score(&self) -> LoadScore {
@@ -293,7 +288,7 @@ impl LoadFile {
                 frequency_ratio: self.frequency_ratio,
             },
             noise_floor_g: self.noise_floor_g,
-            prediction: prediction!(self),
+            prediction: self.prediction(),
         }
     }
 }

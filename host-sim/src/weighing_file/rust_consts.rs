@@ -9,7 +9,7 @@ use estimator_core::weighing::{
     LoadCoverage, LoadScore, Prediction, WeighingConfig, WeighingMethod,
 };
 
-use super::{parse_config, precision_name};
+use super::{method_keys, model_keys, onset_keys, parse_config, precision_name};
 use crate::montecarlo::Precision;
 
 /// What the firmware's build script (`firmware/build.rs`) generates from the text of its
@@ -76,32 +76,11 @@ pub fn firmware_constants(path: &Path, text: &str) -> Result<String> {
 /// firmware build script (paths assume `use estimator_core::tuning::*` and
 /// `estimator_core::sensor::LoadCellModel` in scope).
 pub fn rust_const(config: &WeighingConfig) -> String {
-    let o = &config.onset;
-    let onset = literal(
-        "OnsetConfig",
-        &[
-            ("min_empty_samples", o.min_empty_samples.to_string()),
-            ("drift_sigma", float(o.drift_sigma)),
-            ("threshold_sigma", float(o.threshold_sigma)),
-            ("guard_samples", o.guard_samples.to_string()),
-            ("min_step_sigma", float(o.min_step_sigma)),
-            ("min_noise_rms", float(o.min_noise_rms)),
-            ("rail_low", float(o.rail_low)),
-            ("rail_high", float(o.rail_high)),
-        ],
-    );
-    let m = &config.model;
-    let model = literal(
-        "LoadCellModel",
-        &[
-            ("natural_frequency_hz", float(m.natural_frequency_hz)),
-            ("damping_ratio", float(m.damping_ratio)),
-            ("filter_order", m.filter_order.to_string()),
-            ("filter_cutoff_hz", float(m.filter_cutoff_hz)),
-            ("counts_per_gram", float(m.counts_per_gram)),
-            ("sample_rate_hz", float(m.sample_rate_hz)),
-        ],
-    );
+    let onset = literal("OnsetConfig", &onset_keys(&config.onset, float));
+    // The constant's model holds its gain, before the sample rate.
+    let mut model_fields = model_keys(&config.model, float);
+    model_fields.insert(4, ("counts_per_gram", float(config.model.counts_per_gram)));
+    let model = literal("LoadCellModel", &model_fields);
     let fields = [
         ("method", method(&config.method)),
         ("counts_per_gram", float(config.counts_per_gram)),
@@ -166,48 +145,16 @@ fn literal(type_name: &str, fields: &[(&str, String)]) -> String {
 }
 
 fn method(method: &WeighingMethod) -> String {
-    match *method {
-        WeighingMethod::Step {
-            order,
-            decimation,
-            forgetting,
-        } => literal(
-            "WeighingMethod::Step",
-            &[
-                ("order", order.to_string()),
-                ("decimation", decimation.to_string()),
-                ("forgetting", float(forgetting)),
-            ],
-        ),
-        WeighingMethod::BiasCompensated { order, decimation } => literal(
-            "WeighingMethod::BiasCompensated",
-            &[
-                ("order", order.to_string()),
-                ("decimation", decimation.to_string()),
-            ],
-        ),
-        WeighingMethod::InstrumentalVariable { order, decimation } => literal(
-            "WeighingMethod::InstrumentalVariable",
-            &[
-                ("order", order.to_string()),
-                ("decimation", decimation.to_string()),
-            ],
-        ),
-        WeighingMethod::ModelBank {
-            decimation,
-            candidates,
-            ratio_min,
-            ratio_max,
-        } => literal(
-            "WeighingMethod::ModelBank",
-            &[
-                ("decimation", decimation.to_string()),
-                ("candidates", candidates.to_string()),
-                ("ratio_min", float(ratio_min)),
-                ("ratio_max", float(ratio_max)),
-            ],
-        ),
-    }
+    let variant = match method {
+        WeighingMethod::Step { .. } => "Step",
+        WeighingMethod::BiasCompensated { .. } => "BiasCompensated",
+        WeighingMethod::InstrumentalVariable { .. } => "InstrumentalVariable",
+        WeighingMethod::ModelBank { .. } => "ModelBank",
+    };
+    literal(
+        &format!("WeighingMethod::{variant}"),
+        &method_keys(method, float),
+    )
 }
 
 fn prediction(p: &Prediction) -> String {

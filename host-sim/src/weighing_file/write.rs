@@ -4,9 +4,9 @@
 use std::fmt::Write as _;
 
 use estimator_core::tuning::{CandidateScore, Tuned};
-use estimator_core::weighing::{LoadScore, Prediction, WeighingConfig, WeighingMethod};
+use estimator_core::weighing::{LoadScore, Prediction, WeighingConfig};
 
-use super::{kind_name, precision_name, FORMAT, KINDS};
+use super::{kind_name, method_keys, model_keys, onset_keys, precision_name, FORMAT, KINDS};
 use crate::calibrate::{method_spec, percent, scene_name, Outcome};
 use crate::montecarlo::Precision;
 
@@ -63,6 +63,13 @@ fn write_toml(
     w
 }
 
+/// Comment lines.
+fn comments(w: &mut String, lines: &[&str]) {
+    for line in lines {
+        let _ = writeln!(w, "# {line}");
+    }
+}
+
 /// A float as TOML writes it: shortest round-trip form, `inf`/`-inf`/`nan` spelled out.
 fn number(value: f64) -> String {
     if value.is_nan() {
@@ -106,16 +113,15 @@ fn method(
     provenance: Option<&Provenance<'_>>,
 ) {
     let _ = writeln!(w, "[method]");
-    let _ = writeln!(
+    comments(
         w,
-        "# The smallest candidate (model order n first, then the solver: least squares, with"
+        &[
+            "The smallest candidate (model order n first, then the solver: least squares, with",
+            "forgetting, bias-compensated, instrumental variables; then the largest D; the model bank",
+            "last) whose 95th-percentile |error| at the readout is within the target with 95%",
+            "confidence over the Monte Carlo below, and that is within the target on every recorded drop.",
+        ],
     );
-    let _ = writeln!(w, "# forgetting, bias-compensated, instrumental variables; then the largest D; the model bank");
-    let _ = writeln!(
-        w,
-        "# last) whose 95th-percentile |error| at the readout is within the target with 95%"
-    );
-    let _ = writeln!(w, "# confidence over the Monte Carlo below, and that is within the target on every recorded drop.");
     if let Some(prov) = provenance {
         let chosen = prov.calibrated.chosen.index;
         let smaller = prov.scores.iter().filter(|s| s.index < chosen).count();
@@ -141,31 +147,9 @@ fn method(
         "spec = \"{}\"   # the same as host-sim's --method spec",
         method_spec(config, precision)
     );
-    let keys = match config.method {
-        WeighingMethod::Step {
-            order,
-            decimation,
-            forgetting,
-        } => format!(
-            "order = {order}\ndecimation = {decimation}\nforgetting = {}",
-            number(forgetting)
-        ),
-        WeighingMethod::BiasCompensated { order, decimation }
-        | WeighingMethod::InstrumentalVariable { order, decimation } => {
-            format!("order = {order}\ndecimation = {decimation}")
-        }
-        WeighingMethod::ModelBank {
-            decimation,
-            candidates,
-            ratio_min,
-            ratio_max,
-        } => format!(
-            "decimation = {decimation}\ncandidates = {candidates}\nratio_min = {}\nratio_max = {}",
-            number(ratio_min),
-            number(ratio_max)
-        ),
-    };
-    let _ = writeln!(w, "{keys}");
+    for (key, value) in method_keys(&config.method, number) {
+        let _ = writeln!(w, "{key} = {value}");
+    }
 }
 
 /// `[scale]`.
@@ -226,44 +210,31 @@ fn scale(w: &mut String, config: &WeighingConfig) {
 
 /// `[onset]`.
 fn onset(w: &mut String, config: &WeighingConfig) {
-    let o = &config.onset;
     let _ = writeln!(w, "\n[onset]");
-    let _ = writeln!(
+    comments(
         w,
-        "# How the scale must find the landing (estimator-core tuning::onset): two-sided CUSUM on"
+        &[
+            "How the scale must find the landing (estimator-core tuning::onset): two-sided CUSUM on",
+            "the deviation from the zero in noise standard deviations, backed off to the start of the",
+            "excursion. The method was scored started there AND at the landing itself: start it",
+            "anywhere in between (not before the landing). A code at or beyond a rail is saturated.",
+        ],
     );
-    let _ = writeln!(w, "# the deviation from the zero in noise standard deviations, backed off to the start of the");
-    let _ = writeln!(
-        w,
-        "# excursion. The method was scored started there AND at the landing itself: start it"
-    );
-    let _ = writeln!(
-        w,
-        "# anywhere in between (not before the landing). A code at or beyond a rail is saturated."
-    );
-    let _ = writeln!(
-        w,
-        "min_empty_samples = {}\ndrift_sigma = {}\nthreshold_sigma = {}\nguard_samples = {}",
-        o.min_empty_samples,
-        number(o.drift_sigma),
-        number(o.threshold_sigma),
-        o.guard_samples
-    );
-    let _ = writeln!(
-        w,
-        "min_step_sigma = {}\nmin_noise_rms = {}\nrail_low = {}\nrail_high = {}",
-        number(o.min_step_sigma),
-        number(o.min_noise_rms),
-        number(o.rail_low),
-        number(o.rail_high)
-    );
+    for (key, value) in onset_keys(&config.onset, number) {
+        let _ = writeln!(w, "{key} = {value}");
+    }
 }
 
 /// `[model]`.
 fn model(w: &mut String, config: &WeighingConfig, provenance: Option<&Provenance<'_>>) {
     let _ = writeln!(w, "\n[model]");
-    let _ = writeln!(w, "# Identified from the drops (estimator-core identify): the mechanical mode with the load on,");
-    let _ = writeln!(w, "# in series with the known Butterworth low-pass.");
+    comments(
+        w,
+        &[
+            "Identified from the drops (estimator-core identify): the mechanical mode with the load on,",
+            "in series with the known Butterworth low-pass.",
+        ],
+    );
     if let Some(prov) = provenance {
         let i = &prov.calibrated.identified;
         let _ = writeln!(
@@ -272,20 +243,9 @@ fn model(w: &mut String, config: &WeighingConfig, provenance: Option<&Provenance
             i.evaluations, i.noise_rms
         );
     }
-    let m = &config.model;
-    let _ = writeln!(
-        w,
-        "natural_frequency_hz = {}\ndamping_ratio = {}\nfilter_order = {}",
-        number(m.natural_frequency_hz),
-        number(m.damping_ratio),
-        m.filter_order
-    );
-    let _ = writeln!(
-        w,
-        "filter_cutoff_hz = {}\nsample_rate_hz = {}",
-        number(m.filter_cutoff_hz),
-        number(m.sample_rate_hz)
-    );
+    for (key, value) in model_keys(&config.model, number) {
+        let _ = writeln!(w, "{key} = {value}");
+    }
 }
 
 /// `[target]`.
@@ -398,8 +358,13 @@ fn range(w: &mut String, config: &WeighingConfig) {
         "# The target holds, relative to the load ({} of it), at every scene below: the calibration",
         percent(config.target_relative)
     );
-    let _ = writeln!(w, "# mass and `loads` loads spaced geometrically over [min_g, max_g], each with its own synthetic");
-    let _ = writeln!(w, "# drops of the identified model moved to that load by the physical law (stiffness and damping");
+    comments(
+        w,
+        &[
+            "mass and `loads` loads spaced geometrically over [min_g, max_g], each with its own synthetic",
+            "drops of the identified model moved to that load by the physical law (stiffness and damping",
+        ],
+    );
     match loads.platform_mass_g {
         Some(platform) => {
             let _ = writeln!(w, "# fixed) with the platform's moving mass {platform} g.");
