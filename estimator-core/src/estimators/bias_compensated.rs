@@ -83,11 +83,12 @@
 use crate::estimators::consistency::{
     difference_correlation, difference_noise_gain, NoiseReference, ResidualCheck,
 };
-use crate::estimators::input::{check_sample, Decimator, DifferenceWindow};
+use crate::estimators::input::DifferenceWindow;
+use crate::estimators::intake::{estimator_via_intake, Intake};
 use crate::estimators::step::{identifiability_floor, recentre, StepConfig};
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
-use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
+use crate::reading::{ConfigError, Estimator, InvalidReason, Reading};
 
 /// Configuration of a [`BiasCompensatedStepEstimator`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -125,10 +126,9 @@ impl<T: Real> BiasCompensatedConfig<T> {
 #[derive(Clone, Debug)]
 pub struct BiasCompensatedStepEstimator<T: Real, const N: usize> {
     config: BiasCompensatedConfig<T>,
-    inv_gain: T,
+    intake: Intake<T>,
     /// s² in the estimate's unit at the decimated rate: σ²/(G²·D).
     decimated_variance: T,
-    decimator: Decimator<T>,
     differences: DifferenceWindow<T, N, 1>,
     /// The uncompensated least-squares factor, exactly as in `StepEstimator`.
     factor: Factor<T, N, 1>,
@@ -143,11 +143,6 @@ pub struct BiasCompensatedStepEstimator<T: Real, const N: usize> {
     /// The consistency check, when configured with a noise reference (on the compensated
     /// fit's a-posteriori residuals).
     check: Option<ResidualCheck<T>>,
-    samples: u32,
-    fault: Option<InvalidReason>,
-    state: State,
-    estimate: Option<T>,
-    residual: Option<T>,
 }
 
 impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
@@ -163,9 +158,8 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
         }
         Ok(Self {
             config,
-            inv_gain,
+            intake: step.intake(),
             decimated_variance,
-            decimator: Decimator::new(step.decimation),
             differences: DifferenceWindow::new(),
             factor: Factor::new(),
             rows: 0,
@@ -174,11 +168,6 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
             solution: None,
             identifiability: T::ZERO,
             check: step.residual_check(),
-            samples: 0,
-            fault: None,
-            state: State::WarmingUp,
-            estimate: None,
-            residual: None,
         })
     }
 
@@ -220,25 +209,23 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
     }
 
     fn reading(&self) -> Reading<T> {
-        Reading {
-            estimate: self.estimate,
-            samples: self.samples,
-            state: self.state,
-            residual: self.residual,
-        }
+        self.intake.reading()
     }
 
-    fn invalidate(&mut self, reason: InvalidReason) -> Reading<T> {
-        self.state = State::Invalid(reason);
-        self.estimate = None;
-        self.residual = None;
+    fn fresh(&self) -> Result<Self, ConfigError> {
+        Self::new(self.config)
+    }
+
+    /// Mark the current reading invalid; the solution goes with the estimate.
+    fn invalidate(&mut self, reason: InvalidReason) {
         self.solution = None;
-        self.reading()
+        self.intake.invalidate(reason);
     }
 
-    fn latch(&mut self, reason: InvalidReason) -> Reading<T> {
-        self.fault = Some(reason);
-        self.invalidate(reason)
+    /// Invalidate and stay invalid until the reset.
+    fn latch(&mut self, reason: InvalidReason) {
+        self.solution = None;
+        self.intake.latch(reason);
     }
 
     /// The LS factor downdated by the expected noise information, or `None` when a pivot
@@ -363,42 +350,9 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
             self.invalidate(InvalidReason::ModelMismatch);
             return;
         }
-        self.residual = prior_residual;
         self.solution = Some((lead, step));
-        self.state = State::Estimating;
-        self.estimate = Some(step);
+        self.intake.estimating(step, prior_residual);
     }
 }
 
-impl<T: Real, const N: usize> Estimator<T> for BiasCompensatedStepEstimator<T, N> {
-    fn push(&mut self, sample: T) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        let step = &self.config.step;
-        let sample = match check_sample(sample, step.valid_min, step.valid_max) {
-            Ok(sample) => sample,
-            Err(reason) => return self.latch(reason),
-        };
-        if let Some(x) = self.decimator.push(sample * self.inv_gain) {
-            self.update(x);
-        }
-        self.reading()
-    }
-
-    fn push_missing(&mut self) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        self.latch(InvalidReason::MissingSample)
-    }
-
-    fn reset(&mut self) {
-        // The configuration was validated in `new`, so this cannot fail.
-        if let Ok(fresh) = Self::new(self.config) {
-            *self = fresh;
-        }
-    }
-}
+estimator_via_intake!(BiasCompensatedStepEstimator<T, const N>);

@@ -57,12 +57,12 @@
 use crate::estimators::consistency::{
     difference_correlation, difference_noise_gain, NoiseReference, ResidualCheck,
 };
-use crate::estimators::input::{check_sample, Decimator};
+use crate::estimators::intake::{estimator_via_intake, Intake};
 use crate::estimators::step::StepConfig;
 use crate::numerics::factor::{apply, rotation};
 use crate::numerics::real::Real;
 use crate::numerics::square::{Column, SolveError, Square};
-use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
+use crate::reading::{ConfigError, Estimator, InvalidReason, Reading};
 
 /// The ring of past differences holds `HISTORY_BLOCKS · N` values.
 const HISTORY_BLOCKS: usize = 4;
@@ -292,8 +292,7 @@ impl<T: Real, const N: usize> InstrumentFactor<T, N> {
 #[derive(Clone, Debug)]
 pub struct IvStepEstimator<T: Real, const N: usize> {
     config: IvConfig<T>,
-    inv_gain: T,
-    decimator: Decimator<T>,
+    intake: Intake<T>,
     history: DifferenceHistory<T, N>,
     factor: InstrumentFactor<T, N>,
     /// Regression rows folded in (saturating).
@@ -310,11 +309,6 @@ pub struct IvStepEstimator<T: Real, const N: usize> {
     /// The consistency check, when configured with a noise reference (on the a-posteriori
     /// residuals: IV has no standardising row weight).
     check: Option<ResidualCheck<T>>,
-    samples: u32,
-    fault: Option<InvalidReason>,
-    state: State,
-    estimate: Option<T>,
-    residual: Option<T>,
 }
 
 impl<T: Real, const N: usize> IvStepEstimator<T, N> {
@@ -323,8 +317,7 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
         config.validate(N)?;
         Ok(Self {
             config,
-            inv_gain: T::ONE / config.step.gain,
-            decimator: Decimator::new(config.step.decimation),
+            intake: config.step.intake(),
             history: DifferenceHistory::new(),
             factor: InstrumentFactor::new(),
             rows: 0,
@@ -333,11 +326,6 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
             solution: None,
             identifiability: T::ZERO,
             check: config.step.residual_check(),
-            samples: 0,
-            fault: None,
-            state: State::WarmingUp,
-            estimate: None,
-            residual: None,
         })
     }
 
@@ -380,25 +368,23 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
     }
 
     fn reading(&self) -> Reading<T> {
-        Reading {
-            estimate: self.estimate,
-            samples: self.samples,
-            state: self.state,
-            residual: self.residual,
-        }
+        self.intake.reading()
     }
 
-    fn invalidate(&mut self, reason: InvalidReason) -> Reading<T> {
-        self.state = State::Invalid(reason);
-        self.estimate = None;
-        self.residual = None;
+    fn fresh(&self) -> Result<Self, ConfigError> {
+        Self::new(self.config)
+    }
+
+    /// Mark the current reading invalid; the solution goes with the estimate.
+    fn invalidate(&mut self, reason: InvalidReason) {
         self.solution = None;
-        self.reading()
+        self.intake.invalidate(reason);
     }
 
-    fn latch(&mut self, reason: InvalidReason) -> Reading<T> {
-        self.fault = Some(reason);
-        self.invalidate(reason)
+    /// Invalidate and stay invalid until the reset.
+    fn latch(&mut self, reason: InvalidReason) {
+        self.solution = None;
+        self.intake.latch(reason);
     }
 
     fn update(&mut self, x: T) {
@@ -495,12 +481,10 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
             self.invalidate(InvalidReason::ModelMismatch);
             return;
         }
-        self.residual = prior_residual;
         let mut theta = solved.theta;
         theta.last = step;
         self.solution = Some(theta);
-        self.state = State::Estimating;
-        self.estimate = Some(step);
+        self.intake.estimating(step, prior_residual);
         // Move the origin to the estimate: the right-hand side `Qᵀx` moves by the shift
         // times `Qᵀ1`, the system's step column. The shift is the exact difference of the
         // stored origins, as in `step::recentre`.
@@ -516,35 +500,4 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
     }
 }
 
-impl<T: Real, const N: usize> Estimator<T> for IvStepEstimator<T, N> {
-    fn push(&mut self, sample: T) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        let step = &self.config.step;
-        let sample = match check_sample(sample, step.valid_min, step.valid_max) {
-            Ok(sample) => sample,
-            Err(reason) => return self.latch(reason),
-        };
-        if let Some(x) = self.decimator.push(sample * self.inv_gain) {
-            self.update(x);
-        }
-        self.reading()
-    }
-
-    fn push_missing(&mut self) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        self.latch(InvalidReason::MissingSample)
-    }
-
-    fn reset(&mut self) {
-        // The configuration was validated in `new`, so this cannot fail.
-        if let Ok(fresh) = Self::new(self.config) {
-            *self = fresh;
-        }
-    }
-}
+estimator_via_intake!(IvStepEstimator<T, const N>);

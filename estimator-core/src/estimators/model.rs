@@ -25,7 +25,8 @@
 //! error becomes a bias).
 
 use crate::estimators::consistency::{NoiseReference, ResidualCheck};
-use crate::estimators::input::{check_sample, Decimator};
+use crate::estimators::input::Decimator;
+use crate::estimators::intake::{estimator_via_intake, Intake};
 use crate::estimators::step::MAX_DECIMATION;
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
@@ -222,7 +223,8 @@ impl<T: Real, const S: usize> ModelConfig<T, S> {
 pub struct ModelEstimator<T: Real, const S: usize> {
     config: ModelConfig<T, S>,
     block: BlockModel<T, S>,
-    decimator: Decimator<T>,
+    /// Gain 1: the model is in raw units.
+    intake: Intake<T>,
     /// `C·A^k`: the regressor of the initial state.
     observability_row: [T; S],
     /// `s(k)`: the regressor of the step.
@@ -236,11 +238,6 @@ pub struct ModelEstimator<T: Real, const S: usize> {
     /// Whether a failed check flags this estimator's own reading (a bank judges its
     /// interpolated fit instead, and needs every candidate's estimate).
     flags_mismatch: bool,
-    samples: u32,
-    fault: Option<InvalidReason>,
-    state: State,
-    estimate: Option<T>,
-    residual: Option<T>,
 }
 
 impl<T: Real, const S: usize> ModelEstimator<T, S> {
@@ -265,7 +262,12 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
         Ok(Self {
             config,
             block,
-            decimator: Decimator::new(config.decimation),
+            intake: Intake::new(
+                T::ONE,
+                config.valid_min,
+                config.valid_max,
+                Decimator::new(config.decimation),
+            ),
             observability_row: config.model.c,
             step_response: T::ZERO,
             factor: Factor::new(),
@@ -276,11 +278,6 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
                 ResidualCheck::new(reference, T::ONE, config.decimation, T::ONE)
             }),
             flags_mismatch: true,
-            samples: 0,
-            fault: None,
-            state: State::WarmingUp,
-            estimate: None,
-            residual: None,
         })
     }
 
@@ -324,26 +321,22 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
     }
 
     fn reading(&self) -> Reading<T> {
-        Reading {
-            estimate: self.estimate,
-            samples: self.samples,
-            state: self.state,
-            residual: self.residual,
-        }
+        self.intake.reading()
     }
 
-    fn latch(&mut self, reason: InvalidReason) -> Reading<T> {
-        self.fault = Some(reason);
-        self.state = State::Invalid(reason);
-        self.estimate = None;
-        self.residual = None;
-        self.reading()
+    /// A fresh estimator; a bank's candidate stays one that does not flag its own reading.
+    fn fresh(&self) -> Result<Self, ConfigError> {
+        let fresh = Self::new(self.config)?;
+        Ok(Self {
+            flags_mismatch: self.flags_mismatch,
+            ..fresh
+        })
     }
 
     /// Fold the block mean `y` of block m; `observability_row` and `step_response` hold
     /// `C·A^{mD}` and `s(mD)` at the block's first sample.
     fn update(&mut self, y: T) {
-        let had_estimate = self.estimate.is_some();
+        let had_estimate = self.intake.estimate().is_some();
         let block = &self.block;
         let mut row = [T::ZERO; S];
         let mut next = [T::ZERO; S];
@@ -378,7 +371,7 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
 
         let [u] = self.factor.tail_solution();
         if !(u.is_finite() && folded.row_weight.is_finite() && self.residual_sum.is_finite()) {
-            self.latch(InvalidReason::NonFiniteUpdate);
+            self.intake.latch(InvalidReason::NonFiniteUpdate);
             return;
         }
         if (self.rows as usize) < self.state_columns() + 1 {
@@ -388,59 +381,20 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
         let threshold = T::from_f64(100.0) * T::EPSILON * T::from_u32(self.rows);
         let scale = self.step_response * self.step_response;
         if !(weight > threshold * scale) {
-            self.state = State::Invalid(InvalidReason::IllConditioned);
-            self.estimate = None;
-            self.residual = None;
+            self.intake.invalidate(InvalidReason::IllConditioned);
             return;
         }
         if self.flags_mismatch && self.check.as_ref().is_some_and(|c| c.mismatch(|| T::ONE)) {
             // Not latched: the data so far do not fit this model.
-            self.state = State::Invalid(InvalidReason::ModelMismatch);
-            self.estimate = None;
-            self.residual = None;
+            self.intake.invalidate(InvalidReason::ModelMismatch);
             return;
         }
-        self.residual = had_estimate.then_some(folded.residual);
-        self.state = State::Estimating;
-        self.estimate = Some(u);
+        self.intake
+            .estimating(u, had_estimate.then_some(folded.residual));
     }
 }
 
-impl<T: Real, const S: usize> Estimator<T> for ModelEstimator<T, S> {
-    fn push(&mut self, sample: T) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        match check_sample(sample, self.config.valid_min, self.config.valid_max) {
-            Ok(y) => {
-                if let Some(mean) = self.decimator.push(y) {
-                    self.update(mean);
-                }
-            }
-            Err(reason) => return self.latch(reason),
-        }
-        self.reading()
-    }
-
-    fn push_missing(&mut self) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        self.latch(InvalidReason::MissingSample)
-    }
-
-    fn reset(&mut self) {
-        if let Ok(fresh) = Self::new(self.config) {
-            // A bank's candidate stays one that does not flag its own reading.
-            *self = Self {
-                flags_mismatch: self.flags_mismatch,
-                ..fresh
-            };
-        }
-    }
-}
+estimator_via_intake!(ModelEstimator<T, const S>);
 
 /// `K` candidate models run side by side; the reading is that of the model with the
 /// smallest residual sum of squares (the maximum-likelihood choice over the grid under

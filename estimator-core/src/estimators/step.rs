@@ -38,10 +38,11 @@
 //!   map's valid region (`tuning::WeighingConfig::check_region`).
 
 use crate::estimators::consistency::{NoiseReference, ResidualCheck};
-use crate::estimators::input::{check_sample, Decimator, DifferenceWindow};
+use crate::estimators::input::{Decimator, DifferenceWindow};
+use crate::estimators::intake::{estimator_via_intake, Intake};
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
-use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
+use crate::reading::{ConfigError, Estimator, InvalidReason, Reading};
 
 /// The largest block length the decimator accepts.
 pub const MAX_DECIMATION: u16 = 1024;
@@ -156,6 +157,16 @@ impl<T: Real> StepConfig<T> {
         Ok(())
     }
 
+    /// The intake this configuration asks for: gain, valid range and decimation.
+    pub(crate) fn intake(&self) -> Intake<T> {
+        Intake::new(
+            T::ONE / self.gain,
+            self.valid_min,
+            self.valid_max,
+            Decimator::new(self.decimation),
+        )
+    }
+
     /// The consistency check this configuration asks for, over residuals in the estimate's
     /// unit (raw units over the gain).
     pub(crate) fn residual_check(&self) -> Option<ResidualCheck<T>> {
@@ -176,8 +187,7 @@ impl<T: Real> StepConfig<T> {
 #[derive(Clone, Debug)]
 pub struct StepEstimator<T: Real, const N: usize> {
     config: StepConfig<T>,
-    inv_gain: T,
-    decimator: Decimator<T>,
+    intake: Intake<T>,
     differences: DifferenceWindow<T, N, 1>,
     /// Leading columns: the differences; one trailing column: the constant, whose unknown is
     /// the step level.
@@ -193,12 +203,6 @@ pub struct StepEstimator<T: Real, const N: usize> {
     check: Option<ResidualCheck<T>>,
     /// `Σc²` of the latest solution: the next residual's noise in block-mean variances.
     noise_gain: T,
-    samples: u32,
-    /// A fault that broke the data stream or the state; latched until `reset()`.
-    fault: Option<InvalidReason>,
-    state: State,
-    estimate: Option<T>,
-    residual: Option<T>,
 }
 
 impl<T: Real, const N: usize> StepEstimator<T, N> {
@@ -207,8 +211,7 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         config.validate(N)?;
         Ok(Self {
             config,
-            inv_gain: T::ONE / config.gain,
-            decimator: Decimator::new(config.decimation),
+            intake: config.intake(),
             differences: DifferenceWindow::new(),
             factor: Factor::new(),
             rows: 0,
@@ -216,11 +219,6 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
             offset: T::ZERO,
             check: config.residual_check(),
             noise_gain: T::ONE,
-            samples: 0,
-            fault: None,
-            state: State::WarmingUp,
-            estimate: None,
-            residual: None,
         })
     }
 
@@ -277,26 +275,11 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
     }
 
     fn reading(&self) -> Reading<T> {
-        Reading {
-            estimate: self.estimate,
-            samples: self.samples,
-            state: self.state,
-            residual: self.residual,
-        }
+        self.intake.reading()
     }
 
-    /// Mark the current reading invalid; the next determined update may clear it.
-    fn invalidate(&mut self, reason: InvalidReason) -> Reading<T> {
-        self.state = State::Invalid(reason);
-        self.estimate = None;
-        self.residual = None;
-        self.reading()
-    }
-
-    /// Invalidate and stay invalid until `reset()`: the data stream or the state is broken.
-    fn latch(&mut self, reason: InvalidReason) -> Reading<T> {
-        self.fault = Some(reason);
-        self.invalidate(reason)
+    fn fresh(&self) -> Result<Self, ConfigError> {
+        Self::new(self.config)
     }
 
     /// One decimated sample `x` (in the estimate's unit) into the regression.
@@ -310,7 +293,7 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
             self.factor.forget(n, lambda);
         }
         self.effective_rows = self.effective_rows * lambda + T::ONE;
-        let had_estimate = self.estimate.is_some();
+        let had_estimate = self.intake.estimate().is_some();
         let determined_before = self.rows as usize > n;
         let folded = self
             .factor
@@ -320,7 +303,7 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         let step = self.offset + deviation;
         let [weight] = self.factor.tail_weight();
         if !(step.is_finite() && weight.is_finite() && folded.row_weight.is_finite()) {
-            self.latch(InvalidReason::NonFiniteUpdate);
+            self.intake.latch(InvalidReason::NonFiniteUpdate);
             return;
         }
         if (self.rows as usize) < n + 1 {
@@ -345,22 +328,17 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         // `MIN_IDENTIFIABILITY`).
         let threshold = identifiability_floor::<T>() * self.effective_rows;
         if !(weight > threshold) {
-            self.invalidate(InvalidReason::IllConditioned);
+            self.intake.invalidate(InvalidReason::IllConditioned);
             return;
         }
         self.offset = recentre(&mut self.factor, n, self.offset, step);
         if mismatch {
             // Not latched: the data so far do not fit; more rows may (or a reset will).
-            self.invalidate(InvalidReason::ModelMismatch);
+            self.intake.invalidate(InvalidReason::ModelMismatch);
             return;
         }
-        self.residual = if had_estimate {
-            Some(folded.residual)
-        } else {
-            None
-        };
-        self.state = State::Estimating;
-        self.estimate = Some(step);
+        self.intake
+            .estimating(step, had_estimate.then_some(folded.residual));
     }
 }
 
@@ -384,35 +362,4 @@ pub(crate) fn recentre<T: Real, const N: usize, const E: usize>(
     origin
 }
 
-impl<T: Real, const N: usize> Estimator<T> for StepEstimator<T, N> {
-    fn push(&mut self, sample: T) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        let sample = match check_sample(sample, self.config.valid_min, self.config.valid_max) {
-            Ok(sample) => sample,
-            Err(reason) => return self.latch(reason),
-        };
-        if let Some(x) = self.decimator.push(sample * self.inv_gain) {
-            self.update(x);
-        }
-        self.reading()
-    }
-
-    fn push_missing(&mut self) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        self.latch(InvalidReason::MissingSample)
-    }
-
-    fn reset(&mut self) {
-        let config = self.config;
-        // The configuration was validated in `new`, so this cannot fail.
-        if let Ok(fresh) = Self::new(config) {
-            *self = fresh;
-        }
-    }
-}
+estimator_via_intake!(StepEstimator<T, const N>);
