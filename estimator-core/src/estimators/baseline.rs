@@ -24,7 +24,7 @@ use crate::estimators::consistency::{mismatch_threshold, NoiseReference};
 use crate::estimators::input::Decimator;
 use crate::estimators::intake::{estimator_via_intake, Intake};
 use crate::numerics::real::Real;
-use crate::reading::{ConfigError, InvalidReason, Reading};
+use crate::reading::{ConfigError, InvalidReason};
 
 /// Which baseline.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -140,10 +140,6 @@ impl<T: Real, const K: usize> Baseline<T, K> {
             sum += d * d;
         }
         sum / T::from_u32(K as u32 - 1)
-    }
-
-    fn reading(&self) -> Reading<T> {
-        self.intake.reading()
     }
 
     fn fresh(&self) -> Result<Self, ConfigError> {

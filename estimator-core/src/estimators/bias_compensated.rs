@@ -83,12 +83,12 @@
 use crate::estimators::consistency::{
     difference_correlation, difference_noise_gain, NoiseReference, ResidualCheck,
 };
-use crate::estimators::input::DifferenceWindow;
+use crate::estimators::input::{row_residual, DifferenceWindow};
 use crate::estimators::intake::{estimator_via_intake, Intake};
 use crate::estimators::step::{identifiability_floor, recentre, StepConfig};
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
-use crate::reading::{ConfigError, Estimator, InvalidReason, Reading};
+use crate::reading::{ConfigError, InvalidReason};
 
 /// Configuration of a [`BiasCompensatedStepEstimator`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -176,7 +176,7 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
         &self.config
     }
 
-    /// Check the runs after the next [`Estimator::reset`] against `reference` (`None`: no
+    /// Check the runs after the next [`crate::Estimator::reset`] against `reference` (`None`: no
     /// check), as [`crate::StepEstimator::set_noise_reference`].
     pub fn set_noise_reference(
         &mut self,
@@ -200,16 +200,6 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
     /// Samples needed (at the raw rate) before the first estimate: `(2n+1)·D`.
     pub fn warm_up_samples(&self) -> u32 {
         (2 * self.config.step.order as u32 + 1) * self.config.step.decimation as u32
-    }
-
-    /// Push an integer ADC reading, the zero offset removed in integer arithmetic first.
-    pub fn push_counts(&mut self, counts: i32, zero_counts: i32) -> Reading<T> {
-        let centred = counts.saturating_sub(zero_counts);
-        self.push(T::from_i32(centred))
-    }
-
-    fn reading(&self) -> Reading<T> {
-        self.intake.reading()
     }
 
     fn fresh(&self) -> Result<Self, ConfigError> {
@@ -283,13 +273,9 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
             return;
         }
         let phi = self.differences.window();
-        let prior_residual = self.solution.map(|(lead, step)| {
-            let mut prediction = step;
-            for i in 0..n {
-                prediction += phi[i] * lead[i];
-            }
-            x - prediction
-        });
+        let prior_residual = self
+            .solution
+            .map(|(lead, step)| row_residual(x, &phi, &lead, step, n));
         let lambda = self.config.step.forgetting;
         if lambda < T::ONE {
             self.factor.forget(n, lambda);
@@ -335,11 +321,7 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
         // as in `IvStepEstimator`: no standardising weight for the compensated equations).
         let mismatch = match self.check.as_mut() {
             Some(check) => {
-                let mut prediction = step;
-                for i in 0..n {
-                    prediction += phi[i] * lead[i];
-                }
-                let residual = x - prediction;
+                let residual = row_residual(x, &phi, &lead, step, n);
                 check.push(residual * residual, difference_noise_gain::<T, 1>(&lead, n));
                 check.mismatch(|| difference_correlation::<T, 1>(&lead, n))
             }

@@ -30,7 +30,7 @@ use crate::estimators::input::Decimator;
 use crate::estimators::intake::{estimator_via_intake, Intake};
 use crate::estimators::step::{identifiability_floor, StepConfig};
 use crate::numerics::real::Real;
-use crate::reading::{ConfigError, InvalidReason, Reading};
+use crate::reading::{ConfigError, InvalidReason};
 
 /// Covariance-form RLS for the data-driven step estimator, capacity `N` (order ≤ N).
 /// `P` must be `N + 1` (the number of unknowns); checked at construction.
@@ -148,10 +148,6 @@ impl<T: Real, const N: usize, const P: usize> CovarianceStepEstimator<T, N, P> {
             pivots[i] = pivot;
         }
         true
-    }
-
-    fn reading(&self) -> Reading<T> {
-        self.intake.reading()
     }
 
     fn fresh(&self) -> Result<Self, ConfigError> {

@@ -16,6 +16,23 @@ pub(crate) fn check_sample<T: Real>(sample: T, min: T, max: T) -> Result<T, Inva
     Ok(sample)
 }
 
+/// What the row `[φ, 1]` leaves of its target `x` under the solution `(lead, constant)`:
+/// `x − (constant + Σ φ_i·lead_i)`, summed in that order.
+#[inline]
+pub(crate) fn row_residual<T: Real, const N: usize>(
+    x: T,
+    phi: &[T; N],
+    lead: &[T; N],
+    constant: T,
+    n: usize,
+) -> T {
+    let mut prediction = constant;
+    for i in 0..n {
+        prediction += phi[i] * lead[i];
+    }
+    x - prediction
+}
+
 /// Averages non-overlapping blocks of `D` samples: the anti-alias pre-filter and the
 /// decimation of the multi-rate data-driven estimator, in one.
 ///

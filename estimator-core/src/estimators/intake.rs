@@ -119,24 +119,33 @@ impl<T: Real> Intake<T> {
 /// Implements [`crate::Estimator`] for an estimator built on an [`Intake`], written once:
 /// `push` hands each block mean the intake passes to the estimator's `update`, `push_missing`
 /// only counts and latches, and `reset` replaces the estimator by `fresh()` (a new one with
-/// the same configuration, which was validated when it was built, so it cannot fail).
+/// the same configuration, which was validated when it was built, so it cannot fail). Both
+/// answer with the intake's reading, or with `reading: f` for an estimator that adds to it.
 ///
 /// The estimator provides a field `intake: Intake<T>` and the inherent methods
-/// `update(&mut self, x: T)`, `reading(&self) -> Reading<T>` and
-/// `fresh(&self) -> Result<Self, ConfigError>`. Use: `estimator_via_intake!(Name<T, const N>);`
+/// `update(&mut self, x: T)` and `fresh(&self) -> Result<Self, ConfigError>`.
+/// Use: `estimator_via_intake!(Name<T, const N>);`
 macro_rules! estimator_via_intake {
     ($name:ident<T $(, const $size:ident)*>) => {
-        impl<T: Real $(, const $size: usize)*> crate::reading::Estimator<T> for $name<T $(, $size)*> {
-            fn push(&mut self, sample: T) -> crate::reading::Reading<T> {
+        $crate::estimators::intake::estimator_via_intake!(
+            $name<T $(, const $size)*>,
+            reading: |estimator: &Self| estimator.intake.reading()
+        );
+    };
+    ($name:ident<T $(, const $size:ident)*>, reading: $reading:expr) => {
+        impl<T: Real $(, const $size: usize)*> $crate::reading::Estimator<T>
+            for $name<T $(, $size)*>
+        {
+            fn push(&mut self, sample: T) -> $crate::reading::Reading<T> {
                 if let Some(x) = self.intake.take(sample) {
                     self.update(x);
                 }
-                self.reading()
+                ($reading)(self)
             }
 
-            fn push_missing(&mut self) -> crate::reading::Reading<T> {
+            fn push_missing(&mut self) -> $crate::reading::Reading<T> {
                 self.intake.take_missing();
-                self.reading()
+                ($reading)(self)
             }
 
             fn reset(&mut self) {

@@ -57,12 +57,13 @@
 use crate::estimators::consistency::{
     difference_correlation, difference_noise_gain, NoiseReference, ResidualCheck,
 };
+use crate::estimators::input::row_residual;
 use crate::estimators::intake::{estimator_via_intake, Intake};
 use crate::estimators::step::StepConfig;
 use crate::numerics::factor::{apply, rotation};
 use crate::numerics::real::Real;
-use crate::numerics::square::{Column, SolveError, Square};
-use crate::reading::{ConfigError, Estimator, InvalidReason, Reading};
+use crate::numerics::square::{Column, SolveError, Solved, Square};
+use crate::reading::{ConfigError, InvalidReason};
 
 /// The ring of past differences holds `HISTORY_BLOCKS · N` values.
 const HISTORY_BLOCKS: usize = 4;
@@ -334,7 +335,7 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
         &self.config
     }
 
-    /// Check the runs after the next [`Estimator::reset`] against `reference` (`None`: no
+    /// Check the runs after the next [`crate::Estimator::reset`] against `reference` (`None`: no
     /// check), as [`crate::StepEstimator::set_noise_reference`].
     pub fn set_noise_reference(
         &mut self,
@@ -359,16 +360,6 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
     pub fn warm_up_samples(&self) -> u32 {
         let step = &self.config.step;
         (2 * step.order as u32 + self.config.instrument_delay as u32 + 1) * step.decimation as u32
-    }
-
-    /// Push an integer ADC reading, the zero offset removed in integer arithmetic first.
-    pub fn push_counts(&mut self, counts: i32, zero_counts: i32) -> Reading<T> {
-        let centred = counts.saturating_sub(zero_counts);
-        self.push(T::from_i32(centred))
-    }
-
-    fn reading(&self) -> Reading<T> {
-        self.intake.reading()
     }
 
     fn fresh(&self) -> Result<Self, ConfigError> {
@@ -396,13 +387,9 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
         }
         let phi = self.history.window(n, 0);
         let z = self.history.window(n, delay);
-        let prior_residual = self.solution.map(|theta| {
-            let mut prediction = theta.last;
-            for i in 0..n {
-                prediction += phi[i] * theta.lead[i];
-            }
-            x - prediction
-        });
+        let prior_residual = self
+            .solution
+            .map(|theta| row_residual(x, &phi, &theta.lead, theta.last, n));
         let lambda = self.config.step.forgetting;
         if lambda < T::ONE {
             self.factor.forget(n, lambda);
@@ -417,31 +404,8 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
         if (self.rows as usize) < n + 1 {
             return;
         }
-        // ‖e_uᵀM⁻¹‖² with M = D^{1/2}·system: row i of `system` carries weight 1/D_i.
-        let mut row_weight = Column::<T, N>::zero();
-        for i in 0..=n {
-            let d = if i < n {
-                self.factor.lead_weight[i]
-            } else {
-                self.factor.constant_weight
-            };
-            if !(d > T::ZERO) {
-                self.invalidate(InvalidReason::IllConditioned);
-                return;
-            }
-            row_weight.set(i, n, T::ONE / d);
-        }
-        let solved = match self.factor.system.solve(n, self.factor.rhs, row_weight) {
-            Ok(solved) => solved,
-            Err(SolveError::NonFinite) => {
-                self.latch(InvalidReason::NonFiniteUpdate);
-                return;
-            }
-            Err(SolveError::Singular) => {
-                self.identifiability = T::ZERO;
-                self.invalidate(InvalidReason::IllConditioned);
-                return;
-            }
+        let Some(solved) = self.solve(n) else {
+            return;
         };
         let step = self.offset + solved.theta.last;
         let identifiability = T::ONE / (self.effective_rows * solved.last_row_norm2);
@@ -465,12 +429,8 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
         // towards not flagging while few rows are in.
         let mismatch = match self.check.as_mut() {
             Some(check) => {
-                let mut prediction = step;
-                for i in 0..n {
-                    prediction += phi[i] * solved.theta.lead[i];
-                }
-                let residual = x - prediction;
                 let lead = &solved.theta.lead;
+                let residual = row_residual(x, &phi, lead, step, n);
                 check.push(residual * residual, difference_noise_gain::<T, 1>(lead, n));
                 check.mismatch(|| difference_correlation::<T, 1>(lead, n))
             }
@@ -485,9 +445,44 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
         theta.last = step;
         self.solution = Some(theta);
         self.intake.estimating(step, prior_residual);
-        // Move the origin to the estimate: the right-hand side `Qᵀx` moves by the shift
-        // times `Qᵀ1`, the system's step column. The shift is the exact difference of the
-        // stored origins, as in `step::recentre`.
+        self.recentre(n, step);
+    }
+
+    /// Solve the system for the rows so far; `None` after invalidating (or latching, when
+    /// the system is not finite).
+    fn solve(&mut self, n: usize) -> Option<Solved<T, N>> {
+        // ‖e_uᵀM⁻¹‖² with M = D^{1/2}·system: row i of `system` carries weight 1/D_i.
+        let mut row_weight = Column::<T, N>::zero();
+        for i in 0..=n {
+            let d = if i < n {
+                self.factor.lead_weight[i]
+            } else {
+                self.factor.constant_weight
+            };
+            if !(d > T::ZERO) {
+                self.invalidate(InvalidReason::IllConditioned);
+                return None;
+            }
+            row_weight.set(i, n, T::ONE / d);
+        }
+        match self.factor.system.solve(n, self.factor.rhs, row_weight) {
+            Ok(solved) => Some(solved),
+            Err(SolveError::NonFinite) => {
+                self.latch(InvalidReason::NonFiniteUpdate);
+                None
+            }
+            Err(SolveError::Singular) => {
+                self.identifiability = T::ZERO;
+                self.invalidate(InvalidReason::IllConditioned);
+                None
+            }
+        }
+    }
+
+    /// Move the origin to the estimate `step`: the right-hand side `Qᵀx` moves by the shift
+    /// times `Qᵀ1`, the system's step column. The shift is the exact difference of the
+    /// stored origins, as in `step::recentre`.
+    fn recentre(&mut self, n: usize, step: T) {
         let origin = self.offset + (step - self.offset);
         let applied = origin - self.offset;
         if applied != T::ZERO {

@@ -281,7 +281,7 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
         })
     }
 
-    /// Check the runs after the next [`Estimator::reset`] against `reference` (`None`: no
+    /// Check the runs after the next [`crate::Estimator::reset`] against `reference` (`None`: no
     /// check), as [`crate::StepEstimator::set_noise_reference`].
     pub fn set_noise_reference(
         &mut self,
@@ -318,10 +318,6 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
             InitialState::Unknown => S,
             InitialState::AtRest => 0,
         }
-    }
-
-    fn reading(&self) -> Reading<T> {
-        self.intake.reading()
     }
 
     /// A fresh estimator; a bank's candidate stays one that does not flag its own reading.
@@ -447,7 +443,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
         })
     }
 
-    /// Check the runs after the next [`Estimator::reset`] against `reference` (`None`: no
+    /// Check the runs after the next [`crate::Estimator::reset`] against `reference` (`None`: no
     /// check): every candidate takes it, and only a bank of one flags (see the type's docs).
     pub fn set_noise_reference(
         &mut self,

@@ -161,4 +161,4 @@ impl<T: Real, const N: usize> RampEstimator<T, N> {
     }
 }
 
-estimator_via_intake!(RampEstimator<T, const N>);
+estimator_via_intake!(RampEstimator<T, const N>, reading: Self::reading);

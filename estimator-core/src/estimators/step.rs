@@ -42,7 +42,7 @@ use crate::estimators::input::{Decimator, DifferenceWindow};
 use crate::estimators::intake::{estimator_via_intake, Intake};
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
-use crate::reading::{ConfigError, Estimator, InvalidReason, Reading};
+use crate::reading::{ConfigError, InvalidReason};
 
 /// The largest block length the decimator accepts.
 pub const MAX_DECIMATION: u16 = 1024;
@@ -227,7 +227,7 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         &self.config
     }
 
-    /// Check the runs after the next [`Estimator::reset`] against `reference` (`None`: no
+    /// Check the runs after the next [`crate::Estimator::reset`] against `reference` (`None`: no
     /// check); the current run keeps the check it started with. A reference that is not
     /// finite and positive is refused and nothing changes.
     pub fn set_noise_reference(
@@ -265,17 +265,6 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
     /// Samples needed (at the raw rate) before the first estimate: `(2n+1)·D`.
     pub fn warm_up_samples(&self) -> u32 {
         (2 * self.config.order as u32 + 1) * self.config.decimation as u32
-    }
-
-    /// Push an integer ADC reading: the zero offset is removed in integer arithmetic
-    /// before the conversion to `T`, so no precision is lost to a large offset.
-    pub fn push_counts(&mut self, counts: i32, zero_counts: i32) -> Reading<T> {
-        let centred = counts.saturating_sub(zero_counts);
-        self.push(T::from_i32(centred))
-    }
-
-    fn reading(&self) -> Reading<T> {
-        self.intake.reading()
     }
 
     fn fresh(&self) -> Result<Self, ConfigError> {
