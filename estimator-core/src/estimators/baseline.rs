@@ -10,9 +10,9 @@
 //!   low-pass of length `K·block`) while it is stable.
 //!
 //! ## The band and the noise (found by the stability map)
-//! A fixed band is loose when the noise is low: at 80 dB the 0.5 g band of the defaults is
-//! 300 block-mean standard deviations, so the pan is called stable while it still rings, and
-//! the settled average keeps that ringing (13–14× the Cramér–Rao bound at 1.5 s). Given the
+//! A fixed band is loose when the noise is low: it is then many block-mean standard
+//! deviations wide, so the pan is called stable while it still rings, and the settled
+//! average keeps that ringing. Given the
 //! noise metered at tare ([`BaselineConfig::noise_reference`], at `D = block`), the `K` block
 //! means must also be consistent with a constant load: their sample variance over the block
 //! means' noise variance must stay below the threshold of `crate::estimators::consistency` (the F
@@ -65,8 +65,8 @@ pub struct Baseline<T: Real, const K: usize> {
     blocks_filled: usize,
     next_block: usize,
     /// Σ (x − `settled_origin`) since the reading became stable: deviations, not the load,
-    /// so that a long `f32` sum keeps the precision of the deviations (the stability map
-    /// found the `f32` settled average 11% worse than `f64` at 70 dB when it summed loads).
+    /// so that a long `f32` sum keeps the precision of the deviations (summing loads, the
+    /// stability map found the `f32` settled average measurably worse than `f64`).
     settled_sum: T,
     settled_origin: T,
     settled_count: u32,

@@ -36,50 +36,34 @@
 //! about `√(2/N_eff)` of itself, so a share at or below `max(√(2/N_eff), 100·ε)` is not
 //! resolved from zero (at or below zero the compensated matrix is indefinite): the reading
 //! is `Invalid(IllConditioned)`, not latched. Without this test the readings kept on the
-//! load cell were unbounded (RMS 3.7 g at D = 12 where LS has 0.024 g). The step level's
+//! load cell were unbounded. The step level's
 //! identifiability is the downdated trailing pivot over `N_eff`, with `StepEstimator`'s
 //! rounding-level test.
 //!
 //! Cost per decimated sample: the LS fold (as `StepEstimator`) plus the downdate,
 //! `Σ_j (n+2−j)²/2 ≈ (n+1)³/6` rotation applications (≈ 85 at n = 7) and an `O(n²)` back
 //! substitution for the a-priori residual: roughly 3× `StepEstimator`.
-//! Memory: `BiasCompensatedStepEstimator<f32, 7>` is 464 bytes, `IvStepEstimator<f32, 7>`
-//! 808, `NoiseMeter<f32>` 36 (printed by `tests/eiv_bad_input.rs`).
+//! Memory: `tests/eiv_bad_input.rs` prints the sizes.
 //!
 //! With `noise_variance = 0` it is the least-squares estimator, estimate for estimate.
 //!
-//! ## Results: LS vs IV vs BCLS, and the verdict
+//! ## LS vs IV vs BCLS, and the verdict
 //! `cargo test --release -p estimator-core --test eiv -- --ignored --nocapture study_table`
-//! prints this table: the load cell of `tests/support` (5th order, 4 kHz), 138.32 g at
-//! 73.2547 counts/g, white noise σ = 0.445 g (50 dB), readout 100 ms after the drop, 2,000
-//! runs, BCLS given the true σ², IV with the default delay `n + 1` and floor 0.1. Bias ± its
-//! standard error and RMS in grams over the valid readings; CRLB at 100 ms ≈ 0.020 g.
+//! prints the comparison on the load cell of `tests/support`; `tests/eiv.rs` pins each of
+//! these statements.
 //!
-//! | n | D  | LS bias / RMS  | IV bias / RMS (valid)    | BCLS bias / RMS (valid)   |
-//! |---|----|----------------|--------------------------|---------------------------|
-//! | 7 | 1  | −4.34 / 4.34   | −1.10 ± 0.03 / 1.65 (97%)| −3.53 ± 0.03 / 3.54 (3%)  |
-//! | 7 | 12 | −0.0002 / 0.0243 | −0.0001 / 0.0313 (91%) | +0.0006 / 0.0282 (2%)     |
-//! | 5 | 1  | −5.79 / 5.80   | −1.91 ± 0.07 / 3.75 (97%)| −4.07 ± 0.04 / 4.11 (11%) |
-//! | 5 | 12 | +0.0055 / 0.0249 | −0.0000 / 0.0385 (93%) | +0.0013 / 0.0253 (12%)    |
-//!
-//! With the thesis's delay `2n + 1` at D = 1, IV's bias falls to +0.08 ± 0.03 g (n = 7, RMS
-//! 1.49 g, median |error| 0.38 g); at D = 12 the longer delay only adds variance.
-//!
-//! - **Thesis scene (eq. 4.38, N = 200, 30–50 dB): both win.** The LS bias (+8.6e-5 at 30 dB,
-//!   54 standard errors) is removed by IV and BCLS (≤ 2 standard errors), at the same
-//!   variance (sd ratio 1.00–1.03), every reading valid; BCLS with σ² metered at tare from
-//!   200 samples does as well. RMS gains are small (−4% at 30 dB, −1% at 40 dB).
-//! - **Load cell at D = 1: LS is biased by 4–6 g (EIV bias, 214× the CRLB).** IV removes
-//!   most of it and, with its weak-instrument floor, beats LS in RMS (1.6 vs 4.3 g), but
-//!   stays ~80× the CRLB. BCLS is refused in 89–97% of runs (noise-only directions in the
-//!   regressor space); what it keeps still carries most of the bias.
-//! - **Load cell at D = 12: LS is at 1.2× the CRLB with no resolved bias: both lose.** IV adds
-//!   variance (1.3–1.6× the LS RMS); BCLS is refused in 88–98% of runs and matches LS where
-//!   it is kept.
-//! - **Verdict:** for the load cell, decimated LS (`StepEstimator`, D ≈ 12) is two orders of
-//!   magnitude better than either variant at full rate; keep IV and BCLS for
-//!   well-excited, low-order sensors like the thesis scene, or as a bias check. The tests
-//!   in `tests/eiv.rs` pin each of these statements.
+//! - **Thesis scene (eq. 4.38, second order, low SNR): both win.** IV and BCLS remove the
+//!   LS bias at the same variance, every reading valid; BCLS with σ² metered at tare does as
+//!   well.
+//! - **Load cell at D = 1: LS carries the errors-in-variables bias.** IV removes most of it
+//!   and, with its weak-instrument floor, beats LS in RMS, but stays far above the CRLB.
+//!   BCLS is refused in most runs (noise-only directions in the regressor space); what it
+//!   keeps still carries most of the bias.
+//! - **Load cell at D ≈ 12: LS is near the CRLB with no resolved bias: both lose.** IV adds
+//!   variance; BCLS is refused in most runs and matches LS where it is kept.
+//! - **Verdict:** for the load cell, decimated LS (`StepEstimator`, D ≈ 12) is far better
+//!   than either variant at full rate; keep IV and BCLS for well-excited, low-order sensors
+//!   like the thesis scene, or as a bias check.
 use crate::estimators::consistency::{
     difference_correlation, difference_noise_gain, NoiseReference, ResidualCheck,
 };

@@ -33,7 +33,7 @@
 //! Cost per decimated sample, `p = n + 1`: the fold ≈ `1.5·n²` Givens applications (each
 //! 2 multiplies, 2 adds; ≈ 75 at n = 7, about twice the least-squares fold), then the solve
 //! ≈ `p³/3 + 4p²` multiply–adds (≈ 430 at n = 7). Roughly 5× the cost of `StepEstimator`.
-//! Memory: `IvStepEstimator<f32, 7>` is 808 bytes (printed by `tests/eiv_bad_input.rs`).
+//! Memory: printed by `tests/eiv_bad_input.rs`.
 //!
 //! ## Identifiability and flags
 //! With white equation error the IV estimate's covariance is `σ²·M⁻¹M⁻ᵀ`, so the noise gain
@@ -44,15 +44,14 @@
 //! non-finite state latches `NonFiniteUpdate`; bad samples latch as in `StepEstimator`.
 //!
 //! ## Where it wins and where it loses
-//! Measured by `tests/eiv.rs`; the table and the verdict are in [`crate::estimators::bias_compensated`]'s
+//! Pinned by `tests/eiv.rs`; the verdict is in [`crate::estimators::bias_compensated`]'s
 //! docs. On the thesis's second-order scene IV removes the LS bias at the same variance
 //! (thesis §4.2.4). On the 4 kHz load cell at D = 1 the delayed differences are weak, noisy
-//! instruments: IV removes most of the 4–6 g LS bias, but without the identifiability floor
-//! a few readings in a hundred are off by tens to hundreds of grams (RMS 30 g at n = 7); with
-//! the default floor 3% of readings are flagged and the rest beat LS (1.6 vs 4.3 g RMS), still
-//! ~80× the Cramér–Rao bound. At D = 12 LS has no bias left to remove and IV only adds
-//! variance (1.3–1.6× the LS RMS). A delay of `2n + 1` helps at D = 1 (median error 0.38 g
-//! against 1.1 g) and hurts at D = 12.
+//! instruments: IV removes most of the LS bias, but without the identifiability floor a few
+//! readings in a hundred are off by orders of magnitude; with the default floor a few
+//! percent of readings are flagged and the rest beat LS, still far above the Cramér–Rao
+//! bound. At D ≈ 12 LS has no bias left to remove and IV only adds variance. A delay of
+//! `2n + 1` helps at D = 1 and hurts at D ≈ 12.
 
 use crate::estimators::consistency::{
     difference_correlation, difference_noise_gain, NoiseReference, ResidualCheck,

@@ -137,14 +137,12 @@ fn multiply<T: Real, const S: usize>(x: &[[T; S]; S], y: &[[T; S]; S]) -> [[T; S
 
 /// What the estimator assumes about the sensor's state at its first sample.
 ///
-/// Measured on host-sim's reference cell at 50 dB, 100 ms after the drop, with a model
-/// identified at calibration (`cargo test --release -p host-sim --test model_based --
-/// --ignored --nocapture`): `AtRest` with the exact onset reaches 1.01× the Cramér–Rao
-/// bound of known model, onset and tare; `Unknown` 1.18× (its own bound, with the initial
-/// state unknown, is 1.16×). But one sample of onset error biases `AtRest` by 0.22–0.26%
-/// (ten times the bound's 0.0145%), and in a bank `AtRest` loses up to 1.43× when the load
-/// falls between candidates 2% apart, while `Unknown` stays at 1.18× in both cases. The
-/// firmware, which finds the onset by detecting the change, should use `Unknown`.
+/// `AtRest` with the exact onset meets the Cramér–Rao bound of known model, onset and tare;
+/// `Unknown` meets its own, slightly higher bound (the initial state unknown). But an onset
+/// error of one sample biases `AtRest` far beyond its bound, and in a bank `AtRest` loses
+/// when the load falls between candidates, while `Unknown` does not (host-sim's
+/// `model_based` test prints the figures). The firmware, which finds the onset by
+/// detecting the change, should use `Unknown`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum InitialState {
@@ -153,7 +151,7 @@ pub enum InitialState {
     Unknown,
     /// Zero: the first sample is the onset of a step onto a sensor at rest (the tare
     /// removed). One unknown, so the same samples carry more information on `u`; an onset
-    /// off by `d` samples is a model error, a bias of about `d` × 0.25% on the reference cell.
+    /// off by `d` samples is a model error, a bias that grows with `d`.
     AtRest,
 }
 
@@ -398,21 +396,17 @@ estimator_via_intake!(ModelEstimator<T, const S>);
 /// ordered (e.g. by resonance frequency). With `K ≥ 3`, a best fit on the first or last
 /// candidate is flagged [`InvalidReason::OutsideModelRange`] (never a silently biased number).
 ///
-/// Memory: `K` estimators, about 21 KB in `f32` for `S = 5`, `K = 33` (printed by host-sim's
-/// `model_based` figures).
+/// Memory: `K` estimators (host-sim's `model_based` figures print the size).
 ///
 /// ## The consistency check
 /// With a noise reference in its configurations, a bank of one candidate (`K = 1`, one model
 /// at the calibration mass) flags `Invalid(ModelMismatch)` as a [`ModelEstimator`] does: off
-/// its load its residuals are far beyond the noise (the stability map's silent 13–10⁴× the
-/// bound). A grid (`K ≥ 3`) does not check, because the test cannot separate its failure
-/// from its valid region. Measured on host-sim's reference cell: the residuals of the
-/// interpolated model exceed the noise's in the valid region too (the 2% grid of
-/// the firmware's identified bank from 0.2 s on at 2× the calibration mass, 50 dB, where its
-/// estimate stays at 0.028 g at 100 ms; every load at 70 dB by 1.5 s). The bias of the grid
-/// at high SNR (19× the bound at ×0.9, 70 dB) comes from the vertex of the residual
-/// parabola, and a Newton estimate of the interpolation's remainder did not find it. What
-/// fixes it is a denser grid (`K = 65`: 5.0× at the same point), chosen at calibration.
+/// its load its residuals are far beyond the noise, where its estimate would be silently
+/// biased. A grid (`K ≥ 3`) does not check, because the test cannot separate its failure
+/// from its valid region: the residuals of the interpolated model exceed the noise's in the
+/// valid region too, at high SNR and late in a drop. The bias of the grid at high SNR comes
+/// from the vertex of the residual parabola, and a Newton estimate of the interpolation's
+/// remainder did not find it. What fixes it is a denser grid, chosen at calibration.
 #[derive(Clone, Debug)]
 pub struct ModelBank<T: Real, const S: usize, const K: usize> {
     models: [ModelEstimator<T, S>; K],
@@ -483,9 +477,9 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
         let centre = readings[best];
         if best == 0 || best + 1 == K {
             // With three or more candidates a best fit on the edge means the truth may lie
-            // beyond it, where every candidate is biased (the stability map: 74× and 31× the
-            // CRLB at 100 ms, 50 dB, for resonances 1.4× and 1.5× the calibrated one with a
-            // ±30% bank): flag it rather than report the edge model's biased estimate. Not
+            // beyond it, where every candidate is biased (the stability map found resonances
+            // beyond a bank's range read far off the CRLB): flag it rather than report the
+            // edge model's biased estimate. Not
             // latched: early in a drop the fit may sit at an edge and move inwards.
             if K >= 3 && centre.estimate.is_some() {
                 return Reading {

@@ -23,9 +23,9 @@
 //! - A reading right where the fit becomes determined can be noise amplified by orders of
 //!   magnitude: readings with an identifiability at or below [`MIN_IDENTIFIABILITY`] are
 //!   `Invalid(IllConditioned)` (test `tests/stability.rs`).
-//! - In `f32` over long runs the step level stalled: stored as 138 g it moves in steps of
-//!   1.5e-5 g, and updates of `1/N_eff` of a deviation fell below that (up to 0.2 g off
-//!   after 10⁶ samples at λ = 1, D = 1). The targets are therefore folded relative to an
+//! - In `f32` over long runs the step level stalled: stored as the load itself, updates of
+//!   `1/N_eff` of a deviation fall below the load's rounding step. The targets are therefore
+//!   folded relative to an
 //!   origin that follows the estimate (`offset`), so the factor holds deviations, not the
 //!   load (`Factor::shift_target`); the reading adds the origin back.
 //! - Silent without a noise reference: the bias of an order below the sensor's (n = 1, 2 at
@@ -51,9 +51,7 @@ pub const MAX_DECIMATION: u16 = 1024;
 /// and the difference columns) is not above this floor are `Invalid(IllConditioned)`: their
 /// noise gain is more than √1000 ≈ 32 times that of a plain mean of the same rows. The
 /// stability map found such readings right where a fit becomes determined (`n + 1` rows, no
-/// redundancy): at n = 7, D = 16, 50 dB the first reading had an RMS error of 0.9 g and up
-/// to 12 g over 200 runs, at identifiabilities of 2e-6 to 1e-4, against a median of 0.3
-/// there and of 0.7–1 at 100 ms; one row later its RMS was 0.039 g.
+/// redundancy), with errors orders of magnitude above those of the next row's.
 pub const MIN_IDENTIFIABILITY: f64 = 1e-3;
 
 /// The identifiability floor of `T`: [`MIN_IDENTIFIABILITY`], or the rounding level
