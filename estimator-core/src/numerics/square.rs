@@ -114,12 +114,14 @@ impl<T: Real, const N: usize> Square<T, N> {
     pub(crate) fn solve(
         mut self,
         n: usize,
-        mut rhs: Column<T, N>,
-        mut row_weight: Column<T, N>,
+        rhs: Column<T, N>,
+        row_weight: Column<T, N>,
     ) -> Result<Solved<T, N>, SolveError> {
-        self.scale_rows(n, &mut rhs, &mut row_weight)?;
+        let mut rows = RowSide { rhs, row_weight };
+        self.scale_rows(n, &mut rows)?;
         let column_scale = self.scale_columns(n)?;
-        self.factor_lu(n, &mut rhs, &mut row_weight)?;
+        self.factor_lu(n, &mut rows)?;
+        let RowSide { rhs, row_weight } = rows;
         // U y = (L⁻¹ P b), then θ = S_c y.
         let p = n + 1;
         let mut theta = Column::<T, N>::zero();
@@ -141,12 +143,8 @@ impl<T: Real, const N: usize> Square<T, N> {
 
     /// Scale each row (and its right-hand side) to a largest entry of one; refuse a matrix or
     /// right-hand side that is not finite, or a zero row.
-    fn scale_rows(
-        &mut self,
-        n: usize,
-        rhs: &mut Column<T, N>,
-        row_weight: &mut Column<T, N>,
-    ) -> Result<(), SolveError> {
+    fn scale_rows(&mut self, n: usize, rows: &mut RowSide<T, N>) -> Result<(), SolveError> {
+        let RowSide { rhs, row_weight } = rows;
         let p = n + 1;
         for i in 0..p {
             let mut largest = T::ZERO;
@@ -198,12 +196,8 @@ impl<T: Real, const N: usize> Square<T, N> {
 
     /// `P M = L U` in place (L strictly below the diagonal, unit diagonal implied), applying
     /// L⁻¹ P to `rhs` and P to the row weights.
-    fn factor_lu(
-        &mut self,
-        n: usize,
-        rhs: &mut Column<T, N>,
-        row_weight: &mut Column<T, N>,
-    ) -> Result<(), SolveError> {
+    fn factor_lu(&mut self, n: usize, rows: &mut RowSide<T, N>) -> Result<(), SolveError> {
+        let RowSide { rhs, row_weight } = rows;
         let p = n + 1;
         // Every entry is now at most one in magnitude; a pivot at the rounding level of the
         // elimination (ε·(n+1)) means the matrix is numerically singular.
@@ -274,6 +268,12 @@ impl<T: Real, const N: usize> Square<T, N> {
         }
         last_row_norm2
     }
+}
+
+/// What moves with the rows of `M` in the solve: the right-hand side and the row weights.
+struct RowSide<T, const N: usize> {
+    rhs: Column<T, N>,
+    row_weight: Column<T, N>,
 }
 
 #[inline(always)]
