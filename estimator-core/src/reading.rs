@@ -1,5 +1,7 @@
 //! What every estimator answers with, and the ways a configuration or a sample is refused.
 
+use crate::numerics::real::Real;
+
 /// Why a reading cannot be trusted. A reading with one of these never carries an estimate.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -145,6 +147,15 @@ pub trait Estimator<T> {
     fn push_missing(&mut self) -> Reading<T>;
     /// Forget everything and start over for a new load.
     fn reset(&mut self);
+
+    /// Push an integer ADC reading: the zero offset is removed in integer arithmetic before
+    /// the conversion to `T`, so no precision is lost to a large offset.
+    fn push_counts(&mut self, counts: i32, zero_counts: i32) -> Reading<T>
+    where
+        T: Real,
+    {
+        self.push(T::from_i32(counts.saturating_sub(zero_counts)))
+    }
 }
 
 /// An estimator behind a mutable reference is one too: the owner may keep a large one (a

@@ -139,35 +139,6 @@ fn size_of_the_order_7_f32_estimator_is_within_512_bytes() {
     assert!(size <= 512, "{size} bytes");
 }
 
-/// A random stable sensor: poles inside the unit circle as real poles and complex pairs,
-/// realised as a cascade of 1st/2nd-order sections with unit static gain each.
-fn stable_sensor_response(poles: &[(f64, f64)], gain: f64, u: f64, samples: usize) -> Vec<f64> {
-    // Each (r, θ): θ = 0 → a real pole r; θ > 0 → a pair r·e^{±iθ}.
-    let mut signal = vec![u; samples];
-    for &(r, theta) in poles {
-        let mut out = vec![0.0; samples];
-        if theta == 0.0 {
-            let mut y = 0.0;
-            for k in 0..samples {
-                out[k] = y;
-                y = r * y + (1.0 - r) * signal[k];
-            }
-        } else {
-            let (a1, a2) = (2.0 * r * theta.cos(), -r * r);
-            let b = 1.0 - a1 - a2;
-            let (mut y1, mut y2) = (0.0, 0.0);
-            for k in 0..samples {
-                let y = a1 * y1 + a2 * y2 + b * signal[k];
-                out[k] = y1;
-                y2 = y1;
-                y1 = y;
-            }
-        }
-        signal = out;
-    }
-    signal.iter().map(|v| v * gain).collect()
-}
-
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(256))]
 
@@ -201,12 +172,8 @@ proptest! {
             let r64 = e64.push(s);
             let r32 = e32.push(s as f32);
             prop_assert_eq!(r64.samples as usize, k + 1);
-            prop_assert_eq!(r64.estimate.is_some(), r64.state == State::Estimating);
-            prop_assert_eq!(r32.estimate.is_some(), r32.state == State::Estimating);
-            prop_assert!(r64.estimate.is_none_or(f64::is_finite));
-            prop_assert!(r32.estimate.is_none_or(f32::is_finite));
-            prop_assert!(r64.residual.is_none_or(f64::is_finite));
-            prop_assert!(r32.residual.is_none_or(f32::is_finite));
+            prop_assert!(well_formed(&r64), "{:?}", r64);
+            prop_assert!(well_formed(&r32), "{:?}", r32);
             if poison_at.is_some_and(|p| k >= p) {
                 prop_assert_eq!(r64.state, State::Invalid(InvalidReason::NonFiniteInput));
             }

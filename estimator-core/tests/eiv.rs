@@ -477,26 +477,13 @@ fn thesis_study(snr_db: f64, runs: usize, seed: u64) -> ThesisStudy {
             Bc::new(BiasCompensatedConfig::new(step, sigma * sigma)).unwrap(),
             Bc::new(BiasCompensatedConfig::new(step, metered)).unwrap(),
         );
-        ls.0.push(
-            last_reading(&mut estimators.0, &data)
-                .estimate
-                .map(|v| v - u),
-        );
-        iv.0.push(
-            last_reading(&mut estimators.1, &data)
-                .estimate
-                .map(|v| v - u),
-        );
-        bc.0.push(
-            last_reading(&mut estimators.2, &data)
-                .estimate
-                .map(|v| v - u),
-        );
-        bc_metered.0.push(
-            last_reading(&mut estimators.3, &data)
-                .estimate
-                .map(|v| v - u),
-        );
+        let error = |reading: Reading<f64>| reading.estimate.map(|v| v - u);
+        ls.0.push(error(last_reading(&mut estimators.0, &data)));
+        iv.0.push(error(last_reading(&mut estimators.1, &data)));
+        bc.0.push(error(last_reading(&mut estimators.2, &data)));
+        bc_metered
+            .0
+            .push(error(last_reading(&mut estimators.3, &data)));
     }
     ThesisStudy {
         ls: ls.summary(),

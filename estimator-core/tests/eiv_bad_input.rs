@@ -285,34 +285,6 @@ fn the_noise_meter_refuses_bad_samples_and_agrees_in_f32() {
 // Property: never panics, every valid reading finite
 // ---------------------------------------------------------------------------------------
 
-/// A random stable sensor as a cascade of 1st/2nd-order sections of unit static gain
-/// (as in bad_input.rs).
-fn stable_sensor_response(poles: &[(f64, f64)], gain: f64, u: f64, samples: usize) -> Vec<f64> {
-    let mut signal = vec![u; samples];
-    for &(r, theta) in poles {
-        let mut out = vec![0.0; samples];
-        if theta == 0.0 {
-            let mut y = 0.0;
-            for k in 0..samples {
-                out[k] = y;
-                y = r * y + (1.0 - r) * signal[k];
-            }
-        } else {
-            let (a1, a2) = (2.0 * r * theta.cos(), -r * r);
-            let b = 1.0 - a1 - a2;
-            let (mut y1, mut y2) = (0.0, 0.0);
-            for k in 0..samples {
-                let y = a1 * y1 + a2 * y2 + b * signal[k];
-                out[k] = y1;
-                y2 = y1;
-                y1 = y;
-            }
-        }
-        signal = out;
-    }
-    signal.iter().map(|v| v * gain).collect()
-}
-
 fn check<T: Copy + PartialEq + core::fmt::Debug>(
     r: &Reading<T>,
     finite: impl Fn(T) -> bool,

@@ -309,12 +309,8 @@ proptest! {
                 (b64.push(s), b32.push(s as f32))
             };
             prop_assert_eq!(r64.samples as usize, k + 1);
-            prop_assert_eq!(r64.estimate.is_some(), r64.state == State::Estimating);
-            prop_assert_eq!(r32.estimate.is_some(), r32.state == State::Estimating);
-            prop_assert!(r64.estimate.is_none_or(f64::is_finite));
-            prop_assert!(r32.estimate.is_none_or(f32::is_finite));
-            prop_assert!(r64.residual.is_none_or(f64::is_finite));
-            prop_assert!(r32.residual.is_none_or(f32::is_finite));
+            prop_assert!(well_formed(&r64), "{:?}", r64);
+            prop_assert!(well_formed(&r32), "{:?}", r32);
         }
     }
 }

@@ -114,15 +114,19 @@ fn shifted_load_cell(frequency_ratio: f64) -> Sensor {
     sensor
 }
 
+/// Candidates 0.68×–1.32× the calibrated resonance, 2.1% apart, fitted on block means of 8.
+fn bank_over_the_resonance() -> ([f64; 33], [ModelConfig<f64, 5>; 33]) {
+    let ratios: [f64; 33] = core::array::from_fn(|i| 0.68 * (1.32f64 / 0.68).powf(i as f64 / 32.0));
+    let configs = ratios.map(|r| config_decimated(model_of(&shifted_load_cell(r)), 8));
+    (ratios, configs)
+}
+
 #[test]
 fn a_bank_over_the_resonance_stays_unbiased_off_calibration() {
     // The resonance moves up to ±30% off calibration (the range of the stability map);
     // candidates cover 0.68×–1.32×, 2.1% apart, fitted on block means of 8 samples so that
     // the whole bank costs about what 4 full-rate models would.
-    const K: usize = 33;
-    let ratios: [f64; K] =
-        core::array::from_fn(|i| 0.68 * (1.32f64 / 0.68).powf(i as f64 / (K - 1) as f64));
-    let configs = ratios.map(|r| config_decimated(model_of(&shifted_load_cell(r)), 8));
+    let (ratios, configs) = bank_over_the_resonance();
     for true_ratio in [0.7, 0.77, 0.85, 0.93, 1.0, 1.06, 1.15, 1.3] {
         let sensor = shifted_load_cell(true_ratio);
         let clean = sensor.step_response(MASS_G, 420);
@@ -153,10 +157,7 @@ fn a_bank_over_the_resonance_stays_unbiased_off_calibration() {
 /// the best candidate's own one alarmed on a steady 250 g.
 #[test]
 fn the_bank_residual_is_the_interpolated_models() {
-    const K: usize = 33;
-    let ratios: [f64; K] =
-        core::array::from_fn(|i| 0.68 * (1.32f64 / 0.68).powf(i as f64 / (K - 1) as f64));
-    let configs = ratios.map(|r| config_decimated(model_of(&shifted_load_cell(r)), 8));
+    let (ratios, configs) = bank_over_the_resonance();
     let step = ratios[1] / ratios[0];
     for between in [0.25, 0.5] {
         // A truth a fraction of a grid step above candidate 16.

@@ -195,18 +195,7 @@ fn a_model_bank_flags_a_resonance_outside_its_span() {
     let configs = ratios.map(|r| config(load_cell_at(r)));
     for (truth, edge) in [(1.3, K - 1), (0.75, 0), (1.0, usize::MAX)] {
         let model = load_cell_at(truth);
-        // The noise-free response of the true model (C·Σ A^j B · u).
-        let mut state = [0.0; 5];
-        let y: Vec<f64> = (0..2000)
-            .map(|_| {
-                let out: f64 = (0..5).map(|i| model.c[i] * state[i]).sum();
-                let next: [f64; 5] = core::array::from_fn(|i| {
-                    (0..5).map(|j| model.a[i][j] * state[j]).sum::<f64>() + model.b[i] * MASS_G
-                });
-                state = next;
-                out
-            })
-            .collect();
+        let y = model_drop(&model, 2000);
         let mut bank = ModelBank::new(configs).unwrap();
         for (k, &sample) in y.iter().enumerate() {
             let reading = bank.push(sample);

@@ -10,9 +10,9 @@
 //!   low-pass of length `K·block`) while it is stable.
 //!
 //! ## The band and the noise (found by the stability map)
-//! A fixed band is loose when the noise is low: at 80 dB the 0.5 g band of the defaults is
-//! 300 block-mean standard deviations, so the pan is called stable while it still rings, and
-//! the settled average keeps that ringing (13–14× the Cramér–Rao bound at 1.5 s). Given the
+//! A fixed band is loose when the noise is low: it is then many block-mean standard
+//! deviations wide, so the pan is called stable while it still rings, and the settled
+//! average keeps that ringing. Given the
 //! noise metered at tare ([`BaselineConfig::noise_reference`], at `D = block`), the `K` block
 //! means must also be consistent with a constant load: their sample variance over the block
 //! means' noise variance must stay below the threshold of `crate::estimators::consistency` (the F
@@ -21,8 +21,10 @@
 //! latched) instead of a number.
 
 use crate::estimators::consistency::{mismatch_threshold, NoiseReference};
+use crate::estimators::input::Decimator;
+use crate::estimators::intake::{estimator_via_intake, Intake};
 use crate::numerics::real::Real;
-use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
+use crate::reading::{ConfigError, InvalidReason};
 
 /// Which baseline.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -55,25 +57,22 @@ pub struct BaselineConfig<T> {
 #[derive(Clone, Debug)]
 pub struct Baseline<T: Real, const K: usize> {
     config: BaselineConfig<T>,
-    inv_gain: T,
+    /// No range limit: only samples that are not finite are refused.
+    intake: Intake<T>,
+    /// The block means as `sum / block`.
+    block_mean: Decimator<T>,
     blocks: [T; K],
     blocks_filled: usize,
     next_block: usize,
-    block_sum: T,
-    block_len: u16,
     /// Σ (x − `settled_origin`) since the reading became stable: deviations, not the load,
-    /// so that a long `f32` sum keeps the precision of the deviations (the stability map
-    /// found the `f32` settled average 11% worse than `f64` at 70 dB when it summed loads).
+    /// so that a long `f32` sum keeps the precision of the deviations (summing loads, the
+    /// stability map found the `f32` settled average measurably worse than `f64`).
     settled_sum: T,
     settled_origin: T,
     settled_count: u32,
     /// The noise variance of one block mean (estimate's unit²) and the largest ratio of the
     /// block means' sample variance to it that is consistent with a constant load.
     noise: Option<(T, T)>,
-    samples: u32,
-    fault: Option<InvalidReason>,
-    state: State,
-    estimate: Option<T>,
 }
 
 impl<T: Real, const K: usize> Baseline<T, K> {
@@ -105,20 +104,20 @@ impl<T: Real, const K: usize> Baseline<T, K> {
         };
         Ok(Self {
             config,
-            inv_gain: T::ONE / config.gain,
+            intake: Intake::new(
+                T::ONE / config.gain,
+                T::from_f64(f64::NEG_INFINITY),
+                T::from_f64(f64::INFINITY),
+                Decimator::new(1),
+            ),
+            block_mean: Decimator::dividing(config.block),
             blocks: [T::ZERO; K],
             blocks_filled: 0,
             next_block: 0,
-            block_sum: T::ZERO,
-            block_len: 0,
             settled_sum: T::ZERO,
             settled_origin: T::ZERO,
             settled_count: 0,
             noise,
-            samples: 0,
-            fault: None,
-            state: State::WarmingUp,
-            estimate: None,
         })
     }
 
@@ -143,20 +142,8 @@ impl<T: Real, const K: usize> Baseline<T, K> {
         sum / T::from_u32(K as u32 - 1)
     }
 
-    fn reading(&self) -> Reading<T> {
-        Reading {
-            estimate: self.estimate,
-            samples: self.samples,
-            state: self.state,
-            residual: None,
-        }
-    }
-
-    fn latch(&mut self, reason: InvalidReason) -> Reading<T> {
-        self.fault = Some(reason);
-        self.state = State::Invalid(reason);
-        self.estimate = None;
-        self.reading()
+    fn fresh(&self) -> Result<Self, ConfigError> {
+        Self::new(self.config)
     }
 
     /// Spread and mean of the stored block means.
@@ -175,37 +162,24 @@ impl<T: Real, const K: usize> Baseline<T, K> {
         }
         (max - min, sum / T::from_u32(K as u32))
     }
-}
 
-impl<T: Real, const K: usize> Estimator<T> for Baseline<T, K> {
-    fn push(&mut self, sample: T) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        if !sample.is_finite() {
-            return self.latch(InvalidReason::NonFiniteInput);
-        }
-        let x = sample * self.inv_gain;
+    /// One sample `x` in the estimate's unit.
+    fn update(&mut self, x: T) {
         if self.settled_count > 0 && self.config.mode == BaselineMode::SettledAverage {
             self.settled_sum += x - self.settled_origin;
             self.settled_count += 1;
-            self.estimate =
-                Some(self.settled_origin + self.settled_sum / T::from_u32(self.settled_count));
-            return self.reading();
+            let average = self.settled_origin + self.settled_sum / T::from_u32(self.settled_count);
+            self.intake.estimating(average, None);
+            return;
         }
-        self.block_sum += x;
-        self.block_len += 1;
-        if self.block_len < self.config.block {
-            return self.reading();
-        }
-        self.blocks[self.next_block] = self.block_sum / T::from_u32(self.config.block as u32);
+        let Some(block_mean) = self.block_mean.push(x) else {
+            return;
+        };
+        self.blocks[self.next_block] = block_mean;
         self.next_block = (self.next_block + 1) % K;
         self.blocks_filled = (self.blocks_filled + 1).min(K);
-        self.block_sum = T::ZERO;
-        self.block_len = 0;
         if self.blocks_filled < K {
-            return self.reading();
+            return;
         }
         let (spread, mean) = self.spread_and_mean();
         let consistent = match self.noise {
@@ -216,11 +190,9 @@ impl<T: Real, const K: usize> Estimator<T> for Baseline<T, K> {
         };
         if spread <= self.config.stable_band && !consistent {
             // Within the band, but the means still move beyond the noise: not a number yet.
-            self.state = State::Invalid(InvalidReason::ModelMismatch);
-            self.estimate = None;
+            self.intake.invalidate(InvalidReason::ModelMismatch);
         } else if spread <= self.config.stable_band {
-            self.state = State::Estimating;
-            self.estimate = Some(mean);
+            self.intake.estimating(mean, None);
             if self.config.mode == BaselineMode::SettledAverage {
                 // Everything in the stable window counts towards the average.
                 let count = K as u32 * self.config.block as u32;
@@ -229,30 +201,17 @@ impl<T: Real, const K: usize> Estimator<T> for Baseline<T, K> {
                 self.settled_count = count;
             }
         } else {
-            self.state = State::WarmingUp;
-            self.estimate = None;
-        }
-        self.reading()
-    }
-
-    fn push_missing(&mut self) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        self.latch(InvalidReason::MissingSample)
-    }
-
-    fn reset(&mut self) {
-        if let Ok(fresh) = Self::new(self.config) {
-            *self = fresh;
+            self.intake.warm_up();
         }
     }
 }
 
+estimator_via_intake!(Baseline<T, const K>);
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::reading::{Estimator, State};
 
     fn ringing(k: usize) -> f64 {
         // 25 Hz at 4 kHz, decaying with a 0.2 s time constant, around 100 units (gain 2).

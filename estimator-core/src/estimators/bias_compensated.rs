@@ -36,58 +36,43 @@
 //! about `√(2/N_eff)` of itself, so a share at or below `max(√(2/N_eff), 100·ε)` is not
 //! resolved from zero (at or below zero the compensated matrix is indefinite): the reading
 //! is `Invalid(IllConditioned)`, not latched. Without this test the readings kept on the
-//! load cell were unbounded (RMS 3.7 g at D = 12 where LS has 0.024 g). The step level's
+//! load cell were unbounded. The step level's
 //! identifiability is the downdated trailing pivot over `N_eff`, with `StepEstimator`'s
 //! rounding-level test.
 //!
 //! Cost per decimated sample: the LS fold (as `StepEstimator`) plus the downdate,
 //! `Σ_j (n+2−j)²/2 ≈ (n+1)³/6` rotation applications (≈ 85 at n = 7) and an `O(n²)` back
 //! substitution for the a-priori residual: roughly 3× `StepEstimator`.
-//! Memory: `BiasCompensatedStepEstimator<f32, 7>` is 464 bytes, `IvStepEstimator<f32, 7>`
-//! 808, `NoiseMeter<f32>` 36 (printed by `tests/eiv_bad_input.rs`).
+//! Memory: `tests/eiv_bad_input.rs` prints the sizes.
 //!
 //! With `noise_variance = 0` it is the least-squares estimator, estimate for estimate.
 //!
-//! ## Results: LS vs IV vs BCLS, and the verdict
+//! ## LS vs IV vs BCLS, and the verdict
 //! `cargo test --release -p estimator-core --test eiv -- --ignored --nocapture study_table`
-//! prints this table: the load cell of `tests/support` (5th order, 4 kHz), 138.32 g at
-//! 73.2547 counts/g, white noise σ = 0.445 g (50 dB), readout 100 ms after the drop, 2,000
-//! runs, BCLS given the true σ², IV with the default delay `n + 1` and floor 0.1. Bias ± its
-//! standard error and RMS in grams over the valid readings; CRLB at 100 ms ≈ 0.020 g.
+//! prints the comparison on the load cell of `tests/support`; `tests/eiv.rs` pins each of
+//! these statements.
 //!
-//! | n | D  | LS bias / RMS  | IV bias / RMS (valid)    | BCLS bias / RMS (valid)   |
-//! |---|----|----------------|--------------------------|---------------------------|
-//! | 7 | 1  | −4.34 / 4.34   | −1.10 ± 0.03 / 1.65 (97%)| −3.53 ± 0.03 / 3.54 (3%)  |
-//! | 7 | 12 | −0.0002 / 0.0243 | −0.0001 / 0.0313 (91%) | +0.0006 / 0.0282 (2%)     |
-//! | 5 | 1  | −5.79 / 5.80   | −1.91 ± 0.07 / 3.75 (97%)| −4.07 ± 0.04 / 4.11 (11%) |
-//! | 5 | 12 | +0.0055 / 0.0249 | −0.0000 / 0.0385 (93%) | +0.0013 / 0.0253 (12%)    |
-//!
-//! With the thesis's delay `2n + 1` at D = 1, IV's bias falls to +0.08 ± 0.03 g (n = 7, RMS
-//! 1.49 g, median |error| 0.38 g); at D = 12 the longer delay only adds variance.
-//!
-//! - **Thesis scene (eq. 4.38, N = 200, 30–50 dB): both win.** The LS bias (+8.6e-5 at 30 dB,
-//!   54 standard errors) is removed by IV and BCLS (≤ 2 standard errors), at the same
-//!   variance (sd ratio 1.00–1.03), every reading valid; BCLS with σ² metered at tare from
-//!   200 samples does as well. RMS gains are small (−4% at 30 dB, −1% at 40 dB).
-//! - **Load cell at D = 1: LS is biased by 4–6 g (EIV bias, 214× the CRLB).** IV removes
-//!   most of it and, with its weak-instrument floor, beats LS in RMS (1.6 vs 4.3 g), but
-//!   stays ~80× the CRLB. BCLS is refused in 89–97% of runs (noise-only directions in the
-//!   regressor space); what it keeps still carries most of the bias.
-//! - **Load cell at D = 12: LS is at 1.2× the CRLB with no resolved bias: both lose.** IV adds
-//!   variance (1.3–1.6× the LS RMS); BCLS is refused in 88–98% of runs and matches LS where
-//!   it is kept.
-//! - **Verdict:** for the load cell, decimated LS (`StepEstimator`, D ≈ 12) is two orders of
-//!   magnitude better than either variant at full rate; keep IV and BCLS for
-//!   well-excited, low-order sensors like the thesis scene, or as a bias check. The tests
-//!   in `tests/eiv.rs` pin each of these statements.
+//! - **Thesis scene (eq. 4.38, second order, low SNR): both win.** IV and BCLS remove the
+//!   LS bias at the same variance, every reading valid; BCLS with σ² metered at tare does as
+//!   well.
+//! - **Load cell at D = 1: LS carries the errors-in-variables bias.** IV removes most of it
+//!   and, with its weak-instrument floor, beats LS in RMS, but stays far above the CRLB.
+//!   BCLS is refused in most runs (noise-only directions in the regressor space); what it
+//!   keeps still carries most of the bias.
+//! - **Load cell at D ≈ 12: LS is near the CRLB with no resolved bias: both lose.** IV adds
+//!   variance; BCLS is refused in most runs and matches LS where it is kept.
+//! - **Verdict:** for the load cell, decimated LS (`StepEstimator`, D ≈ 12) is far better
+//!   than either variant at full rate; keep IV and BCLS for well-excited, low-order sensors
+//!   like the thesis scene, or as a bias check.
 use crate::estimators::consistency::{
     difference_correlation, difference_noise_gain, NoiseReference, ResidualCheck,
 };
-use crate::estimators::input::{check_sample, Decimator, DifferenceWindow};
+use crate::estimators::input::{row_residual, DifferenceWindow};
+use crate::estimators::intake::{estimator_via_intake, Intake};
 use crate::estimators::step::{identifiability_floor, recentre, StepConfig};
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
-use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
+use crate::reading::{ConfigError, InvalidReason};
 
 /// Configuration of a [`BiasCompensatedStepEstimator`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -125,10 +110,9 @@ impl<T: Real> BiasCompensatedConfig<T> {
 #[derive(Clone, Debug)]
 pub struct BiasCompensatedStepEstimator<T: Real, const N: usize> {
     config: BiasCompensatedConfig<T>,
-    inv_gain: T,
+    intake: Intake<T>,
     /// s² in the estimate's unit at the decimated rate: σ²/(G²·D).
     decimated_variance: T,
-    decimator: Decimator<T>,
     differences: DifferenceWindow<T, N, 1>,
     /// The uncompensated least-squares factor, exactly as in `StepEstimator`.
     factor: Factor<T, N, 1>,
@@ -143,11 +127,6 @@ pub struct BiasCompensatedStepEstimator<T: Real, const N: usize> {
     /// The consistency check, when configured with a noise reference (on the compensated
     /// fit's a-posteriori residuals).
     check: Option<ResidualCheck<T>>,
-    samples: u32,
-    fault: Option<InvalidReason>,
-    state: State,
-    estimate: Option<T>,
-    residual: Option<T>,
 }
 
 impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
@@ -163,9 +142,8 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
         }
         Ok(Self {
             config,
-            inv_gain,
+            intake: step.intake(),
             decimated_variance,
-            decimator: Decimator::new(step.decimation),
             differences: DifferenceWindow::new(),
             factor: Factor::new(),
             rows: 0,
@@ -174,11 +152,6 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
             solution: None,
             identifiability: T::ZERO,
             check: step.residual_check(),
-            samples: 0,
-            fault: None,
-            state: State::WarmingUp,
-            estimate: None,
-            residual: None,
         })
     }
 
@@ -187,7 +160,7 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
         &self.config
     }
 
-    /// Check the runs after the next [`Estimator::reset`] against `reference` (`None`: no
+    /// Check the runs after the next [`crate::Estimator::reset`] against `reference` (`None`: no
     /// check), as [`crate::StepEstimator::set_noise_reference`].
     pub fn set_noise_reference(
         &mut self,
@@ -213,32 +186,20 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
         (2 * self.config.step.order as u32 + 1) * self.config.step.decimation as u32
     }
 
-    /// Push an integer ADC reading, the zero offset removed in integer arithmetic first.
-    pub fn push_counts(&mut self, counts: i32, zero_counts: i32) -> Reading<T> {
-        let centred = counts.saturating_sub(zero_counts);
-        self.push(T::from_i32(centred))
+    fn fresh(&self) -> Result<Self, ConfigError> {
+        Self::new(self.config)
     }
 
-    fn reading(&self) -> Reading<T> {
-        Reading {
-            estimate: self.estimate,
-            samples: self.samples,
-            state: self.state,
-            residual: self.residual,
-        }
-    }
-
-    fn invalidate(&mut self, reason: InvalidReason) -> Reading<T> {
-        self.state = State::Invalid(reason);
-        self.estimate = None;
-        self.residual = None;
+    /// Mark the current reading invalid; the solution goes with the estimate.
+    fn invalidate(&mut self, reason: InvalidReason) {
         self.solution = None;
-        self.reading()
+        self.intake.invalidate(reason);
     }
 
-    fn latch(&mut self, reason: InvalidReason) -> Reading<T> {
-        self.fault = Some(reason);
-        self.invalidate(reason)
+    /// Invalidate and stay invalid until the reset.
+    fn latch(&mut self, reason: InvalidReason) {
+        self.solution = None;
+        self.intake.latch(reason);
     }
 
     /// The LS factor downdated by the expected noise information, or `None` when a pivot
@@ -296,13 +257,9 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
             return;
         }
         let phi = self.differences.window();
-        let prior_residual = self.solution.map(|(lead, step)| {
-            let mut prediction = step;
-            for i in 0..n {
-                prediction += phi[i] * lead[i];
-            }
-            x - prediction
-        });
+        let prior_residual = self
+            .solution
+            .map(|(lead, step)| row_residual(x, &phi, &lead, step, n));
         let lambda = self.config.step.forgetting;
         if lambda < T::ONE {
             self.factor.forget(n, lambda);
@@ -348,11 +305,7 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
         // as in `IvStepEstimator`: no standardising weight for the compensated equations).
         let mismatch = match self.check.as_mut() {
             Some(check) => {
-                let mut prediction = step;
-                for i in 0..n {
-                    prediction += phi[i] * lead[i];
-                }
-                let residual = x - prediction;
+                let residual = row_residual(x, &phi, &lead, step, n);
                 check.push(residual * residual, difference_noise_gain::<T, 1>(&lead, n));
                 check.mismatch(|| difference_correlation::<T, 1>(&lead, n))
             }
@@ -363,42 +316,9 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
             self.invalidate(InvalidReason::ModelMismatch);
             return;
         }
-        self.residual = prior_residual;
         self.solution = Some((lead, step));
-        self.state = State::Estimating;
-        self.estimate = Some(step);
+        self.intake.estimating(step, prior_residual);
     }
 }
 
-impl<T: Real, const N: usize> Estimator<T> for BiasCompensatedStepEstimator<T, N> {
-    fn push(&mut self, sample: T) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        let step = &self.config.step;
-        let sample = match check_sample(sample, step.valid_min, step.valid_max) {
-            Ok(sample) => sample,
-            Err(reason) => return self.latch(reason),
-        };
-        if let Some(x) = self.decimator.push(sample * self.inv_gain) {
-            self.update(x);
-        }
-        self.reading()
-    }
-
-    fn push_missing(&mut self) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        self.latch(InvalidReason::MissingSample)
-    }
-
-    fn reset(&mut self) {
-        // The configuration was validated in `new`, so this cannot fail.
-        if let Ok(fresh) = Self::new(self.config) {
-            *self = fresh;
-        }
-    }
-}
+estimator_via_intake!(BiasCompensatedStepEstimator<T, const N>);

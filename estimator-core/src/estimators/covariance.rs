@@ -12,30 +12,32 @@
 //!
 //! ## Flags (found by the stability map, host-sim `study stability`)
 //! - In `f32` Ψ loses positive definiteness within the first rows of the reference drop at
-//!   every SNR and order the map tried (1–40, 10–80 dB), its readings then off by up to 10⁴
-//!   times the Cramér–Rao bound. Each update therefore factors Ψ (LDLᵀ in `f64`, `(n+1)³/6`
+//!   every SNR and order the map tried, its readings then off by orders of magnitude beyond
+//!   the Cramér–Rao bound. Each update therefore factors Ψ (LDLᵀ in `f64`, `(n+1)³/6`
 //!   multiply–adds, more than the update itself: a reference may pay that) and latches
 //!   [`InvalidReason::LostDefiniteness`] at a pivot not above the rounding of its diagonal
 //!   entry, or at a gain denominator `λ + φᵀΨφ` below λ (φᵀΨφ < 0 proves Ψ indefinite).
 //! - Readings whose identifiability `1/(Ψ_uu·(N_eff + δλ^k))` is not above
 //!   [`crate::MIN_IDENTIFIABILITY`] are `Invalid(IllConditioned)`, as in `StepEstimator`.
 //! - As in `StepEstimator`, the step level is kept relative to an origin that follows the
-//!   estimate (`offset`): kept as the load itself, in `f32` it stalled over long runs (22×
-//!   the steady-state bound after 10⁶ samples at λ = 1, D = 1, against 3.5× in `f64`).
+//!   estimate (`offset`): kept as the load itself, in `f32` it stalled over long runs.
 
 use crate::estimators::consistency::{
     difference_correlation, difference_noise_gain, ResidualCheck,
 };
+use crate::estimators::input::Decimator;
+use crate::estimators::intake::{estimator_via_intake, Intake};
 use crate::estimators::step::{identifiability_floor, StepConfig};
 use crate::numerics::real::Real;
-use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
+use crate::reading::{ConfigError, InvalidReason};
 
 /// Covariance-form RLS for the data-driven step estimator, capacity `N` (order ≤ N).
 /// `P` must be `N + 1` (the number of unknowns); checked at construction.
 #[derive(Clone, Debug)]
 pub struct CovarianceStepEstimator<T: Real, const N: usize, const P: usize> {
     config: StepConfig<T>,
-    inv_gain: T,
+    /// Block means as `sum / D`, the textbook rule this reference keeps.
+    intake: Intake<T>,
     prior: T,
     psi: [[T; P]; P],
     theta: [T; P],
@@ -51,13 +53,6 @@ pub struct CovarianceStepEstimator<T: Real, const N: usize, const P: usize> {
     offset: T,
     /// The consistency check, when configured with a noise reference.
     check: Option<ResidualCheck<T>>,
-    samples: u32,
-    block_sum: T,
-    block_len: u16,
-    fault: Option<InvalidReason>,
-    state: State,
-    estimate: Option<T>,
-    residual: Option<T>,
 }
 
 impl<T: Real, const N: usize, const P: usize> CovarianceStepEstimator<T, N, P> {
@@ -73,7 +68,12 @@ impl<T: Real, const N: usize, const P: usize> CovarianceStepEstimator<T, N, P> {
         }
         Ok(Self {
             config,
-            inv_gain: T::ONE / config.gain,
+            intake: Intake::new(
+                T::ONE / config.gain,
+                config.valid_min,
+                config.valid_max,
+                Decimator::dividing(config.decimation),
+            ),
             prior: prior_information,
             psi,
             theta: [T::ZERO; P],
@@ -85,13 +85,6 @@ impl<T: Real, const N: usize, const P: usize> CovarianceStepEstimator<T, N, P> {
             prior_weight: prior_information,
             offset: T::ZERO,
             check: config.residual_check(),
-            samples: 0,
-            block_sum: T::ZERO,
-            block_len: 0,
-            fault: None,
-            state: State::WarmingUp,
-            estimate: None,
-            residual: None,
         })
     }
 
@@ -156,21 +149,8 @@ impl<T: Real, const N: usize, const P: usize> CovarianceStepEstimator<T, N, P> {
         true
     }
 
-    fn reading(&self) -> Reading<T> {
-        Reading {
-            estimate: self.estimate,
-            samples: self.samples,
-            state: self.state,
-            residual: self.residual,
-        }
-    }
-
-    fn latch(&mut self, reason: InvalidReason) -> Reading<T> {
-        self.fault = Some(reason);
-        self.state = State::Invalid(reason);
-        self.estimate = None;
-        self.residual = None;
-        self.reading()
+    fn fresh(&self) -> Result<Self, ConfigError> {
+        Self::new(self.config, self.prior)
     }
 
     fn update(&mut self, x: T) {
@@ -229,22 +209,20 @@ impl<T: Real, const N: usize, const P: usize> CovarianceStepEstimator<T, N, P> {
         self.prior_weight *= lambda;
         let u = self.offset + self.theta[n];
         if !(u.is_finite() && denom.is_finite() && self.psi[n][n].is_finite()) {
-            self.latch(InvalidReason::NonFiniteUpdate);
+            self.intake.latch(InvalidReason::NonFiniteUpdate);
             return;
         }
         // φᵀΨφ < 0 (a denominator below λ) proves the Ψ this row used indefinite; the LDLᵀ
         // test checks the Ψ the next row will use.
         if !(denom >= lambda) || !self.positive_definite() {
-            self.latch(InvalidReason::LostDefiniteness);
+            self.intake.latch(InvalidReason::LostDefiniteness);
             return;
         }
         if (self.rows as usize) < p {
             return;
         }
         if !(self.identifiability() > identifiability_floor::<T>()) {
-            self.state = State::Invalid(InvalidReason::IllConditioned);
-            self.estimate = None;
-            self.residual = None;
+            self.intake.invalidate(InvalidReason::IllConditioned);
             return;
         }
         let theta = self.theta;
@@ -252,7 +230,7 @@ impl<T: Real, const N: usize, const P: usize> CovarianceStepEstimator<T, N, P> {
             .check
             .as_ref()
             .is_some_and(|check| check.mismatch(|| difference_correlation::<T, 1>(&theta[..n], n)));
-        let had_estimate = self.estimate.is_some();
+        let had_estimate = self.intake.estimate().is_some();
         // Move the origin to the estimate (exact difference of the stored origins, as in
         // `step::recentre`); only the step unknown changes.
         let origin = self.offset + (u - self.offset);
@@ -261,52 +239,11 @@ impl<T: Real, const N: usize, const P: usize> CovarianceStepEstimator<T, N, P> {
         self.offset = origin;
         if mismatch {
             // Not latched, as in `StepEstimator`.
-            self.state = State::Invalid(InvalidReason::ModelMismatch);
-            self.estimate = None;
-            self.residual = None;
+            self.intake.invalidate(InvalidReason::ModelMismatch);
             return;
         }
-        self.state = State::Estimating;
-        self.residual = had_estimate.then_some(error);
-        self.estimate = Some(u);
+        self.intake.estimating(u, had_estimate.then_some(error));
     }
 }
 
-impl<T: Real, const N: usize, const P: usize> Estimator<T> for CovarianceStepEstimator<T, N, P> {
-    fn push(&mut self, sample: T) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        if !sample.is_finite() {
-            return self.latch(InvalidReason::NonFiniteInput);
-        }
-        if !(sample >= self.config.valid_min && sample <= self.config.valid_max) {
-            return self.latch(InvalidReason::OutOfRange);
-        }
-        let x = sample * self.inv_gain;
-        self.block_sum += x;
-        self.block_len += 1;
-        if self.block_len == self.config.decimation {
-            let mean = self.block_sum / T::from_u32(self.config.decimation as u32);
-            self.block_sum = T::ZERO;
-            self.block_len = 0;
-            self.update(mean);
-        }
-        self.reading()
-    }
-
-    fn push_missing(&mut self) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        self.latch(InvalidReason::MissingSample)
-    }
-
-    fn reset(&mut self) {
-        if let Ok(fresh) = Self::new(self.config, self.prior) {
-            *self = fresh;
-        }
-    }
-}
+estimator_via_intake!(CovarianceStepEstimator<T, const N, const P>);

@@ -16,6 +16,23 @@ pub(crate) fn check_sample<T: Real>(sample: T, min: T, max: T) -> Result<T, Inva
     Ok(sample)
 }
 
+/// What the row `[φ, 1]` leaves of its target `x` under the solution `(lead, constant)`:
+/// `x − (constant + Σ φ_i·lead_i)`, summed in that order.
+#[inline]
+pub(crate) fn row_residual<T: Real, const N: usize>(
+    x: T,
+    phi: &[T; N],
+    lead: &[T; N],
+    constant: T,
+    n: usize,
+) -> T {
+    let mut prediction = constant;
+    for i in 0..n {
+        prediction += phi[i] * lead[i];
+    }
+    x - prediction
+}
+
 /// Averages non-overlapping blocks of `D` samples: the anti-alias pre-filter and the
 /// decimation of the multi-rate data-driven estimator, in one.
 ///
@@ -29,23 +46,49 @@ pub(crate) fn check_sample<T: Real>(sample: T, min: T, max: T) -> Result<T, Inva
 /// - it has nulls at multiples of fs/D (D = 80 at 4 kHz nulls 50 Hz mains exactly).
 ///
 /// What "matched to the sensor's bandwidth" means here: the differences Δy must carry the
-/// transient above the noise, so D grows until fs/(2D) approaches the sensor's bandwidth. On
-/// the reference chain (100 Hz Butterworth, 25 Hz resonance, fs = 4 kHz) the host-sim sweep
-/// finds the optimum at D = 12–16, i.e. a decimated Nyquist frequency of 125–167 Hz, just above
-/// the analogue filter's cut-off; the calibration command picks D from recorded drops.
+/// transient above the noise, so D grows until fs/(2D) approaches the sensor's bandwidth,
+/// just above the analogue filter's cut-off; the calibration command picks D from recorded
+/// drops.
 #[derive(Clone, Debug)]
 pub(crate) struct Decimator<T> {
     length: u16,
-    inv_length: T,
+    mean: BlockMean<T>,
     sum: T,
     filled: u16,
 }
 
+/// How a block's sum becomes its mean. Each estimator keeps the rule it was validated with,
+/// so that its readings stay the same bit for bit.
+#[derive(Clone, Copy, Debug)]
+enum BlockMean<T> {
+    /// Blocks of one sample: the sample itself, not summed.
+    Sample,
+    /// `sum · (1/D)`: one multiply per block (the estimators').
+    Scaled(T),
+    /// `sum / D`, summed even for `D = 1` (the covariance reference's and the baselines').
+    Divided(T),
+}
+
 impl<T: Real> Decimator<T> {
+    /// Block means as `sum · (1/D)`; `D ≤ 1` passes samples through.
     pub(crate) fn new(length: u16) -> Self {
+        let mean = if length <= 1 {
+            BlockMean::Sample
+        } else {
+            BlockMean::Scaled(T::ONE / T::from_u32(length as u32))
+        };
+        Self::with_mean(length, mean)
+    }
+
+    /// Block means as `sum / D`, for every `D`.
+    pub(crate) fn dividing(length: u16) -> Self {
+        Self::with_mean(length, BlockMean::Divided(T::from_u32(length as u32)))
+    }
+
+    fn with_mean(length: u16, mean: BlockMean<T>) -> Self {
         Self {
             length,
-            inv_length: T::ONE / T::from_u32(length.max(1) as u32),
+            mean,
             sum: T::ZERO,
             filled: 0,
         }
@@ -54,7 +97,7 @@ impl<T: Real> Decimator<T> {
     /// The block mean when this sample completes a block.
     #[inline]
     pub(crate) fn push(&mut self, x: T) -> Option<T> {
-        if self.length <= 1 {
+        if let BlockMean::Sample = self.mean {
             return Some(x);
         }
         self.sum += x;
@@ -62,7 +105,11 @@ impl<T: Real> Decimator<T> {
         if self.filled < self.length {
             return None;
         }
-        let mean = self.sum * self.inv_length;
+        let mean = match self.mean {
+            BlockMean::Scaled(inv_length) => self.sum * inv_length,
+            BlockMean::Divided(length) => self.sum / length,
+            BlockMean::Sample => x,
+        };
         self.sum = T::ZERO;
         self.filled = 0;
         Some(mean)

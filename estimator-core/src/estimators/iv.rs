@@ -33,7 +33,7 @@
 //! Cost per decimated sample, `p = n + 1`: the fold ≈ `1.5·n²` Givens applications (each
 //! 2 multiplies, 2 adds; ≈ 75 at n = 7, about twice the least-squares fold), then the solve
 //! ≈ `p³/3 + 4p²` multiply–adds (≈ 430 at n = 7). Roughly 5× the cost of `StepEstimator`.
-//! Memory: `IvStepEstimator<f32, 7>` is 808 bytes (printed by `tests/eiv_bad_input.rs`).
+//! Memory: printed by `tests/eiv_bad_input.rs`.
 //!
 //! ## Identifiability and flags
 //! With white equation error the IV estimate's covariance is `σ²·M⁻¹M⁻ᵀ`, so the noise gain
@@ -44,25 +44,25 @@
 //! non-finite state latches `NonFiniteUpdate`; bad samples latch as in `StepEstimator`.
 //!
 //! ## Where it wins and where it loses
-//! Measured by `tests/eiv.rs`; the table and the verdict are in [`crate::estimators::bias_compensated`]'s
+//! Pinned by `tests/eiv.rs`; the verdict is in [`crate::estimators::bias_compensated`]'s
 //! docs. On the thesis's second-order scene IV removes the LS bias at the same variance
 //! (thesis §4.2.4). On the 4 kHz load cell at D = 1 the delayed differences are weak, noisy
-//! instruments: IV removes most of the 4–6 g LS bias, but without the identifiability floor
-//! a few readings in a hundred are off by tens to hundreds of grams (RMS 30 g at n = 7); with
-//! the default floor 3% of readings are flagged and the rest beat LS (1.6 vs 4.3 g RMS), still
-//! ~80× the Cramér–Rao bound. At D = 12 LS has no bias left to remove and IV only adds
-//! variance (1.3–1.6× the LS RMS). A delay of `2n + 1` helps at D = 1 (median error 0.38 g
-//! against 1.1 g) and hurts at D = 12.
+//! instruments: IV removes most of the LS bias, but without the identifiability floor a few
+//! readings in a hundred are off by orders of magnitude; with the default floor a few
+//! percent of readings are flagged and the rest beat LS, still far above the Cramér–Rao
+//! bound. At D ≈ 12 LS has no bias left to remove and IV only adds variance. A delay of
+//! `2n + 1` helps at D = 1 and hurts at D ≈ 12.
 
 use crate::estimators::consistency::{
     difference_correlation, difference_noise_gain, NoiseReference, ResidualCheck,
 };
-use crate::estimators::input::{check_sample, Decimator};
+use crate::estimators::input::row_residual;
+use crate::estimators::intake::{estimator_via_intake, Intake};
 use crate::estimators::step::StepConfig;
 use crate::numerics::factor::{apply, rotation};
 use crate::numerics::real::Real;
-use crate::numerics::square::{Column, SolveError, Square};
-use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
+use crate::numerics::square::{Column, SolveError, Solved, Square};
+use crate::reading::{ConfigError, InvalidReason};
 
 /// The ring of past differences holds `HISTORY_BLOCKS · N` values.
 const HISTORY_BLOCKS: usize = 4;
@@ -292,8 +292,7 @@ impl<T: Real, const N: usize> InstrumentFactor<T, N> {
 #[derive(Clone, Debug)]
 pub struct IvStepEstimator<T: Real, const N: usize> {
     config: IvConfig<T>,
-    inv_gain: T,
-    decimator: Decimator<T>,
+    intake: Intake<T>,
     history: DifferenceHistory<T, N>,
     factor: InstrumentFactor<T, N>,
     /// Regression rows folded in (saturating).
@@ -310,11 +309,6 @@ pub struct IvStepEstimator<T: Real, const N: usize> {
     /// The consistency check, when configured with a noise reference (on the a-posteriori
     /// residuals: IV has no standardising row weight).
     check: Option<ResidualCheck<T>>,
-    samples: u32,
-    fault: Option<InvalidReason>,
-    state: State,
-    estimate: Option<T>,
-    residual: Option<T>,
 }
 
 impl<T: Real, const N: usize> IvStepEstimator<T, N> {
@@ -323,8 +317,7 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
         config.validate(N)?;
         Ok(Self {
             config,
-            inv_gain: T::ONE / config.step.gain,
-            decimator: Decimator::new(config.step.decimation),
+            intake: config.step.intake(),
             history: DifferenceHistory::new(),
             factor: InstrumentFactor::new(),
             rows: 0,
@@ -333,11 +326,6 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
             solution: None,
             identifiability: T::ZERO,
             check: config.step.residual_check(),
-            samples: 0,
-            fault: None,
-            state: State::WarmingUp,
-            estimate: None,
-            residual: None,
         })
     }
 
@@ -346,7 +334,7 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
         &self.config
     }
 
-    /// Check the runs after the next [`Estimator::reset`] against `reference` (`None`: no
+    /// Check the runs after the next [`crate::Estimator::reset`] against `reference` (`None`: no
     /// check), as [`crate::StepEstimator::set_noise_reference`].
     pub fn set_noise_reference(
         &mut self,
@@ -373,32 +361,20 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
         (2 * step.order as u32 + self.config.instrument_delay as u32 + 1) * step.decimation as u32
     }
 
-    /// Push an integer ADC reading, the zero offset removed in integer arithmetic first.
-    pub fn push_counts(&mut self, counts: i32, zero_counts: i32) -> Reading<T> {
-        let centred = counts.saturating_sub(zero_counts);
-        self.push(T::from_i32(centred))
+    fn fresh(&self) -> Result<Self, ConfigError> {
+        Self::new(self.config)
     }
 
-    fn reading(&self) -> Reading<T> {
-        Reading {
-            estimate: self.estimate,
-            samples: self.samples,
-            state: self.state,
-            residual: self.residual,
-        }
-    }
-
-    fn invalidate(&mut self, reason: InvalidReason) -> Reading<T> {
-        self.state = State::Invalid(reason);
-        self.estimate = None;
-        self.residual = None;
+    /// Mark the current reading invalid; the solution goes with the estimate.
+    fn invalidate(&mut self, reason: InvalidReason) {
         self.solution = None;
-        self.reading()
+        self.intake.invalidate(reason);
     }
 
-    fn latch(&mut self, reason: InvalidReason) -> Reading<T> {
-        self.fault = Some(reason);
-        self.invalidate(reason)
+    /// Invalidate and stay invalid until the reset.
+    fn latch(&mut self, reason: InvalidReason) {
+        self.solution = None;
+        self.intake.latch(reason);
     }
 
     fn update(&mut self, x: T) {
@@ -410,13 +386,9 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
         }
         let phi = self.history.window(n, 0);
         let z = self.history.window(n, delay);
-        let prior_residual = self.solution.map(|theta| {
-            let mut prediction = theta.last;
-            for i in 0..n {
-                prediction += phi[i] * theta.lead[i];
-            }
-            x - prediction
-        });
+        let prior_residual = self
+            .solution
+            .map(|theta| row_residual(x, &phi, &theta.lead, theta.last, n));
         let lambda = self.config.step.forgetting;
         if lambda < T::ONE {
             self.factor.forget(n, lambda);
@@ -431,31 +403,8 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
         if (self.rows as usize) < n + 1 {
             return;
         }
-        // ‖e_uᵀM⁻¹‖² with M = D^{1/2}·system: row i of `system` carries weight 1/D_i.
-        let mut row_weight = Column::<T, N>::zero();
-        for i in 0..=n {
-            let d = if i < n {
-                self.factor.lead_weight[i]
-            } else {
-                self.factor.constant_weight
-            };
-            if !(d > T::ZERO) {
-                self.invalidate(InvalidReason::IllConditioned);
-                return;
-            }
-            row_weight.set(i, n, T::ONE / d);
-        }
-        let solved = match self.factor.system.solve(n, self.factor.rhs, row_weight) {
-            Ok(solved) => solved,
-            Err(SolveError::NonFinite) => {
-                self.latch(InvalidReason::NonFiniteUpdate);
-                return;
-            }
-            Err(SolveError::Singular) => {
-                self.identifiability = T::ZERO;
-                self.invalidate(InvalidReason::IllConditioned);
-                return;
-            }
+        let Some(solved) = self.solve(n) else {
+            return;
         };
         let step = self.offset + solved.theta.last;
         let identifiability = T::ONE / (self.effective_rows * solved.last_row_norm2);
@@ -479,12 +428,8 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
         // towards not flagging while few rows are in.
         let mismatch = match self.check.as_mut() {
             Some(check) => {
-                let mut prediction = step;
-                for i in 0..n {
-                    prediction += phi[i] * solved.theta.lead[i];
-                }
-                let residual = x - prediction;
                 let lead = &solved.theta.lead;
+                let residual = row_residual(x, &phi, lead, step, n);
                 check.push(residual * residual, difference_noise_gain::<T, 1>(lead, n));
                 check.mismatch(|| difference_correlation::<T, 1>(lead, n))
             }
@@ -495,15 +440,48 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
             self.invalidate(InvalidReason::ModelMismatch);
             return;
         }
-        self.residual = prior_residual;
         let mut theta = solved.theta;
         theta.last = step;
         self.solution = Some(theta);
-        self.state = State::Estimating;
-        self.estimate = Some(step);
-        // Move the origin to the estimate: the right-hand side `Qᵀx` moves by the shift
-        // times `Qᵀ1`, the system's step column. The shift is the exact difference of the
-        // stored origins, as in `step::recentre`.
+        self.intake.estimating(step, prior_residual);
+        self.recentre(n, step);
+    }
+
+    /// Solve the system for the rows so far; `None` after invalidating (or latching, when
+    /// the system is not finite).
+    fn solve(&mut self, n: usize) -> Option<Solved<T, N>> {
+        // ‖e_uᵀM⁻¹‖² with M = D^{1/2}·system: row i of `system` carries weight 1/D_i.
+        let mut row_weight = Column::<T, N>::zero();
+        for i in 0..=n {
+            let d = if i < n {
+                self.factor.lead_weight[i]
+            } else {
+                self.factor.constant_weight
+            };
+            if !(d > T::ZERO) {
+                self.invalidate(InvalidReason::IllConditioned);
+                return None;
+            }
+            row_weight.set(i, n, T::ONE / d);
+        }
+        match self.factor.system.solve(n, self.factor.rhs, row_weight) {
+            Ok(solved) => Some(solved),
+            Err(SolveError::NonFinite) => {
+                self.latch(InvalidReason::NonFiniteUpdate);
+                None
+            }
+            Err(SolveError::Singular) => {
+                self.identifiability = T::ZERO;
+                self.invalidate(InvalidReason::IllConditioned);
+                None
+            }
+        }
+    }
+
+    /// Move the origin to the estimate `step`: the right-hand side `Qᵀx` moves by the shift
+    /// times `Qᵀ1`, the system's step column. The shift is the exact difference of the
+    /// stored origins, as in `step::recentre`.
+    fn recentre(&mut self, n: usize, step: T) {
         let origin = self.offset + (step - self.offset);
         let applied = origin - self.offset;
         if applied != T::ZERO {
@@ -516,35 +494,4 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
     }
 }
 
-impl<T: Real, const N: usize> Estimator<T> for IvStepEstimator<T, N> {
-    fn push(&mut self, sample: T) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        let step = &self.config.step;
-        let sample = match check_sample(sample, step.valid_min, step.valid_max) {
-            Ok(sample) => sample,
-            Err(reason) => return self.latch(reason),
-        };
-        if let Some(x) = self.decimator.push(sample * self.inv_gain) {
-            self.update(x);
-        }
-        self.reading()
-    }
-
-    fn push_missing(&mut self) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        self.latch(InvalidReason::MissingSample)
-    }
-
-    fn reset(&mut self) {
-        // The configuration was validated in `new`, so this cannot fail.
-        if let Ok(fresh) = Self::new(self.config) {
-            *self = fresh;
-        }
-    }
-}
+estimator_via_intake!(IvStepEstimator<T, const N>);

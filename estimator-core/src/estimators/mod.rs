@@ -9,7 +9,9 @@
 //!   models across the resonance);
 //! - baselines a user would otherwise pick: [`baseline`] (settle-then-average, moving
 //!   average);
-//! - shared: [`input`] (sample checks, block averaging, the difference window),
+//! - shared: [`intake`] (the sample count, fault latch, range check, gain, decimation and
+//!   reading every estimator answers with), [`input`] (sample checks, block averaging, the
+//!   difference window),
 //!   [`consistency`] (residuals against the noise metered at tare), [`noise_meter`].
 //!
 //! The crate root re-exports the estimators and their configurations; the modules stay
@@ -20,6 +22,7 @@ pub(crate) mod bias_compensated;
 pub(crate) mod consistency;
 pub(crate) mod covariance;
 pub(crate) mod input;
+pub(crate) mod intake;
 pub(crate) mod iv;
 pub(crate) mod model;
 pub(crate) mod noise_meter;

@@ -25,7 +25,8 @@
 //! error becomes a bias).
 
 use crate::estimators::consistency::{NoiseReference, ResidualCheck};
-use crate::estimators::input::{check_sample, Decimator};
+use crate::estimators::input::Decimator;
+use crate::estimators::intake::{estimator_via_intake, Intake};
 use crate::estimators::step::MAX_DECIMATION;
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
@@ -136,14 +137,12 @@ fn multiply<T: Real, const S: usize>(x: &[[T; S]; S], y: &[[T; S]; S]) -> [[T; S
 
 /// What the estimator assumes about the sensor's state at its first sample.
 ///
-/// Measured on host-sim's reference cell at 50 dB, 100 ms after the drop, with a model
-/// identified at calibration (`cargo test --release -p host-sim --test model_based --
-/// --ignored --nocapture`): `AtRest` with the exact onset reaches 1.01× the Cramér–Rao
-/// bound of known model, onset and tare; `Unknown` 1.18× (its own bound, with the initial
-/// state unknown, is 1.16×). But one sample of onset error biases `AtRest` by 0.22–0.26%
-/// (ten times the bound's 0.0145%), and in a bank `AtRest` loses up to 1.43× when the load
-/// falls between candidates 2% apart, while `Unknown` stays at 1.18× in both cases. The
-/// firmware, which finds the onset by detecting the change, should use `Unknown`.
+/// `AtRest` with the exact onset meets the Cramér–Rao bound of known model, onset and tare;
+/// `Unknown` meets its own, slightly higher bound (the initial state unknown). But an onset
+/// error of one sample biases `AtRest` far beyond its bound, and in a bank `AtRest` loses
+/// when the load falls between candidates, while `Unknown` does not (host-sim's
+/// `model_based` test prints the figures). The firmware, which finds the onset by
+/// detecting the change, should use `Unknown`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum InitialState {
@@ -152,7 +151,7 @@ pub enum InitialState {
     Unknown,
     /// Zero: the first sample is the onset of a step onto a sensor at rest (the tare
     /// removed). One unknown, so the same samples carry more information on `u`; an onset
-    /// off by `d` samples is a model error, a bias of about `d` × 0.25% on the reference cell.
+    /// off by `d` samples is a model error, a bias that grows with `d`.
     AtRest,
 }
 
@@ -222,7 +221,8 @@ impl<T: Real, const S: usize> ModelConfig<T, S> {
 pub struct ModelEstimator<T: Real, const S: usize> {
     config: ModelConfig<T, S>,
     block: BlockModel<T, S>,
-    decimator: Decimator<T>,
+    /// Gain 1: the model is in raw units.
+    intake: Intake<T>,
     /// `C·A^k`: the regressor of the initial state.
     observability_row: [T; S],
     /// `s(k)`: the regressor of the step.
@@ -236,11 +236,6 @@ pub struct ModelEstimator<T: Real, const S: usize> {
     /// Whether a failed check flags this estimator's own reading (a bank judges its
     /// interpolated fit instead, and needs every candidate's estimate).
     flags_mismatch: bool,
-    samples: u32,
-    fault: Option<InvalidReason>,
-    state: State,
-    estimate: Option<T>,
-    residual: Option<T>,
 }
 
 impl<T: Real, const S: usize> ModelEstimator<T, S> {
@@ -265,7 +260,12 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
         Ok(Self {
             config,
             block,
-            decimator: Decimator::new(config.decimation),
+            intake: Intake::new(
+                T::ONE,
+                config.valid_min,
+                config.valid_max,
+                Decimator::new(config.decimation),
+            ),
             observability_row: config.model.c,
             step_response: T::ZERO,
             factor: Factor::new(),
@@ -276,15 +276,10 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
                 ResidualCheck::new(reference, T::ONE, config.decimation, T::ONE)
             }),
             flags_mismatch: true,
-            samples: 0,
-            fault: None,
-            state: State::WarmingUp,
-            estimate: None,
-            residual: None,
         })
     }
 
-    /// Check the runs after the next [`Estimator::reset`] against `reference` (`None`: no
+    /// Check the runs after the next [`crate::Estimator::reset`] against `reference` (`None`: no
     /// check), as [`crate::StepEstimator::set_noise_reference`].
     pub fn set_noise_reference(
         &mut self,
@@ -323,27 +318,19 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
         }
     }
 
-    fn reading(&self) -> Reading<T> {
-        Reading {
-            estimate: self.estimate,
-            samples: self.samples,
-            state: self.state,
-            residual: self.residual,
-        }
-    }
-
-    fn latch(&mut self, reason: InvalidReason) -> Reading<T> {
-        self.fault = Some(reason);
-        self.state = State::Invalid(reason);
-        self.estimate = None;
-        self.residual = None;
-        self.reading()
+    /// A fresh estimator; a bank's candidate stays one that does not flag its own reading.
+    fn fresh(&self) -> Result<Self, ConfigError> {
+        let fresh = Self::new(self.config)?;
+        Ok(Self {
+            flags_mismatch: self.flags_mismatch,
+            ..fresh
+        })
     }
 
     /// Fold the block mean `y` of block m; `observability_row` and `step_response` hold
     /// `C·A^{mD}` and `s(mD)` at the block's first sample.
     fn update(&mut self, y: T) {
-        let had_estimate = self.estimate.is_some();
+        let had_estimate = self.intake.estimate().is_some();
         let block = &self.block;
         let mut row = [T::ZERO; S];
         let mut next = [T::ZERO; S];
@@ -378,7 +365,7 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
 
         let [u] = self.factor.tail_solution();
         if !(u.is_finite() && folded.row_weight.is_finite() && self.residual_sum.is_finite()) {
-            self.latch(InvalidReason::NonFiniteUpdate);
+            self.intake.latch(InvalidReason::NonFiniteUpdate);
             return;
         }
         if (self.rows as usize) < self.state_columns() + 1 {
@@ -388,59 +375,20 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
         let threshold = T::from_f64(100.0) * T::EPSILON * T::from_u32(self.rows);
         let scale = self.step_response * self.step_response;
         if !(weight > threshold * scale) {
-            self.state = State::Invalid(InvalidReason::IllConditioned);
-            self.estimate = None;
-            self.residual = None;
+            self.intake.invalidate(InvalidReason::IllConditioned);
             return;
         }
         if self.flags_mismatch && self.check.as_ref().is_some_and(|c| c.mismatch(|| T::ONE)) {
             // Not latched: the data so far do not fit this model.
-            self.state = State::Invalid(InvalidReason::ModelMismatch);
-            self.estimate = None;
-            self.residual = None;
+            self.intake.invalidate(InvalidReason::ModelMismatch);
             return;
         }
-        self.residual = had_estimate.then_some(folded.residual);
-        self.state = State::Estimating;
-        self.estimate = Some(u);
+        self.intake
+            .estimating(u, had_estimate.then_some(folded.residual));
     }
 }
 
-impl<T: Real, const S: usize> Estimator<T> for ModelEstimator<T, S> {
-    fn push(&mut self, sample: T) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        match check_sample(sample, self.config.valid_min, self.config.valid_max) {
-            Ok(y) => {
-                if let Some(mean) = self.decimator.push(y) {
-                    self.update(mean);
-                }
-            }
-            Err(reason) => return self.latch(reason),
-        }
-        self.reading()
-    }
-
-    fn push_missing(&mut self) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        self.latch(InvalidReason::MissingSample)
-    }
-
-    fn reset(&mut self) {
-        if let Ok(fresh) = Self::new(self.config) {
-            // A bank's candidate stays one that does not flag its own reading.
-            *self = Self {
-                flags_mismatch: self.flags_mismatch,
-                ..fresh
-            };
-        }
-    }
-}
+estimator_via_intake!(ModelEstimator<T, const S>);
 
 /// `K` candidate models run side by side; the reading is that of the model with the
 /// smallest residual sum of squares (the maximum-likelihood choice over the grid under
@@ -448,21 +396,17 @@ impl<T: Real, const S: usize> Estimator<T> for ModelEstimator<T, S> {
 /// ordered (e.g. by resonance frequency). With `K ≥ 3`, a best fit on the first or last
 /// candidate is flagged [`InvalidReason::OutsideModelRange`] (never a silently biased number).
 ///
-/// Memory: `K` estimators, about 21 KB in `f32` for `S = 5`, `K = 33` (printed by host-sim's
-/// `model_based` figures).
+/// Memory: `K` estimators (host-sim's `model_based` figures print the size).
 ///
 /// ## The consistency check
 /// With a noise reference in its configurations, a bank of one candidate (`K = 1`, one model
 /// at the calibration mass) flags `Invalid(ModelMismatch)` as a [`ModelEstimator`] does: off
-/// its load its residuals are far beyond the noise (the stability map's silent 13–10⁴× the
-/// bound). A grid (`K ≥ 3`) does not check, because the test cannot separate its failure
-/// from its valid region. Measured on host-sim's reference cell: the residuals of the
-/// interpolated model exceed the noise's in the valid region too (the 2% grid of
-/// the firmware's identified bank from 0.2 s on at 2× the calibration mass, 50 dB, where its
-/// estimate stays at 0.028 g at 100 ms; every load at 70 dB by 1.5 s). The bias of the grid
-/// at high SNR (19× the bound at ×0.9, 70 dB) comes from the vertex of the residual
-/// parabola, and a Newton estimate of the interpolation's remainder did not find it. What
-/// fixes it is a denser grid (`K = 65`: 5.0× at the same point), chosen at calibration.
+/// its load its residuals are far beyond the noise, where its estimate would be silently
+/// biased. A grid (`K ≥ 3`) does not check, because the test cannot separate its failure
+/// from its valid region: the residuals of the interpolated model exceed the noise's in the
+/// valid region too, at high SNR and late in a drop. The bias of the grid at high SNR comes
+/// from the vertex of the residual parabola, and a Newton estimate of the interpolation's
+/// remainder did not find it. What fixes it is a denser grid, chosen at calibration.
 #[derive(Clone, Debug)]
 pub struct ModelBank<T: Real, const S: usize, const K: usize> {
     models: [ModelEstimator<T, S>; K],
@@ -493,7 +437,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
         })
     }
 
-    /// Check the runs after the next [`Estimator::reset`] against `reference` (`None`: no
+    /// Check the runs after the next [`crate::Estimator::reset`] against `reference` (`None`: no
     /// check): every candidate takes it, and only a bank of one flags (see the type's docs).
     pub fn set_noise_reference(
         &mut self,
@@ -533,9 +477,9 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
         let centre = readings[best];
         if best == 0 || best + 1 == K {
             // With three or more candidates a best fit on the edge means the truth may lie
-            // beyond it, where every candidate is biased (the stability map: 74× and 31× the
-            // CRLB at 100 ms, 50 dB, for resonances 1.4× and 1.5× the calibrated one with a
-            // ±30% bank): flag it rather than report the edge model's biased estimate. Not
+            // beyond it, where every candidate is biased (the stability map found resonances
+            // beyond a bank's range read far off the CRLB): flag it rather than report the
+            // edge model's biased estimate. Not
             // latched: early in a drop the fit may sit at an edge and move inwards.
             if K >= 3 && centre.estimate.is_some() {
                 return Reading {

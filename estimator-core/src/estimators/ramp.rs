@@ -16,11 +16,12 @@
 //! recursive engine as the step estimator solves it, with `[t, 1]` as trailing columns.
 
 use crate::estimators::consistency::ResidualCheck;
-use crate::estimators::input::{check_sample, Decimator, DifferenceWindow};
+use crate::estimators::input::DifferenceWindow;
+use crate::estimators::intake::{estimator_via_intake, Intake};
 use crate::estimators::step::StepConfig;
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
-use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
+use crate::reading::{ConfigError, InvalidReason, Reading};
 
 /// Configuration of a [`RampEstimator`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -39,9 +40,9 @@ pub struct RampConfig<T> {
 #[derive(Clone, Debug)]
 pub struct RampEstimator<T: Real, const N: usize> {
     config: RampConfig<T>,
-    inv_gain: T,
+    /// Its estimate is the line's intercept `b`; the reading moves it along `slope`.
+    intake: Intake<T>,
     decimated_period_s: T,
-    decimator: Decimator<T>,
     differences: DifferenceWindow<T, N, 2>,
     /// Leading: second differences; trailing: `[t, 1]`.
     factor: Factor<T, N, 2>,
@@ -52,10 +53,8 @@ pub struct RampEstimator<T: Real, const N: usize> {
     check: Option<ResidualCheck<T>>,
     /// `Σc²` of the latest solution (second differences).
     noise_gain: T,
-    samples: u32,
-    fault: Option<InvalidReason>,
-    line: Option<(T, T)>,
-    state: State,
+    /// The line's slope `a`, valid while the intake has an intercept.
+    slope: T,
 }
 
 impl<T: Real, const N: usize> RampEstimator<T, N> {
@@ -71,9 +70,8 @@ impl<T: Real, const N: usize> RampEstimator<T, N> {
         let decimation = config.regression.decimation;
         Ok(Self {
             config,
-            inv_gain: T::ONE / config.regression.gain,
+            intake: config.regression.intake(),
             decimated_period_s: config.sample_period_s * T::from_u32(decimation as u32),
-            decimator: Decimator::new(decimation),
             differences: DifferenceWindow::new(),
             factor: Factor::new(),
             decimated_samples: 0,
@@ -81,38 +79,30 @@ impl<T: Real, const N: usize> RampEstimator<T, N> {
             effective_rows: T::ZERO,
             check: config.regression.residual_check(),
             noise_gain: T::ONE,
-            samples: 0,
-            fault: None,
-            line: None,
-            state: State::WarmingUp,
+            slope: T::ZERO,
         })
     }
 
     /// The input line: slope `a` (estimate's unit per second) and intercept `b` (at the
     /// first raw sample after reset), once determined.
     pub fn line(&self) -> Option<(T, T)> {
-        self.line
+        self.intake
+            .estimate()
+            .map(|intercept| (self.slope, intercept))
     }
 
+    /// The intake's reading with the line evaluated at the latest raw sample.
     fn reading(&self) -> Reading<T> {
-        let t = T::from_u32(self.samples.saturating_sub(1)) * self.config.sample_period_s;
+        let reading = self.intake.reading();
+        let t = T::from_u32(reading.samples.saturating_sub(1)) * self.config.sample_period_s;
         Reading {
-            estimate: self.line.map(|(a, b)| a * t + b),
-            samples: self.samples,
-            state: self.state,
-            residual: None,
+            estimate: reading.estimate.map(|b| self.slope * t + b),
+            ..reading
         }
     }
 
-    fn invalidate(&mut self, reason: InvalidReason) -> Reading<T> {
-        self.state = State::Invalid(reason);
-        self.line = None;
-        self.reading()
-    }
-
-    fn latch(&mut self, reason: InvalidReason) -> Reading<T> {
-        self.fault = Some(reason);
-        self.invalidate(reason)
+    fn fresh(&self) -> Result<Self, ConfigError> {
+        Self::new(self.config)
     }
 
     fn update(&mut self, x: T) {
@@ -137,7 +127,7 @@ impl<T: Real, const N: usize> RampEstimator<T, N> {
         self.rows = self.rows.saturating_add(1);
         let [slope, c0] = self.factor.tail_solution();
         if !(slope.is_finite() && c0.is_finite() && folded.row_weight.is_finite()) {
-            self.latch(InvalidReason::NonFiniteUpdate);
+            self.intake.latch(InvalidReason::NonFiniteUpdate);
             return;
         }
         if (self.rows as usize) < n + 2 {
@@ -158,47 +148,17 @@ impl<T: Real, const N: usize> RampEstimator<T, N> {
         // The time column's weight grows like rows·t², so compare it on that scale.
         let t_scale = t * t;
         if !(w_1 > threshold && w_t > threshold * t_scale) {
-            self.invalidate(InvalidReason::IllConditioned);
+            self.intake.invalidate(InvalidReason::IllConditioned);
             return;
         }
         if mismatch {
             // Not latched, as in `StepEstimator`.
-            self.invalidate(InvalidReason::ModelMismatch);
+            self.intake.invalidate(InvalidReason::ModelMismatch);
             return;
         }
-        self.line = Some((slope, c0 + slope * self.config.lag_s));
-        self.state = State::Estimating;
+        self.slope = slope;
+        self.intake.estimating(c0 + slope * self.config.lag_s, None);
     }
 }
 
-impl<T: Real, const N: usize> Estimator<T> for RampEstimator<T, N> {
-    fn push(&mut self, sample: T) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        let cfg = &self.config.regression;
-        let sample = match check_sample(sample, cfg.valid_min, cfg.valid_max) {
-            Ok(sample) => sample,
-            Err(reason) => return self.latch(reason),
-        };
-        if let Some(x) = self.decimator.push(sample * self.inv_gain) {
-            self.update(x);
-        }
-        self.reading()
-    }
-
-    fn push_missing(&mut self) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        self.latch(InvalidReason::MissingSample)
-    }
-
-    fn reset(&mut self) {
-        if let Ok(fresh) = Self::new(self.config) {
-            *self = fresh;
-        }
-    }
-}
+estimator_via_intake!(RampEstimator<T, const N>, reading: Self::reading);

@@ -23,9 +23,9 @@
 //! - A reading right where the fit becomes determined can be noise amplified by orders of
 //!   magnitude: readings with an identifiability at or below [`MIN_IDENTIFIABILITY`] are
 //!   `Invalid(IllConditioned)` (test `tests/stability.rs`).
-//! - In `f32` over long runs the step level stalled: stored as 138 g it moves in steps of
-//!   1.5e-5 g, and updates of `1/N_eff` of a deviation fell below that (up to 0.2 g off
-//!   after 10⁶ samples at λ = 1, D = 1). The targets are therefore folded relative to an
+//! - In `f32` over long runs the step level stalled: stored as the load itself, updates of
+//!   `1/N_eff` of a deviation fall below the load's rounding step. The targets are therefore
+//!   folded relative to an
 //!   origin that follows the estimate (`offset`), so the factor holds deviations, not the
 //!   load (`Factor::shift_target`); the reading adds the origin back.
 //! - Silent without a noise reference: the bias of an order below the sensor's (n = 1, 2 at
@@ -38,10 +38,11 @@
 //!   map's valid region (`tuning::WeighingConfig::check_region`).
 
 use crate::estimators::consistency::{NoiseReference, ResidualCheck};
-use crate::estimators::input::{check_sample, Decimator, DifferenceWindow};
+use crate::estimators::input::{Decimator, DifferenceWindow};
+use crate::estimators::intake::{estimator_via_intake, Intake};
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
-use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
+use crate::reading::{ConfigError, InvalidReason};
 
 /// The largest block length the decimator accepts.
 pub const MAX_DECIMATION: u16 = 1024;
@@ -50,9 +51,7 @@ pub const MAX_DECIMATION: u16 = 1024;
 /// and the difference columns) is not above this floor are `Invalid(IllConditioned)`: their
 /// noise gain is more than √1000 ≈ 32 times that of a plain mean of the same rows. The
 /// stability map found such readings right where a fit becomes determined (`n + 1` rows, no
-/// redundancy): at n = 7, D = 16, 50 dB the first reading had an RMS error of 0.9 g and up
-/// to 12 g over 200 runs, at identifiabilities of 2e-6 to 1e-4, against a median of 0.3
-/// there and of 0.7–1 at 100 ms; one row later its RMS was 0.039 g.
+/// redundancy), with errors orders of magnitude above those of the next row's.
 pub const MIN_IDENTIFIABILITY: f64 = 1e-3;
 
 /// The identifiability floor of `T`: [`MIN_IDENTIFIABILITY`], or the rounding level
@@ -156,6 +155,16 @@ impl<T: Real> StepConfig<T> {
         Ok(())
     }
 
+    /// The intake this configuration asks for: gain, valid range and decimation.
+    pub(crate) fn intake(&self) -> Intake<T> {
+        Intake::new(
+            T::ONE / self.gain,
+            self.valid_min,
+            self.valid_max,
+            Decimator::new(self.decimation),
+        )
+    }
+
     /// The consistency check this configuration asks for, over residuals in the estimate's
     /// unit (raw units over the gain).
     pub(crate) fn residual_check(&self) -> Option<ResidualCheck<T>> {
@@ -176,8 +185,7 @@ impl<T: Real> StepConfig<T> {
 #[derive(Clone, Debug)]
 pub struct StepEstimator<T: Real, const N: usize> {
     config: StepConfig<T>,
-    inv_gain: T,
-    decimator: Decimator<T>,
+    intake: Intake<T>,
     differences: DifferenceWindow<T, N, 1>,
     /// Leading columns: the differences; one trailing column: the constant, whose unknown is
     /// the step level.
@@ -193,12 +201,6 @@ pub struct StepEstimator<T: Real, const N: usize> {
     check: Option<ResidualCheck<T>>,
     /// `Σc²` of the latest solution: the next residual's noise in block-mean variances.
     noise_gain: T,
-    samples: u32,
-    /// A fault that broke the data stream or the state; latched until `reset()`.
-    fault: Option<InvalidReason>,
-    state: State,
-    estimate: Option<T>,
-    residual: Option<T>,
 }
 
 impl<T: Real, const N: usize> StepEstimator<T, N> {
@@ -207,8 +209,7 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         config.validate(N)?;
         Ok(Self {
             config,
-            inv_gain: T::ONE / config.gain,
-            decimator: Decimator::new(config.decimation),
+            intake: config.intake(),
             differences: DifferenceWindow::new(),
             factor: Factor::new(),
             rows: 0,
@@ -216,11 +217,6 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
             offset: T::ZERO,
             check: config.residual_check(),
             noise_gain: T::ONE,
-            samples: 0,
-            fault: None,
-            state: State::WarmingUp,
-            estimate: None,
-            residual: None,
         })
     }
 
@@ -229,7 +225,7 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         &self.config
     }
 
-    /// Check the runs after the next [`Estimator::reset`] against `reference` (`None`: no
+    /// Check the runs after the next [`crate::Estimator::reset`] against `reference` (`None`: no
     /// check); the current run keeps the check it started with. A reference that is not
     /// finite and positive is refused and nothing changes.
     pub fn set_noise_reference(
@@ -269,34 +265,8 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         (2 * self.config.order as u32 + 1) * self.config.decimation as u32
     }
 
-    /// Push an integer ADC reading: the zero offset is removed in integer arithmetic
-    /// before the conversion to `T`, so no precision is lost to a large offset.
-    pub fn push_counts(&mut self, counts: i32, zero_counts: i32) -> Reading<T> {
-        let centred = counts.saturating_sub(zero_counts);
-        self.push(T::from_i32(centred))
-    }
-
-    fn reading(&self) -> Reading<T> {
-        Reading {
-            estimate: self.estimate,
-            samples: self.samples,
-            state: self.state,
-            residual: self.residual,
-        }
-    }
-
-    /// Mark the current reading invalid; the next determined update may clear it.
-    fn invalidate(&mut self, reason: InvalidReason) -> Reading<T> {
-        self.state = State::Invalid(reason);
-        self.estimate = None;
-        self.residual = None;
-        self.reading()
-    }
-
-    /// Invalidate and stay invalid until `reset()`: the data stream or the state is broken.
-    fn latch(&mut self, reason: InvalidReason) -> Reading<T> {
-        self.fault = Some(reason);
-        self.invalidate(reason)
+    fn fresh(&self) -> Result<Self, ConfigError> {
+        Self::new(self.config)
     }
 
     /// One decimated sample `x` (in the estimate's unit) into the regression.
@@ -310,7 +280,7 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
             self.factor.forget(n, lambda);
         }
         self.effective_rows = self.effective_rows * lambda + T::ONE;
-        let had_estimate = self.estimate.is_some();
+        let had_estimate = self.intake.estimate().is_some();
         let determined_before = self.rows as usize > n;
         let folded = self
             .factor
@@ -320,7 +290,7 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         let step = self.offset + deviation;
         let [weight] = self.factor.tail_weight();
         if !(step.is_finite() && weight.is_finite() && folded.row_weight.is_finite()) {
-            self.latch(InvalidReason::NonFiniteUpdate);
+            self.intake.latch(InvalidReason::NonFiniteUpdate);
             return;
         }
         if (self.rows as usize) < n + 1 {
@@ -345,22 +315,17 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         // `MIN_IDENTIFIABILITY`).
         let threshold = identifiability_floor::<T>() * self.effective_rows;
         if !(weight > threshold) {
-            self.invalidate(InvalidReason::IllConditioned);
+            self.intake.invalidate(InvalidReason::IllConditioned);
             return;
         }
         self.offset = recentre(&mut self.factor, n, self.offset, step);
         if mismatch {
             // Not latched: the data so far do not fit; more rows may (or a reset will).
-            self.invalidate(InvalidReason::ModelMismatch);
+            self.intake.invalidate(InvalidReason::ModelMismatch);
             return;
         }
-        self.residual = if had_estimate {
-            Some(folded.residual)
-        } else {
-            None
-        };
-        self.state = State::Estimating;
-        self.estimate = Some(step);
+        self.intake
+            .estimating(step, had_estimate.then_some(folded.residual));
     }
 }
 
@@ -384,35 +349,4 @@ pub(crate) fn recentre<T: Real, const N: usize, const E: usize>(
     origin
 }
 
-impl<T: Real, const N: usize> Estimator<T> for StepEstimator<T, N> {
-    fn push(&mut self, sample: T) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        let sample = match check_sample(sample, self.config.valid_min, self.config.valid_max) {
-            Ok(sample) => sample,
-            Err(reason) => return self.latch(reason),
-        };
-        if let Some(x) = self.decimator.push(sample * self.inv_gain) {
-            self.update(x);
-        }
-        self.reading()
-    }
-
-    fn push_missing(&mut self) -> Reading<T> {
-        self.samples = self.samples.saturating_add(1);
-        if self.fault.is_some() {
-            return self.reading();
-        }
-        self.latch(InvalidReason::MissingSample)
-    }
-
-    fn reset(&mut self) {
-        let config = self.config;
-        // The configuration was validated in `new`, so this cannot fail.
-        if let Ok(fresh) = Self::new(config) {
-            *self = fresh;
-        }
-    }
-}
+estimator_via_intake!(StepEstimator<T, const N>);

@@ -47,74 +47,46 @@ pub trait Real:
     fn sqrt(self) -> Self;
 }
 
-impl Real for f32 {
-    const ZERO: Self = 0.0;
-    const ONE: Self = 1.0;
-    const EPSILON: Self = f32::EPSILON;
-    const NAME: &'static str = "f32";
+/// `Real` for a primitive float, with its `libm` square root.
+macro_rules! impl_real {
+    ($float:ident, $sqrt:path) => {
+        impl Real for $float {
+            const ZERO: Self = 0.0;
+            const ONE: Self = 1.0;
+            const EPSILON: Self = $float::EPSILON;
+            const NAME: &'static str = stringify!($float);
 
-    #[inline]
-    fn from_f64(value: f64) -> Self {
-        value as f32
-    }
-    #[inline]
-    fn to_f64(self) -> f64 {
-        self as f64
-    }
-    #[inline]
-    fn from_i32(value: i32) -> Self {
-        value as f32
-    }
-    #[inline]
-    fn from_u32(value: u32) -> Self {
-        value as f32
-    }
-    #[inline]
-    fn abs(self) -> Self {
-        f32::abs(self)
-    }
-    #[inline]
-    fn is_finite(self) -> bool {
-        f32::is_finite(self)
-    }
-    #[inline]
-    fn sqrt(self) -> Self {
-        libm::sqrtf(self)
-    }
+            #[inline]
+            fn from_f64(value: f64) -> Self {
+                value as $float
+            }
+            #[inline]
+            fn to_f64(self) -> f64 {
+                self as f64
+            }
+            #[inline]
+            fn from_i32(value: i32) -> Self {
+                value as $float
+            }
+            #[inline]
+            fn from_u32(value: u32) -> Self {
+                value as $float
+            }
+            #[inline]
+            fn abs(self) -> Self {
+                $float::abs(self)
+            }
+            #[inline]
+            fn is_finite(self) -> bool {
+                $float::is_finite(self)
+            }
+            #[inline]
+            fn sqrt(self) -> Self {
+                $sqrt(self)
+            }
+        }
+    };
 }
 
-impl Real for f64 {
-    const ZERO: Self = 0.0;
-    const ONE: Self = 1.0;
-    const EPSILON: Self = f64::EPSILON;
-    const NAME: &'static str = "f64";
-
-    #[inline]
-    fn from_f64(value: f64) -> Self {
-        value
-    }
-    #[inline]
-    fn to_f64(self) -> f64 {
-        self
-    }
-    #[inline]
-    fn from_i32(value: i32) -> Self {
-        value as f64
-    }
-    #[inline]
-    fn from_u32(value: u32) -> Self {
-        value as f64
-    }
-    #[inline]
-    fn abs(self) -> Self {
-        f64::abs(self)
-    }
-    #[inline]
-    fn is_finite(self) -> bool {
-        f64::is_finite(self)
-    }
-    #[inline]
-    fn sqrt(self) -> Self {
-        libm::sqrt(self)
-    }
-}
+impl_real!(f32, libm::sqrtf);
+impl_real!(f64, libm::sqrt);

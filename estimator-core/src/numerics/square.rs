@@ -114,9 +114,37 @@ impl<T: Real, const N: usize> Square<T, N> {
     pub(crate) fn solve(
         mut self,
         n: usize,
-        mut rhs: Column<T, N>,
-        mut row_weight: Column<T, N>,
+        rhs: Column<T, N>,
+        row_weight: Column<T, N>,
     ) -> Result<Solved<T, N>, SolveError> {
+        let mut rows = RowSide { rhs, row_weight };
+        self.scale_rows(n, &mut rows)?;
+        let column_scale = self.scale_columns(n)?;
+        self.factor_lu(n, &mut rows)?;
+        let RowSide { rhs, row_weight } = rows;
+        // U y = (L⁻¹ P b), then θ = S_c y.
+        let p = n + 1;
+        let mut theta = Column::<T, N>::zero();
+        for i in (0..p).rev() {
+            let mut value = rhs.get(i, n);
+            for j in (i + 1)..p {
+                value -= self.get(i, j, n) * theta.get(j, n);
+            }
+            theta.set(i, n, value / self.get(i, i, n));
+        }
+        for j in 0..p {
+            theta.set(j, n, theta.get(j, n) * column_scale.get(j, n));
+        }
+        Ok(Solved {
+            theta,
+            last_row_norm2: self.last_row_norm2(n, &column_scale, &row_weight),
+        })
+    }
+
+    /// Scale each row (and its right-hand side) to a largest entry of one; refuse a matrix or
+    /// right-hand side that is not finite, or a zero row.
+    fn scale_rows(&mut self, n: usize, rows: &mut RowSide<T, N>) -> Result<(), SolveError> {
+        let RowSide { rhs, row_weight } = rows;
         let p = n + 1;
         for i in 0..p {
             let mut largest = T::ZERO;
@@ -141,6 +169,13 @@ impl<T: Real, const N: usize> Square<T, N> {
             // M⁻¹ = (row-scaled)⁻¹·S_r, so row i of the scaled problem carries weight ω_i·s_i².
             row_weight.set(i, n, row_weight.get(i, n) * scale * scale);
         }
+        Ok(())
+    }
+
+    /// Scale each column to a largest entry of one; the scales `S_c`, or `Singular` for a
+    /// zero column.
+    fn scale_columns(&mut self, n: usize) -> Result<Column<T, N>, SolveError> {
+        let p = n + 1;
         let mut column_scale = Column::<T, N>::zero();
         for j in 0..p {
             let mut largest = T::ZERO;
@@ -156,6 +191,14 @@ impl<T: Real, const N: usize> Square<T, N> {
                 self.set(i, j, n, self.get(i, j, n) * scale);
             }
         }
+        Ok(column_scale)
+    }
+
+    /// `P M = L U` in place (L strictly below the diagonal, unit diagonal implied), applying
+    /// L⁻¹ P to `rhs` and P to the row weights.
+    fn factor_lu(&mut self, n: usize, rows: &mut RowSide<T, N>) -> Result<(), SolveError> {
+        let RowSide { rhs, row_weight } = rows;
+        let p = n + 1;
         // Every entry is now at most one in magnitude; a pivot at the rounding level of the
         // elimination (ε·(n+1)) means the matrix is numerically singular.
         let singular = T::EPSILON * T::from_u32(p as u32);
@@ -189,20 +232,19 @@ impl<T: Real, const N: usize> Square<T, N> {
                 rhs.set(i, n, rhs.get(i, n) - factor * rhs.get(k, n));
             }
         }
-        // U y = (L⁻¹ P b), then θ = S_c y.
-        let mut theta = Column::<T, N>::zero();
-        for i in (0..p).rev() {
-            let mut value = rhs.get(i, n);
-            for j in (i + 1)..p {
-                value -= self.get(i, j, n) * theta.get(j, n);
-            }
-            theta.set(i, n, value / self.get(i, i, n));
-        }
-        for j in 0..p {
-            theta.set(j, n, theta.get(j, n) * column_scale.get(j, n));
-        }
-        // g = M⁻ᵀ e_last: with P M = L U, Uᵀ w = S_c e_last, Lᵀ v = w, and g = Pᵀ v; the row
-        // weights were permuted with the rows, so Σ ω_i g_i² = Σ ω'_k v_k².
+        Ok(())
+    }
+
+    /// `Σ ω_i g_i²` for `g = M⁻ᵀ e_last`, from the LU factors: with P M = L U,
+    /// Uᵀ w = S_c e_last, Lᵀ v = w, and g = Pᵀ v; the row weights were permuted with the
+    /// rows, so Σ ω_i g_i² = Σ ω'_k v_k².
+    fn last_row_norm2(
+        &self,
+        n: usize,
+        column_scale: &Column<T, N>,
+        row_weight: &Column<T, N>,
+    ) -> T {
+        let p = n + 1;
         let mut w = Column::<T, N>::zero();
         for i in 0..p {
             let mut value = if i == n {
@@ -224,11 +266,14 @@ impl<T: Real, const N: usize> Square<T, N> {
             w.set(i, n, value);
             last_row_norm2 += row_weight.get(i, n) * value * value;
         }
-        Ok(Solved {
-            theta,
-            last_row_norm2,
-        })
+        last_row_norm2
     }
+}
+
+/// What moves with the rows of `M` in the solve: the right-hand side and the row weights.
+struct RowSide<T, const N: usize> {
+    rhs: Column<T, N>,
+    row_weight: Column<T, N>,
 }
 
 #[inline(always)]

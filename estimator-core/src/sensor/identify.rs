@@ -272,31 +272,12 @@ pub fn identify<T: Real, const S: usize>(
     // Two periods of the lowest frequency, and four times the blocks that determine a fit.
     let needed = (2.0 * config.sample_rate_hz / config.frequency_min_hz) as usize;
     let needed = needed.max(4 * (S + 1) * decimation);
-    for (index, drop) in drops.iter().enumerate() {
-        if drop.len() < needed {
-            return Err(IdentifyError::TooShort {
-                drop: index,
-                samples: drop.len(),
-                needed,
-            });
-        }
-        if let Some(sample) = drop.iter().position(|v| !v.is_finite()) {
-            return Err(IdentifyError::NonFinite {
-                drop: index,
-                sample,
-            });
-        }
-        if is_flat(drop) {
-            return Err(IdentifyError::Flat { drop: index });
-        }
-    }
+    check_drops(drops, needed)?;
     let mut problem = Problem::<T, S> {
         drops,
         config,
         evaluations: 0,
     };
-
-    // Coarse grid.
     let ln_f = (
         libm::log(config.frequency_min_hz),
         libm::log(config.frequency_max_hz),
@@ -306,54 +287,9 @@ pub fn identify<T: Real, const S: usize>(
     let z_step = (ln_z.1 - ln_z.0) / f64::from(config.damping_points - 1);
     // At least the samples the length check asks for, so every coarse fit is determined.
     let coarse = ((config.coarse_window_s * config.sample_rate_hz) as usize).max(needed);
-    let mut best = (ln_f.0, ln_z.0, f64::INFINITY);
-    for i in 0..config.frequency_points {
-        let lf = ln_f.0 + f_step * f64::from(i);
-        for j in 0..config.damping_points {
-            let lz = ln_z.0 + z_step * f64::from(j);
-            let cost = problem.cost(lf, lz, coarse);
-            if cost < best.2 {
-                best = (lf, lz, cost);
-            }
-        }
-    }
-    if !best.2.is_finite() {
-        return Err(IdentifyError::NotIdentifiable);
-    }
-
-    // Cyclic golden sections. The first cycle searches one grid step either side; later ones
-    // twice the distance the previous cycle moved (coordinate descent on a nearly separable
-    // valley moves less every cycle), never less than the tolerance.
-    let (mut lf, mut lz) = (best.0, best.1);
-    let mut cost = problem.cost(lf, lz, usize::MAX);
-    let (mut f_half, mut z_half) = (f_step, z_step);
+    let start = problem.coarse_grid(ln_f.0, f_step, ln_z.0, z_step, coarse)?;
+    let (lf, lz) = problem.refine(start, (ln_f, f_step), (ln_z, z_step));
     let width = config.tolerance;
-    for _ in 0..12 {
-        let (lf_before, lz_before) = (lf, lz);
-        let low = (lf - f_half).max(ln_f.0);
-        let high = (lf + f_half).min(ln_f.1);
-        let (found, found_cost) =
-            golden_section(|x| problem.cost(x, lz, usize::MAX), low, high, width);
-        if found_cost <= cost {
-            (lf, cost) = (found, found_cost);
-        }
-        let low = (lz - z_half).max(ln_z.0);
-        let high = (lz + z_half).min(ln_z.1);
-        let (found, found_cost) =
-            golden_section(|x| problem.cost(lf, x, usize::MAX), low, high, width);
-        if found_cost <= cost {
-            (lz, cost) = (found, found_cost);
-        }
-        let (moved_f, moved_z) = ((lf - lf_before).abs(), (lz - lz_before).abs());
-        if moved_f <= width && moved_z <= width {
-            break;
-        }
-        // A minimum at a bracket's edge (moved almost the whole half-width) may lie beyond
-        // it: search twice as wide next time.
-        f_half = next_half(f_half, moved_f, width);
-        z_half = next_half(z_half, moved_z, width);
-    }
-
     let (frequency_hz, damping_ratio) = (libm::exp(lf), libm::exp(lz));
     let fit = problem
         .fit(frequency_hz, damping_ratio, usize::MAX)
@@ -377,6 +313,111 @@ pub fn identify<T: Real, const S: usize>(
         noise_rms,
         evaluations: problem.evaluations,
     })
+}
+
+/// Refuse drops shorter than `needed`, with a sample that is not finite, or flat.
+fn check_drops<T: Real>(drops: &[&[T]], needed: usize) -> Result<(), IdentifyError> {
+    for (index, drop) in drops.iter().enumerate() {
+        if drop.len() < needed {
+            return Err(IdentifyError::TooShort {
+                drop: index,
+                samples: drop.len(),
+                needed,
+            });
+        }
+        if let Some(sample) = drop.iter().position(|v| !v.is_finite()) {
+            return Err(IdentifyError::NonFinite {
+                drop: index,
+                sample,
+            });
+        }
+        if is_flat(drop) {
+            return Err(IdentifyError::Flat { drop: index });
+        }
+    }
+    Ok(())
+}
+
+impl<T: Real, const S: usize> Problem<'_, T, S> {
+    /// The best point `(ln f, ln ζ)` of the coarse grid, fitting the first `coarse` samples.
+    fn coarse_grid(
+        &mut self,
+        ln_f0: f64,
+        f_step: f64,
+        ln_z0: f64,
+        z_step: f64,
+        coarse: usize,
+    ) -> Result<(f64, f64), IdentifyError> {
+        let mut best = (ln_f0, ln_z0, f64::INFINITY);
+        for i in 0..self.config.frequency_points {
+            let lf = ln_f0 + f_step * f64::from(i);
+            for j in 0..self.config.damping_points {
+                let lz = ln_z0 + z_step * f64::from(j);
+                let cost = self.cost(lf, lz, coarse);
+                if cost < best.2 {
+                    best = (lf, lz, cost);
+                }
+            }
+        }
+        if !best.2.is_finite() {
+            return Err(IdentifyError::NotIdentifiable);
+        }
+        Ok((best.0, best.1))
+    }
+
+    /// Cyclic golden sections from `start` over the whole drops. The first cycle searches
+    /// one grid step either side; later ones twice the distance the previous cycle moved
+    /// (coordinate descent on a nearly separable valley moves less every cycle), never less
+    /// than the tolerance. Each axis is `((low, high), grid step)` in logarithms.
+    fn refine(
+        &mut self,
+        start: (f64, f64),
+        (ln_f, f_step): ((f64, f64), f64),
+        (ln_z, z_step): ((f64, f64), f64),
+    ) -> (f64, f64) {
+        let (mut lf, mut lz) = start;
+        let mut cost = self.cost(lf, lz, usize::MAX);
+        let (mut f_half, mut z_half) = (f_step, z_step);
+        let width = self.config.tolerance;
+        for _ in 0..12 {
+            let (lf_before, lz_before) = (lf, lz);
+            (lf, cost) = improve(lf, cost, f_half, ln_f, width, |x| {
+                self.cost(x, lz, usize::MAX)
+            });
+            (lz, cost) = improve(lz, cost, z_half, ln_z, width, |x| {
+                self.cost(lf, x, usize::MAX)
+            });
+            let (moved_f, moved_z) = ((lf - lf_before).abs(), (lz - lz_before).abs());
+            if moved_f <= width && moved_z <= width {
+                break;
+            }
+            // A minimum at a bracket's edge (moved almost the whole half-width) may lie
+            // beyond it: search twice as wide next time.
+            f_half = next_half(f_half, moved_f, width);
+            z_half = next_half(z_half, moved_z, width);
+        }
+        (lf, lz)
+    }
+}
+
+/// A golden-section search of `cost` within `half` of `x` (clipped to `range`): the point
+/// found and its cost when no worse than `current`, else `(x, current)`.
+fn improve(
+    x: f64,
+    current: f64,
+    half: f64,
+    range: (f64, f64),
+    width: f64,
+    cost: impl FnMut(f64) -> f64,
+) -> (f64, f64) {
+    let low = (x - half).max(range.0);
+    let high = (x + half).min(range.1);
+    let (found, found_cost) = golden_section(cost, low, high, width);
+    if found_cost <= current {
+        (found, found_cost)
+    } else {
+        (x, current)
+    }
 }
 
 /// True when the mean of the drop's second half is not above 10 times its noise. The noise

@@ -225,3 +225,39 @@ pub fn thesis_second_order() -> Sensor {
         sample_time_s: 0.01,
     }
 }
+
+/// A random stable sensor: poles inside the unit circle as real poles and complex pairs,
+/// realised as a cascade of 1st/2nd-order sections with unit static gain each.
+pub fn stable_sensor_response(poles: &[(f64, f64)], gain: f64, u: f64, samples: usize) -> Vec<f64> {
+    // Each (r, θ): θ = 0 → a real pole r; θ > 0 → a pair r·e^{±iθ}.
+    let mut signal = vec![u; samples];
+    for &(r, theta) in poles {
+        let mut out = vec![0.0; samples];
+        if theta == 0.0 {
+            let mut y = 0.0;
+            for k in 0..samples {
+                out[k] = y;
+                y = r * y + (1.0 - r) * signal[k];
+            }
+        } else {
+            let (a1, a2) = (2.0 * r * theta.cos(), -r * r);
+            let b = 1.0 - a1 - a2;
+            let (mut y1, mut y2) = (0.0, 0.0);
+            for k in 0..samples {
+                let y = a1 * y1 + a2 * y2 + b * signal[k];
+                out[k] = y1;
+                y2 = y1;
+                y1 = y;
+            }
+        }
+        signal = out;
+    }
+    signal.iter().map(|v| v * gain).collect()
+}
+
+/// The reading contract: an estimate exactly while estimating, every number finite.
+pub fn well_formed<T: estimator_core::Real>(reading: &estimator_core::Reading<T>) -> bool {
+    reading.estimate.is_some() == (reading.state == estimator_core::State::Estimating)
+        && reading.estimate.is_none_or(|v| v.is_finite())
+        && reading.residual.is_none_or(|v| v.is_finite())
+}

@@ -1,0 +1,160 @@
+//! The sample intake every estimator shares: it counts the raw samples, refuses the bad ones
+//! (not finite, outside the valid range, missing) by latching a fault, scales the rest into
+//! the estimate's unit, decimates them, and holds the reading the estimator answers with.
+//!
+//! Why one type: the latching rules and the reading an invalid sample gets are part of the
+//! [`crate::Estimator`] contract, so every estimator must apply them the same way.
+//!
+//! What must never happen: a latched intake passing a sample on, a reading with an estimate
+//! while it is invalid, or a change in the arithmetic (`sample · (1/G)` before the block
+//! mean) that would move any estimator's readings by a rounding.
+
+use crate::estimators::input::{check_sample, Decimator};
+use crate::numerics::real::Real;
+use crate::reading::{InvalidReason, Reading, State};
+
+/// Sample count, fault latch, valid range, inverse gain and decimator, and the reading state.
+#[derive(Clone, Debug)]
+pub(crate) struct Intake<T> {
+    /// Raw samples pushed since the reset (saturating), missing ones included.
+    samples: u32,
+    /// A fault that broke the data stream or the state; latched until the reset.
+    fault: Option<InvalidReason>,
+    valid_min: T,
+    valid_max: T,
+    /// `1/G`: raw units to the estimate's unit.
+    inv_gain: T,
+    decimator: Decimator<T>,
+    state: State,
+    estimate: Option<T>,
+    residual: Option<T>,
+}
+
+impl<T: Real> Intake<T> {
+    /// A fresh intake: warming up, no fault.
+    pub(crate) fn new(inv_gain: T, valid_min: T, valid_max: T, decimator: Decimator<T>) -> Self {
+        Self {
+            samples: 0,
+            fault: None,
+            valid_min,
+            valid_max,
+            inv_gain,
+            decimator,
+            state: State::WarmingUp,
+            estimate: None,
+            residual: None,
+        }
+    }
+
+    /// Count one raw sample; the block mean in the estimate's unit when it completes a block.
+    /// A sample that is not finite or out of range latches its fault; once latched, nothing
+    /// passes until the reset.
+    #[inline]
+    pub(crate) fn take(&mut self, sample: T) -> Option<T> {
+        self.samples = self.samples.saturating_add(1);
+        if self.fault.is_some() {
+            return None;
+        }
+        match check_sample(sample, self.valid_min, self.valid_max) {
+            Ok(sample) => self.decimator.push(sample * self.inv_gain),
+            Err(reason) => {
+                self.latch(reason);
+                None
+            }
+        }
+    }
+
+    /// Count a sample the caller lost: the Hankel structure (or the model's time base) is
+    /// broken, so this latches [`InvalidReason::MissingSample`] unless a fault already is.
+    pub(crate) fn take_missing(&mut self) {
+        self.samples = self.samples.saturating_add(1);
+        if self.fault.is_none() {
+            self.latch(InvalidReason::MissingSample);
+        }
+    }
+
+    /// The current estimate (`Some` only while estimating).
+    pub(crate) fn estimate(&self) -> Option<T> {
+        self.estimate
+    }
+
+    /// A valid reading: `estimate`, with the a-priori `residual` of the row that gave it.
+    pub(crate) fn estimating(&mut self, estimate: T, residual: Option<T>) {
+        self.state = State::Estimating;
+        self.estimate = Some(estimate);
+        self.residual = residual;
+    }
+
+    /// No estimate yet: back to warming up (a baseline that is not stable).
+    pub(crate) fn warm_up(&mut self) {
+        self.state = State::WarmingUp;
+        self.estimate = None;
+        self.residual = None;
+    }
+
+    /// Mark the current reading invalid; a later valid update may clear it.
+    pub(crate) fn invalidate(&mut self, reason: InvalidReason) {
+        self.state = State::Invalid(reason);
+        self.estimate = None;
+        self.residual = None;
+    }
+
+    /// Invalidate and stay invalid until the reset: the data stream or the state is broken.
+    pub(crate) fn latch(&mut self, reason: InvalidReason) {
+        self.fault = Some(reason);
+        self.invalidate(reason);
+    }
+
+    /// The reading as it stands.
+    pub(crate) fn reading(&self) -> Reading<T> {
+        Reading {
+            estimate: self.estimate,
+            samples: self.samples,
+            state: self.state,
+            residual: self.residual,
+        }
+    }
+}
+
+/// Implements [`crate::Estimator`] for an estimator built on an [`Intake`], written once:
+/// `push` hands each block mean the intake passes to the estimator's `update`, `push_missing`
+/// only counts and latches, and `reset` replaces the estimator by `fresh()` (a new one with
+/// the same configuration, which was validated when it was built, so it cannot fail). Both
+/// answer with the intake's reading, or with `reading: f` for an estimator that adds to it.
+///
+/// The estimator provides a field `intake: Intake<T>` and the inherent methods
+/// `update(&mut self, x: T)` and `fresh(&self) -> Result<Self, ConfigError>`.
+/// Use: `estimator_via_intake!(Name<T, const N>);`
+macro_rules! estimator_via_intake {
+    ($name:ident<T $(, const $size:ident)*>) => {
+        $crate::estimators::intake::estimator_via_intake!(
+            $name<T $(, const $size)*>,
+            reading: |estimator: &Self| estimator.intake.reading()
+        );
+    };
+    ($name:ident<T $(, const $size:ident)*>, reading: $reading:expr) => {
+        impl<T: Real $(, const $size: usize)*> $crate::reading::Estimator<T>
+            for $name<T $(, $size)*>
+        {
+            fn push(&mut self, sample: T) -> $crate::reading::Reading<T> {
+                if let Some(x) = self.intake.take(sample) {
+                    self.update(x);
+                }
+                ($reading)(self)
+            }
+
+            fn push_missing(&mut self) -> $crate::reading::Reading<T> {
+                self.intake.take_missing();
+                ($reading)(self)
+            }
+
+            fn reset(&mut self) {
+                if let Ok(fresh) = self.fresh() {
+                    *self = fresh;
+                }
+            }
+        }
+    };
+}
+
+pub(crate) use estimator_via_intake;
