@@ -93,11 +93,7 @@ pub fn hand_off<A: AdcSource>(
 /// One conversion as the weighing core takes it: counts, a rail, or a lost conversion.
 #[inline(always)]
 pub fn read_sample<A: AdcSource>(adc: &mut A) -> RawSample {
-    match adc.read() {
-        Ok(code) if adc.is_saturated(code) => RawSample::Saturated,
-        Ok(code) => RawSample::Counts(code as i32),
-        Err(_) => RawSample::Lost,
-    }
+    RawSample::read(adc)
 }
 
 /// The estimator task of both boards: drain the hand-off queue into the pipeline, at most

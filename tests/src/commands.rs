@@ -622,7 +622,7 @@ pub fn host_replay(seed: u64) -> RunLog {
             let result = commands.handle(command, &mut scale, index);
             lines.push(firmware_log::command(index, command, &result));
         }
-        let reading = scale.push(e2e::read_sample(&mut adc));
+        let reading = scale.push(weighing::RawSample::read(&mut adc));
         let done = index + 1;
         if done % step != 0 {
             continue;

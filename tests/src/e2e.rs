@@ -632,19 +632,6 @@ pub fn configured_scale(
     estimator_core::weighing::Scale::configured(weighing, calibration)
 }
 
-/// One conversion as the firmware's hand-off queues it (`firmware::pipeline::read_sample`):
-/// counts, a rail, or a lost conversion.
-pub fn read_sample(
-    adc: &mut impl estimator_core::sensor::AdcSource,
-) -> estimator_core::weighing::RawSample {
-    use estimator_core::weighing::RawSample;
-    match adc.read() {
-        Ok(code) if adc.is_saturated(code) => RawSample::Saturated,
-        Ok(code) => RawSample::Counts(code as i32),
-        Err(_) => RawSample::Lost,
-    }
-}
-
 /// Run the weighing core (`estimator_core::weighing::Scale`, the code the firmware's estimator task
 /// runs, in `f32`) on the host over `samples` conversions of `adc`, and log readout lines
 /// in the firmware's format. Predicts the QEMU run without QEMU (same core, same model);
@@ -657,7 +644,7 @@ pub fn host_replay<E: estimator_core::weighing::ScaleEstimator>(
     let mut lines = Vec::new();
     let step = (SAMPLE_RATE_HZ / READOUT_HZ) as u32;
     for index in 0..samples {
-        let reading = scale.push(read_sample(adc));
+        let reading = scale.push(estimator_core::weighing::RawSample::read(adc));
         if (index + 1) % step == 0 {
             lines.push(firmware_log::readout(index + 1, &reading, 0));
         }
@@ -821,13 +808,7 @@ mod host_replay_tests {
         let mut valid_before = [false; 3];
         let mut changes = 0;
         for index in 0..16_000u32 {
-            let code = adc.read().unwrap();
-            let sample = if adc.is_saturated(code) {
-                RawSample::Saturated
-            } else {
-                RawSample::Counts(code as i32)
-            };
-            let reading = scale.push(sample);
+            let reading = scale.push(RawSample::read(&mut adc));
             if let Some(slot) = DEMO_CHANGES.iter().position(|&c| c == index + 1) {
                 valid_before[slot] = reading.mass_g.is_some();
             }
@@ -1031,13 +1012,7 @@ mod host_replay_tests {
             if changes.contains(&index) {
                 undeclared = true;
             }
-            let code = adc.read().unwrap();
-            let sample = if adc.is_saturated(code) {
-                RawSample::Saturated
-            } else {
-                RawSample::Counts(code as i32)
-            };
-            let reading = scale.push(sample);
+            let reading = scale.push(RawSample::read(adc));
             let flagged = reading.state
                 == ScaleState::Invalid(ScaleFault::Estimator(InvalidReason::ModelMismatch));
             if flagged {

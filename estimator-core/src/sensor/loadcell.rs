@@ -217,19 +217,26 @@ impl LoadCellModel {
     }
 }
 
+/// The reference cell of the tests (25 Hz, ζ = 0.03, a third-order 100 Hz filter,
+/// 73.25 counts/g at 4 kHz): one fixture for the tests of every layer.
+#[cfg(test)]
+pub(crate) fn reference_cell() -> LoadCellModel {
+    LoadCellModel {
+        natural_frequency_hz: 25.0,
+        damping_ratio: 0.03,
+        filter_order: 3,
+        filter_cutoff_hz: 100.0,
+        counts_per_gram: 73.25,
+        sample_rate_hz: 4000.0,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn reference() -> LoadCellModel {
-        LoadCellModel {
-            natural_frequency_hz: 25.0,
-            damping_ratio: 0.03,
-            filter_order: 3,
-            filter_cutoff_hz: 100.0,
-            counts_per_gram: 73.25,
-            sample_rate_hz: 4000.0,
-        }
+        reference_cell()
     }
 
     fn static_gain<const S: usize>(m: &SensorModel<f64, S>) -> f64 {

@@ -12,4 +12,6 @@ mod loadcell;
 
 pub use adc::{AdcError, AdcSource};
 pub use identify::{identify, Identified, IdentifyConfig, IdentifyError};
+#[cfg(test)]
+pub(crate) use loadcell::reference_cell;
 pub use loadcell::{LoadCellModel, MAX_DAMPING_RATIO};

@@ -280,7 +280,7 @@ mod tests {
     use super::*;
 
     fn cell() -> LoadCellModel {
-        crate::weighing::reference_cell()
+        crate::sensor::reference_cell()
     }
 
     #[test]

@@ -358,7 +358,7 @@ mod tests {
     const RESPONSE: usize = 2000;
 
     fn cell() -> LoadCellModel {
-        crate::weighing::reference_cell()
+        crate::sensor::reference_cell()
     }
 
     /// A recorded drop of the reference cell: 0.15 s empty, then 0.5 s of the response, white

@@ -24,8 +24,6 @@ pub use command::{
 pub use key::{KeyDebouncer, KeyPress};
 pub(crate) use method::cover_ratios;
 pub(crate) use method::readout_samples;
-#[cfg(test)]
-pub(crate) use method::reference_cell;
 pub use method::{
     BankCandidate, LoadCoverage, LoadScene, LoadScore, OnsetConfig, Prediction, RegionError,
     WeighingConfig, WeighingEstimator, WeighingMethod, MAX_LOADS, MAX_NYQUIST_OVER_BANDWIDTH,

@@ -320,20 +320,6 @@ pub(crate) fn cover_ratios(
     *ratio_max = high * step;
 }
 
-/// The reference cell of the tests (25 Hz, ζ = 0.03, a third-order 100 Hz filter,
-/// 73.25 counts/g at 4 kHz): one fixture for the weighing and tuning tests.
-#[cfg(test)]
-pub(crate) fn reference_cell() -> LoadCellModel {
-    LoadCellModel {
-        natural_frequency_hz: 25.0,
-        damping_ratio: 0.03,
-        filter_order: 3,
-        filter_cutoff_hz: 100.0,
-        counts_per_gram: 73.25,
-        sample_rate_hz: 4000.0,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -354,7 +340,7 @@ mod tests {
             raw_noise_variance_counts2: 1_050.0,
             onset: OnsetConfig::new(4000.0).with_rails(0.0, 65_535.0),
             detection_lag_samples: 10.0,
-            model: reference_cell(),
+            model: crate::sensor::reference_cell(),
             identified_counts_per_gram: 73.25,
             calibration_mass_g: 138.32,
             readout_s: 0.1,

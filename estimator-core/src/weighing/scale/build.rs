@@ -105,7 +105,7 @@ mod tests {
             model: LoadCellModel {
                 counts_per_gram: CPG as f64,
                 sample_rate_hz: FS as f64,
-                ..crate::weighing::reference_cell()
+                ..crate::sensor::reference_cell()
             },
             identified_counts_per_gram: CPG as f64,
             calibration_mass_g: 138.32,

@@ -5,6 +5,7 @@
 //! the state is invalid, and the state says why.
 
 use crate::reading::InvalidReason;
+use crate::sensor::AdcSource;
 
 /// One raw sample as the firmware hands it over.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -16,6 +17,19 @@ pub enum RawSample {
     Saturated,
     /// The sample was lost (ADC overrun, full queue, a gap in the sequence numbers).
     Lost,
+}
+
+impl RawSample {
+    /// The next conversion of `adc` as the scale takes it: a code on a rail is
+    /// [`Self::Saturated`], a failed conversion [`Self::Lost`].
+    #[inline]
+    pub fn read<A: AdcSource>(adc: &mut A) -> Self {
+        match adc.read() {
+            Ok(code) if adc.is_saturated(code) => Self::Saturated,
+            Ok(code) => Self::Counts(code as i32),
+            Err(_) => Self::Lost,
+        }
+    }
 }
 
 /// Why the scale cannot show a mass.
