@@ -68,7 +68,7 @@ use crate::estimators::consistency::{
     difference_correlation, difference_noise_gain, NoiseReference, ResidualCheck,
 };
 use crate::estimators::input::{row_residual, DifferenceWindow};
-use crate::estimators::intake::{estimator_via_intake, Intake};
+use crate::estimators::intake::{estimator_via_intake, step_wrapper_accessors, Intake};
 use crate::estimators::step::{identifiability_floor, recentre, StepConfig};
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
@@ -155,24 +155,7 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
         })
     }
 
-    /// The configuration in use.
-    pub fn config(&self) -> &BiasCompensatedConfig<T> {
-        &self.config
-    }
-
-    /// Check the runs after the next [`crate::Estimator::reset`] against `reference` (`None`: no
-    /// check), as [`crate::StepEstimator::set_noise_reference`].
-    pub fn set_noise_reference(
-        &mut self,
-        reference: Option<NoiseReference<T>>,
-    ) -> Result<(), ConfigError> {
-        NoiseReference::replace(&mut self.config.step.noise_reference, reference)
-    }
-
-    /// The capacity `N`: the largest order this instance accepts.
-    pub const fn capacity() -> usize {
-        N
-    }
+    step_wrapper_accessors!(BiasCompensatedConfig);
 
     /// The compensated trailing pivot over the weighted row count at the latest reading, in
     /// (0, 1]; zero before the first. How well the compensated equations determine the step

@@ -158,3 +158,58 @@ macro_rules! estimator_via_intake {
 }
 
 pub(crate) use estimator_via_intake;
+
+/// The builder methods of the intake's settings, written once for every configuration that
+/// holds them (fields `noise_reference`, `decimation`, `valid_min`, `valid_max`).
+macro_rules! intake_config_builders {
+    () => {
+        /// Check the fit's residuals against the noise metered at tare (raw units², at this
+        /// configuration's `D`; see [`NoiseReference`]).
+        pub fn with_noise_reference(mut self, reference: NoiseReference<T>) -> Self {
+            self.noise_reference = Some(reference);
+            self
+        }
+
+        /// Set the block length D of the decimator.
+        pub fn with_decimation(mut self, decimation: u16) -> Self {
+            self.decimation = decimation;
+            self
+        }
+
+        /// Set the range of valid raw samples.
+        pub fn with_valid_range(mut self, min: T, max: T) -> Self {
+            self.valid_min = min;
+            self.valid_max = max;
+            self
+        }
+    };
+}
+
+pub(crate) use intake_config_builders;
+
+/// The accessors of an estimator whose configuration wraps a [`crate::StepConfig`] in its
+/// field `step` (instrumental variables, bias compensation): written once for both.
+macro_rules! step_wrapper_accessors {
+    ($config:ident) => {
+        /// The configuration in use.
+        pub fn config(&self) -> &$config<T> {
+            &self.config
+        }
+
+        /// Check the runs after the next [`crate::Estimator::reset`] against `reference`
+        /// (`None`: no check), as [`crate::StepEstimator::set_noise_reference`].
+        pub fn set_noise_reference(
+            &mut self,
+            reference: Option<NoiseReference<T>>,
+        ) -> Result<(), ConfigError> {
+            NoiseReference::replace(&mut self.config.step.noise_reference, reference)
+        }
+
+        /// The capacity `N`: the largest order this instance accepts.
+        pub const fn capacity() -> usize {
+            N
+        }
+    };
+}
+
+pub(crate) use step_wrapper_accessors;

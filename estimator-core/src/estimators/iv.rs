@@ -57,7 +57,7 @@ use crate::estimators::consistency::{
     difference_correlation, difference_noise_gain, NoiseReference, ResidualCheck,
 };
 use crate::estimators::input::row_residual;
-use crate::estimators::intake::{estimator_via_intake, Intake};
+use crate::estimators::intake::{estimator_via_intake, step_wrapper_accessors, Intake};
 use crate::estimators::step::StepConfig;
 use crate::numerics::factor::{apply, rotation};
 use crate::numerics::real::Real;
@@ -329,24 +329,7 @@ impl<T: Real, const N: usize> IvStepEstimator<T, N> {
         })
     }
 
-    /// The configuration in use.
-    pub fn config(&self) -> &IvConfig<T> {
-        &self.config
-    }
-
-    /// Check the runs after the next [`crate::Estimator::reset`] against `reference` (`None`: no
-    /// check), as [`crate::StepEstimator::set_noise_reference`].
-    pub fn set_noise_reference(
-        &mut self,
-        reference: Option<NoiseReference<T>>,
-    ) -> Result<(), ConfigError> {
-        NoiseReference::replace(&mut self.config.step.noise_reference, reference)
-    }
-
-    /// The capacity `N`: the largest order this instance accepts.
-    pub const fn capacity() -> usize {
-        N
-    }
+    step_wrapper_accessors!(IvConfig);
 
     /// `1 / (rows·‖e_uᵀ M⁻¹‖²)` at the latest solve, in (0, 1]; zero before the first. The
     /// IV estimate's noise is amplified by `1/√·` relative to an ideal regression on the same

@@ -26,7 +26,7 @@
 
 use crate::estimators::consistency::{NoiseReference, ResidualCheck};
 use crate::estimators::input::Decimator;
-use crate::estimators::intake::{estimator_via_intake, Intake};
+use crate::estimators::intake::{estimator_via_intake, intake_config_builders, Intake};
 use crate::estimators::step::MAX_DECIMATION;
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
@@ -189,29 +189,11 @@ impl<T: Real, const S: usize> ModelConfig<T, S> {
         }
     }
 
-    /// Check the fit's residuals against the noise metered at tare (raw units², at this
-    /// configuration's `D`; see [`NoiseReference`]).
-    pub fn with_noise_reference(mut self, reference: NoiseReference<T>) -> Self {
-        self.noise_reference = Some(reference);
-        self
-    }
-
-    /// Set the block length D.
-    pub fn with_decimation(mut self, decimation: u16) -> Self {
-        self.decimation = decimation;
-        self
-    }
+    intake_config_builders!();
 
     /// Set what is assumed about the initial state.
     pub fn with_initial_state(mut self, initial_state: InitialState) -> Self {
         self.initial_state = initial_state;
-        self
-    }
-
-    /// Set the range of valid raw samples.
-    pub fn with_valid_range(mut self, min: T, max: T) -> Self {
-        self.valid_min = min;
-        self.valid_max = max;
         self
     }
 }

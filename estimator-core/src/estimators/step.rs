@@ -39,7 +39,7 @@
 
 use crate::estimators::consistency::{NoiseReference, ResidualCheck};
 use crate::estimators::input::{Decimator, DifferenceWindow};
-use crate::estimators::intake::{estimator_via_intake, Intake};
+use crate::estimators::intake::{estimator_via_intake, intake_config_builders, Intake};
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
 use crate::reading::{ConfigError, InvalidReason};
@@ -102,29 +102,11 @@ impl<T: Real> StepConfig<T> {
         }
     }
 
-    /// Check the fit's residuals against the noise metered at tare (raw units², at this
-    /// configuration's `D`; see [`NoiseReference`]).
-    pub fn with_noise_reference(mut self, reference: NoiseReference<T>) -> Self {
-        self.noise_reference = Some(reference);
-        self
-    }
+    intake_config_builders!();
 
     /// Set the forgetting factor λ.
     pub fn with_forgetting(mut self, forgetting: T) -> Self {
         self.forgetting = forgetting;
-        self
-    }
-
-    /// Set the block length D of the decimator.
-    pub fn with_decimation(mut self, decimation: u16) -> Self {
-        self.decimation = decimation;
-        self
-    }
-
-    /// Set the range of valid raw samples.
-    pub fn with_valid_range(mut self, min: T, max: T) -> Self {
-        self.valid_min = min;
-        self.valid_max = max;
         self
     }
 
