@@ -66,7 +66,7 @@ pub fn estimate_with(
             estimator.push(value - zero)
         };
         match reading.estimate {
-            Some(value) => writeln!(out, "{k},{value:e},{}", state_name(reading.state))?,
+            Some(value) => writeln!(out, "{k},{value},{}", state_name(reading.state))?,
             None => writeln!(out, "{k},,{}", state_name(reading.state))?,
         }
     }

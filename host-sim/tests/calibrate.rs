@@ -1111,7 +1111,7 @@ fn the_command_end_to_end_and_estimate_config_equals_the_core() {
         let reading = core.push((sample - config.zero_counts) as f32);
         let state = host_sim::estimate::state_name(reading.state);
         expected.push(match reading.estimate {
-            Some(value) => format!("{k},{:e},{state}", f64::from(value)),
+            Some(value) => format!("{k},{},{state}", f64::from(value)),
             None => format!("{k},,{state}"),
         });
     }

@@ -71,7 +71,7 @@ fn estimate_on_a_simulated_csv_equals_the_core() {
                 (r.estimate.map(f64::from), r.state)
             };
             expected.push(match estimate {
-                Some(value) => format!("{k},{value:e},{}", state_name(state)),
+                Some(value) => format!("{k},{value},{}", state_name(state)),
                 None => format!("{k},,{}", state_name(state)),
             });
         }
@@ -214,7 +214,7 @@ fn expected_lines(readings: impl Iterator<Item = Reading<f64>>) -> Vec<String> {
     let mut lines = vec!["k,estimate,state".to_string()];
     for (k, r) in readings.enumerate() {
         lines.push(match r.estimate {
-            Some(value) => format!("{k},{value:e},{}", state_name(r.state)),
+            Some(value) => format!("{k},{value},{}", state_name(r.state)),
             None => format!("{k},,{}", state_name(r.state)),
         });
     }
@@ -523,4 +523,48 @@ fn speed_study_is_reproducible_across_thread_counts() {
         )),
         "{first}"
     );
+}
+
+/// What a user types first: `--version`, a negative number as a value, and estimates in
+/// plain decimals, not `1.38e2`.
+#[test]
+fn version_negative_values_and_plain_decimals() {
+    let version = run_ok(host_sim().arg("--version"));
+    assert_eq!(
+        version.trim(),
+        format!("host-sim {}", env!("CARGO_PKG_VERSION"))
+    );
+
+    let (csv, _, gain, zero) = simulated_reference("negative-gain.csv");
+    let estimates = |gain: f64| -> Vec<(String, String)> {
+        let out = run_ok(
+            host_sim()
+                .args(["estimate", "--method", "step:n=5,D=24", "--input"])
+                .arg(&csv)
+                .args(["--gain", &gain.to_string(), "--zero", &zero.to_string()]),
+        );
+        out.lines()
+            .skip(1)
+            .map(|line| {
+                let fields: Vec<&str> = line.split(',').collect();
+                (fields[1].to_string(), fields[2].to_string())
+            })
+            .collect()
+    };
+    let positive = estimates(gain);
+    let negative = estimates(-gain);
+    assert_eq!(positive.len(), negative.len());
+    let mut valid = 0;
+    for ((p, p_state), (n, n_state)) in positive.iter().zip(&negative) {
+        assert_eq!(p_state, n_state);
+        assert!(!p.contains(['e', 'E']), "not a plain decimal: {p}");
+        if p.is_empty() {
+            assert!(n.is_empty());
+            continue;
+        }
+        valid += 1;
+        let (p, n): (f64, f64) = (p.parse().unwrap(), n.parse().unwrap());
+        assert!((p + n).abs() <= 1e-9 * p.abs().max(1.0), "{p} vs {n}");
+    }
+    assert!(valid > 1000, "only {valid} valid estimates");
 }

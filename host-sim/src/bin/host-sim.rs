@@ -20,6 +20,7 @@ use host_sim::study;
 #[derive(Parser)]
 #[command(
     name = "host-sim",
+    version,
     about = "The weighing scene, Monte Carlo studies and charts"
 )]
 struct Cli {
@@ -57,6 +58,7 @@ enum Command {
 }
 
 #[derive(Args)]
+#[command(allow_negative_numbers = true)]
 struct SimulateArgs {
     /// A scene file, or the name of a shipped scene (host-sim/scenes/NAME.toml).
     scene: String,
@@ -71,6 +73,7 @@ struct SimulateArgs {
 }
 
 #[derive(Args)]
+#[command(allow_negative_numbers = true)]
 struct EstimateArgs {
     #[arg(long)]
     input: PathBuf,
@@ -117,6 +120,7 @@ struct EstimateArgs {
 }
 
 #[derive(Args)]
+#[command(allow_negative_numbers = true)]
 struct CalibrateArgs {
     /// A recorded drop (repeat for each; 3 is typical).
     #[arg(long = "drop", required = true)]
@@ -188,6 +192,7 @@ struct CalibrateArgs {
 }
 
 #[derive(Args)]
+#[command(allow_negative_numbers = true)]
 struct MontecarloArgs {
     scene: String,
     #[arg(long, default_value_t = 1000)]
@@ -218,6 +223,7 @@ struct MontecarloArgs {
 }
 
 #[derive(Args)]
+#[command(allow_negative_numbers = true)]
 struct TableArgs {
     #[arg(long, default_value_t = 1000)]
     runs: usize,
@@ -230,6 +236,7 @@ struct TableArgs {
 }
 
 #[derive(Args)]
+#[command(allow_negative_numbers = true)]
 struct ChartArgs {
     /// Draw all four charts (the only mode so far).
     #[arg(long)]
@@ -248,6 +255,7 @@ struct ChartArgs {
 }
 
 #[derive(Args)]
+#[command(allow_negative_numbers = true)]
 struct StudyArgs {
     /// `speed` (speed against accuracy), `stability` (the stability map) or `ramp`
     /// (conveyor weighing, the `conveyor-ramp` scene: its SNRs default to 30,40,50 dB;
@@ -276,6 +284,7 @@ struct StudyArgs {
 }
 
 #[derive(Args)]
+#[command(allow_negative_numbers = true)]
 struct BenchArgs {
     #[arg(long, default_value_t = 10_000)]
     runs: usize,
