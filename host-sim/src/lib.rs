@@ -70,4 +70,6 @@ pub mod stability;
 #[cfg(feature = "std")]
 pub mod study;
 #[cfg(feature = "std")]
+pub mod torture;
+#[cfg(feature = "std")]
 mod weighing_file;

@@ -55,6 +55,40 @@ enum Command {
     Study(StudyArgs),
     /// Monte Carlo benchmark: estimator updates per second on this host.
     Bench(BenchArgs),
+    /// The firmware's scale over random sequences of weighings (loads to beyond capacity,
+    /// placed by hand, dropped, small additions, trickles, noise kinds, lost samples, tare
+    /// and calibration): counts the readings shown settled whose error exceeds the maximum
+    /// permissible error. Last line: `silent wrong readings: W of M shown in N runs`; exits
+    /// non-zero when W > 0.
+    Torture(TortureArgs),
+}
+
+#[derive(Args)]
+struct TortureArgs {
+    #[arg(long, default_value_t = 100)]
+    runs: u64,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Run only this run of the seed (to reproduce one listed in the report).
+    #[arg(long)]
+    only_run: Option<u64>,
+    /// With --only-run: write every readout line of the run (truth, shown, state, act) and
+    /// each command's outcome as CSV to this file.
+    #[arg(long, requires = "only_run")]
+    trace: Option<PathBuf>,
+    /// The weighing configuration the scale is built from (default: the firmware's shipped
+    /// one, built into this binary).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Max, g.
+    #[arg(long, default_value_t = 600.0)]
+    capacity_g: f64,
+    /// The scale interval e, g.
+    #[arg(long, default_value_t = 0.1)]
+    e_g: f64,
+    /// Worker threads (default: the machine's).
+    #[arg(long)]
+    threads: Option<usize>,
 }
 
 #[derive(Args)]
@@ -332,6 +366,7 @@ fn main() -> Result<()> {
         Command::Chart(args) => chart_command(args),
         Command::Study(args) => study_command(args),
         Command::Bench(args) => bench(args),
+        Command::Torture(args) => torture(args),
     }
 }
 
@@ -881,5 +916,58 @@ fn charts(
         "wrote {}/{{a,b,c,d}}-*.{{svg,png}} and summary.csv",
         out.display()
     );
+    Ok(())
+}
+
+/// The firmware's weighing configuration as shipped (what its images are built with).
+const SHIPPED_WEIGHING_CONFIG: &str = include_str!("../../../firmware/weighing.toml");
+
+fn torture(args: TortureArgs) -> Result<()> {
+    use host_sim::torture::{self, judge::Limits, TortureSettings};
+    let (weighing, _precision) = match &args.config {
+        Some(path) => calibrate::load_config(path)?,
+        None => calibrate::parse_config(
+            std::path::Path::new("firmware/weighing.toml"),
+            SHIPPED_WEIGHING_CONFIG,
+        )?,
+    };
+    let threads = args
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let settings = TortureSettings {
+        runs: args.runs,
+        seed: args.seed,
+        threads,
+        limits: Limits {
+            capacity_g: args.capacity_g,
+            scale_interval_g: args.e_g,
+            target_relative: weighing.target_relative,
+            target_mass_g: weighing.calibration_mass_g,
+        },
+    };
+    let tallies = match args.only_run {
+        Some(run) => {
+            let mut tallies = torture::judge::Tallies::default();
+            let chain = host_sim::SensorChain::reference();
+            let mut file = match &args.trace {
+                Some(path) => {
+                    Some(BufWriter::new(File::create(path).with_context(|| {
+                        format!("cannot write {}", path.display())
+                    })?))
+                }
+                None => None,
+            };
+            let trace = file.as_mut().map(|f| f as &mut dyn Write);
+            torture::one_run(run, &settings, &chain, &weighing, &mut tallies, trace)
+                .map_err(|e| anyhow::anyhow!("the weighing configuration is refused: {e}"))?;
+            tallies
+        }
+        None => torture::torture(&settings, &weighing)
+            .map_err(|e| anyhow::anyhow!("the weighing configuration is refused: {e}"))?,
+    };
+    print!("{}", torture::report(&settings, &tallies));
+    if tallies.total().silent_wrong > 0 {
+        std::process::exit(1);
+    }
     Ok(())
 }

@@ -1,0 +1,295 @@
+//! Whether a reading the scale shows is right: the maximum permissible error, the truth a
+//! display may lag behind, and the tally per act.
+
+use std::collections::BTreeMap;
+
+use super::plan::ActKind;
+
+/// The error limits a shown reading is judged against.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Limits {
+    /// Max, g.
+    pub capacity_g: f64,
+    /// The scale interval e, g.
+    pub scale_interval_g: f64,
+    /// The configured accuracy target, relative to the load (the weighing configuration's
+    /// `target_relative`).
+    pub target_relative: f64,
+    /// The load the target was set at (the calibration mass), g: below it the target is
+    /// `target_relative` of this mass.
+    pub target_mass_g: f64,
+}
+
+impl Limits {
+    /// The maximum permissible error for a net load of `load_g` (OIML R 76-1, class III,
+    /// initial verification): 0.5 e up to 500 e, 1 e up to 2,000 e, 1.5 e above.
+    pub fn mpe_class_iii_g(&self, load_g: f64) -> f64 {
+        let e = self.scale_interval_g;
+        let intervals = load_g.abs() / e;
+        if intervals <= 500.0 {
+            0.5 * e
+        } else if intervals <= 2000.0 {
+            e
+        } else {
+            1.5 * e
+        }
+    }
+
+    /// The error a reading of `load_g` may have: the MPE, or the configured target where
+    /// it is tighter (`target_relative` of the load, or of the target's mass below it).
+    pub fn permissible_g(&self, load_g: f64) -> f64 {
+        let target = self.target_relative * load_g.abs().max(self.target_mass_g);
+        self.mpe_class_iii_g(load_g).min(target)
+    }
+
+    /// Above this gross load the scale must not show a mass (Max + 9 e, OIML R 76).
+    pub fn overload_g(&self) -> f64 {
+        self.capacity_g + 9.0 * self.scale_interval_g
+    }
+}
+
+/// What was on the pan over the last readout period (a display may lag one period): the
+/// least and greatest true net load in it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Truth {
+    /// Least true net load, g.
+    pub low_g: f64,
+    /// Greatest true net load, g.
+    pub high_g: f64,
+    /// Least true gross load, g: above Max + 9 e over the whole period, no mass may be
+    /// shown settled.
+    pub gross_low_g: f64,
+}
+
+impl Truth {
+    /// How far `shown_g` lies outside the interval, g (0 inside).
+    pub fn error_g(&self, shown_g: f64) -> f64 {
+        if shown_g < self.low_g {
+            self.low_g - shown_g
+        } else if shown_g > self.high_g {
+            shown_g - self.high_g
+        } else {
+            0.0
+        }
+    }
+}
+
+/// A wrong reading shown as settled, to reproduce.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Wrong {
+    /// The run (its seed is `run_seed(seed, run)`).
+    pub run: u64,
+    /// When, s.
+    pub time_s: f64,
+    /// The act in progress.
+    pub act: ActKind,
+    /// What the scale showed, g.
+    pub shown_g: f64,
+    /// The true net load (mid of the period), g.
+    pub truth_g: f64,
+    /// The permissible error, g.
+    pub permissible_g: f64,
+    /// The state shown.
+    pub state: &'static str,
+}
+
+/// Counts for one act.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Tally {
+    /// Readout lines judged.
+    pub readings: u64,
+    /// Lines shown stable (or empty, or final) with a mass: the display says "this is it".
+    pub shown: u64,
+    /// Of those, outside the permissible error (or a mass shown above Max + 9 e).
+    pub silent_wrong: u64,
+    /// Lines with a mass outside the permissible error but flagged as not settled
+    /// (estimating).
+    pub flagged_wrong: u64,
+    /// Lines with no mass (invalid, warming up).
+    pub no_mass: u64,
+    /// The largest error of a shown reading over its permissible error.
+    pub worst_ratio: f64,
+}
+
+impl Tally {
+    fn add(&mut self, other: &Tally) {
+        self.readings += other.readings;
+        self.shown += other.shown;
+        self.silent_wrong += other.silent_wrong;
+        self.flagged_wrong += other.flagged_wrong;
+        self.no_mass += other.no_mass;
+        self.worst_ratio = self.worst_ratio.max(other.worst_ratio);
+    }
+}
+
+/// The tallies of runs, per act, and the worst silent wrong readings.
+#[derive(Clone, Debug, Default)]
+pub struct Tallies {
+    /// Per act kind.
+    pub by_act: BTreeMap<ActKind, Tally>,
+    /// The silent wrong readings with the largest error ratio (at most [`Self::KEEP`]).
+    pub worst: Vec<Wrong>,
+    /// Runs tallied.
+    pub runs: u64,
+}
+
+impl Tallies {
+    /// Silent wrong readings kept to show.
+    pub const KEEP: usize = 8;
+
+    /// Count one judged readout line.
+    pub fn judge(
+        &mut self,
+        act: ActKind,
+        line: Line,
+        limits: &Limits,
+        wrong: impl FnOnce() -> Wrong,
+    ) {
+        let tally = self.by_act.entry(act).or_default();
+        tally.readings += 1;
+        let Some(shown_g) = line.mass_g else {
+            tally.no_mass += 1;
+            return;
+        };
+        let mid = 0.5 * (line.truth.low_g + line.truth.high_g);
+        let permissible = limits.permissible_g(mid);
+        let over_capacity = line.truth.gross_low_g > limits.overload_g();
+        let error = line.truth.error_g(shown_g);
+        let is_wrong = error > permissible || over_capacity;
+        if !line.settled {
+            if is_wrong {
+                tally.flagged_wrong += 1;
+            }
+            return;
+        }
+        tally.shown += 1;
+        let ratio = if over_capacity {
+            f64::INFINITY
+        } else {
+            error / permissible
+        };
+        tally.worst_ratio = tally.worst_ratio.max(ratio);
+        if is_wrong {
+            tally.silent_wrong += 1;
+            self.worst.push(wrong());
+            self.worst.sort_by(|a, b| {
+                let ra = (a.shown_g - a.truth_g).abs() / a.permissible_g;
+                let rb = (b.shown_g - b.truth_g).abs() / b.permissible_g;
+                rb.total_cmp(&ra)
+            });
+            self.worst.truncate(Self::KEEP);
+        }
+    }
+
+    /// Merge the tallies of other runs.
+    pub fn merge(&mut self, other: Tallies) {
+        for (act, tally) in &other.by_act {
+            self.by_act.entry(*act).or_default().add(tally);
+        }
+        self.worst.extend(other.worst);
+        self.worst.sort_by(|a, b| {
+            let ra = (a.shown_g - a.truth_g).abs() / a.permissible_g;
+            let rb = (b.shown_g - b.truth_g).abs() / b.permissible_g;
+            rb.total_cmp(&ra).then(a.run.cmp(&b.run))
+        });
+        self.worst.truncate(Self::KEEP);
+        self.runs += other.runs;
+    }
+
+    /// All acts together.
+    pub fn total(&self) -> Tally {
+        let mut total = Tally::default();
+        for tally in self.by_act.values() {
+            total.add(tally);
+        }
+        total
+    }
+}
+
+/// One readout line as judged.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Line {
+    /// The mass shown, g (`None`: no mass).
+    pub mass_g: Option<f64>,
+    /// Shown as settled (stable, empty or final).
+    pub settled: bool,
+    /// What was on the pan.
+    pub truth: Truth,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn limits() -> Limits {
+        Limits {
+            capacity_g: 600.0,
+            scale_interval_g: 0.1,
+            target_relative: 5e-4,
+            target_mass_g: 138.32,
+        }
+    }
+
+    #[test]
+    fn mpe_steps_at_500_and_2000_intervals() {
+        let l = limits();
+        assert_eq!(l.mpe_class_iii_g(50.0), 0.05);
+        assert_eq!(l.mpe_class_iii_g(50.01), 0.1);
+        assert_eq!(l.mpe_class_iii_g(200.0), 0.1);
+        assert_eq!(l.mpe_class_iii_g(200.1), 0.15000000000000002);
+        // The target (0.05 % of 138.32 g = 0.069 g) is tighter than 1 e at 100 g.
+        assert!((l.permissible_g(100.0) - 0.06916).abs() < 1e-9);
+        // At 600 g, 0.05 % is 0.3 g: the MPE (1.5 e) is tighter.
+        assert!((l.permissible_g(600.0) - 0.15).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_stable_mass_above_max_plus_9e_is_wrong_even_when_accurate() {
+        let mut tallies = Tallies::default();
+        let line = Line {
+            mass_g: Some(660.0),
+            settled: true,
+            truth: Truth {
+                low_g: 660.0,
+                high_g: 660.0,
+                gross_low_g: 660.0,
+            },
+        };
+        let wrong = || Wrong {
+            run: 0,
+            time_s: 0.0,
+            act: ActKind::Overload,
+            shown_g: 660.0,
+            truth_g: 660.0,
+            permissible_g: 0.15,
+            state: "stable",
+        };
+        tallies.judge(ActKind::Overload, line, &limits(), wrong);
+        assert_eq!(tallies.total().silent_wrong, 1);
+        // The same line flagged (estimating) is a flagged wrong reading, not a silent one.
+        let mut tallies = Tallies::default();
+        tallies.judge(
+            ActKind::Overload,
+            Line {
+                settled: false,
+                ..line
+            },
+            &limits(),
+            wrong,
+        );
+        assert_eq!(tallies.total().silent_wrong, 0);
+        assert_eq!(tallies.total().flagged_wrong, 1);
+    }
+
+    #[test]
+    fn a_display_may_lag_one_period() {
+        let truth = Truth {
+            low_g: 100.0,
+            high_g: 100.5,
+            gross_low_g: 100.0,
+        };
+        assert_eq!(truth.error_g(100.2), 0.0);
+        assert!((truth.error_g(100.7) - 0.2).abs() < 1e-12);
+        assert!((truth.error_g(99.9) - 0.1).abs() < 1e-12);
+    }
+}

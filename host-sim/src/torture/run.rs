@@ -1,0 +1,189 @@
+//! One torture run: the simulated cell plays the plan, the firmware's scale and command
+//! state machine (estimator-core, unchanged) read it, and every readout line is judged.
+
+use estimator_core::weighing::{
+    Command, CommandConfig, Commands, CountsScale, RawSample, Scale, ScaleReading, ScaleState,
+    WeighingConfig, WeighingEstimator,
+};
+
+use super::judge::{Limits, Line, Tallies, Truth, Wrong};
+use super::plan::PLAN_EVENTS;
+use super::plan::{ActKind, Instrument, Plan, PlannedCommand};
+use super::TortureSettings;
+use crate::calibrate::BANK_CANDIDATES;
+use crate::montecarlo::CAPACITY;
+use crate::sensor::{SensorChain, STATES};
+use crate::simulated::run_seed;
+use crate::simulated::SimulatedAdc;
+use std::io::Write as _;
+
+/// The scale the firmware builds from a weighing configuration, with host-sim's sizes.
+pub type TortureScale = Scale<WeighingEstimator<f32, CAPACITY, STATES, BANK_CANDIDATES>>;
+
+/// Raw samples per readout line (the firmware's 20 Hz readout at 4 kHz).
+pub const READOUT_SAMPLES: u64 = 200;
+
+/// A command refused is pressed again each readout for this many samples (2 s).
+const RETRY_SAMPLES: u64 = 8000;
+
+/// Run `plan` (drawn for run `run` of `settings`) on the scale of `weighing`, converting with the chain's
+/// own gain and zero (a board calibrated right), and tally every readout line.
+pub fn run_plan(
+    run: u64,
+    plan: &Plan,
+    settings: &TortureSettings,
+    chain: &SensorChain,
+    weighing: &WeighingConfig,
+    tallies: &mut Tallies,
+    trace: Option<&mut dyn std::io::Write>,
+) -> Result<(), estimator_core::ConfigError> {
+    let limits = &settings.limits;
+    // The noise of the cell: another stream than the plan's, of the same run.
+    let seed = run_seed(settings.seed, run) ^ 0x5eed;
+    let mut trace = trace;
+    if let Some(out) = trace.as_mut() {
+        let _ = writeln!(
+            out,
+            "t_s,truth_low_g,truth_high_g,mass_g,state,act,tare_truth_g,event"
+        );
+    }
+    let mut adc = SimulatedAdc::<PLAN_EVENTS>::new(*chain, plan.script, plan.disturbances, seed);
+    let calibration = CountsScale {
+        counts_per_gram: adc.counts_per_gram() as f32,
+        zero_counts: adc.zero_code() as f32,
+    };
+    let mut scale = Box::new(TortureScale::configured(weighing, calibration)?);
+    let rate_hz = 1.0 / chain.conversion_period_s();
+    let mut commands = Commands::new(CommandConfig::weighing_default(rate_hz as f32));
+    let mut next_command = 0;
+    let mut pending: Option<(u64, PlannedCommand)> = None;
+    let mut next_loss = 0;
+    let mut losing_until = 0;
+    let mut next_act = 0;
+    let mut act = ActKind::Boot;
+    let mut tare_truth_g = 0.0;
+    let mut low = f64::INFINITY;
+    let mut high = f64::NEG_INFINITY;
+    for sample in 0..plan.samples {
+        while next_act < plan.acts.len() && plan.acts[next_act].0 <= sample {
+            act = plan.acts[next_act].1;
+            next_act += 1;
+        }
+        if next_loss < plan.losses.len() && plan.losses[next_loss].0 <= sample {
+            losing_until = sample + plan.losses[next_loss].1;
+            next_loss += 1;
+        }
+        let read = RawSample::read(&mut adc);
+        let raw = if sample < losing_until {
+            RawSample::Lost
+        } else {
+            read
+        };
+        let reading = scale.push(raw);
+        let gross = adc.load_g();
+        low = low.min(gross);
+        high = high.max(gross);
+        if (sample + 1) % READOUT_SAMPLES != 0 {
+            continue;
+        }
+        let now = (sample + 1) as u32;
+        let line = line_of(&reading, low, high, tare_truth_g);
+        let time_s = (sample + 1) as f64 / rate_hz;
+        tallies.judge(act, line, limits, || Wrong {
+            run,
+            time_s,
+            act,
+            shown_g: line.mass_g.unwrap_or(f64::NAN),
+            truth_g: 0.5 * (line.truth.low_g + line.truth.high_g),
+            permissible_g: limits.permissible_g(0.5 * (line.truth.low_g + line.truth.high_g)),
+            state: state_name(&reading.state),
+        });
+        if let Some(out) = trace.as_mut() {
+            let _ = writeln!(
+                out,
+                "{time_s:.3},{:.4},{:.4},{},{},{},{tare_truth_g:.4},",
+                line.truth.low_g,
+                line.truth.high_g,
+                line.mass_g.map_or(String::new(), |m| format!("{m:.4}")),
+                state_name(&reading.state),
+                act.key()
+            );
+        }
+        let polled = commands.poll(&mut scale, now);
+        if let (Some(out), Some(result)) = (trace.as_mut(), polled.as_ref()) {
+            let _ = writeln!(out, ",,,,,,,\"calibration {result:?}\"");
+        }
+        if let Some(Ok(calibration)) = polled {
+            scale.recalibrate(calibration.counts_scale());
+            tare_truth_g = 0.0;
+        }
+        while next_command < plan.commands.len() && plan.commands[next_command].0 <= sample {
+            pending = Some(plan.commands[next_command]);
+            next_command += 1;
+        }
+        if let Some((at, command)) = pending {
+            let command = match command {
+                PlannedCommand::Tare => Command::Tare,
+                PlannedCommand::ClearTare => Command::ClearTare,
+                PlannedCommand::Calibrate { known_mass_g } => Command::Calibrate { known_mass_g },
+            };
+            let outcome = commands.handle(command, &mut scale, now);
+            if let Some(out) = trace.as_mut() {
+                let _ = writeln!(out, ",,,,,,,\"{command:?} -> {outcome:?}\"");
+            }
+            match outcome {
+                Ok(_) => {
+                    pending = None;
+                    match command {
+                        Command::Tare => tare_truth_g = adc.load_g(),
+                        Command::ClearTare => tare_truth_g = 0.0,
+                        _ => {}
+                    }
+                }
+                Err(_) if sample >= at + RETRY_SAMPLES => pending = None,
+                Err(_) => {}
+            }
+        }
+        low = gross;
+        high = gross;
+    }
+    tallies.runs += 1;
+    Ok(())
+}
+
+/// The readout line as judged: the reading the sample gave (what the firmware prints), the
+/// truth of the period since the last line.
+fn line_of(reading: &ScaleReading, low_g: f64, high_g: f64, tare_g: f64) -> Line {
+    let settled = matches!(reading.state, ScaleState::Stable | ScaleState::Empty);
+    Line {
+        mass_g: reading.mass_g.map(f64::from),
+        settled,
+        truth: Truth {
+            low_g: low_g - tare_g,
+            high_g: high_g - tare_g,
+            gross_low_g: low_g,
+        },
+    }
+}
+
+/// The state as the readout line names it.
+pub fn state_name(state: &ScaleState) -> &'static str {
+    match state {
+        ScaleState::Empty => "empty",
+        ScaleState::Estimating => "estimating",
+        ScaleState::Stable => "stable",
+        ScaleState::Invalid(_) => "invalid",
+    }
+}
+
+/// The reference mass the operator calibrates with, g (the firmware's calibration
+/// command asks for the same).
+pub const CALIBRATION_MASS_G: f64 = 200.0;
+
+/// The instrument a plan is drawn for.
+pub fn instrument(limits: &Limits) -> Instrument {
+    Instrument {
+        capacity_g: limits.capacity_g,
+        calibration_mass_g: CALIBRATION_MASS_G,
+    }
+}

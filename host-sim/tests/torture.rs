@@ -1,0 +1,94 @@
+//! `host-sim torture`: the same report on 1 and 2 threads, one run reproduced alone with
+//! its trace, and its last line in the documented form.
+
+mod support;
+use support::host_sim;
+
+/// The output and whether it exited successfully (it exits non-zero when it found a
+/// silent wrong reading).
+fn torture(args: &[&str]) -> (String, bool) {
+    let output: std::process::Output = host_sim()
+        .arg("torture")
+        .args(args)
+        .output()
+        .expect("host-sim runs");
+    // It always reports: a run that found wrong readings exits non-zero, but still
+    // prints its table.
+    assert!(
+        !output.stdout.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    (
+        String::from_utf8(output.stdout).unwrap(),
+        output.status.success(),
+    )
+}
+
+/// `silent wrong readings: W of M shown in N runs` → (W, M, N).
+fn last_line(report: &str) -> (u64, u64, u64) {
+    let line = report.lines().last().unwrap();
+    let words: Vec<&str> = line.split_whitespace().collect();
+    assert_eq!(&words[..3], ["silent", "wrong", "readings:"], "{line}");
+    assert_eq!(
+        (words[4], words[6], words[7], words[9]),
+        ("of", "shown", "in", "runs")
+    );
+    (
+        words[3].parse().unwrap(),
+        words[5].parse().unwrap(),
+        words[8].parse().unwrap(),
+    )
+}
+
+#[test]
+fn the_same_report_on_one_and_two_threads_and_exit_status_follows_it() {
+    let (one, ok_one) = torture(&["--runs", "6", "--seed", "3", "--threads", "1"]);
+    let (two, ok_two) = torture(&["--runs", "6", "--seed", "3", "--threads", "2"]);
+    assert_eq!(one, two);
+    assert_eq!(ok_one, ok_two);
+    let (wrong, shown, runs) = last_line(&one);
+    assert_eq!(runs, 6);
+    assert!(shown > 100, "{one}");
+    assert_eq!(ok_one, wrong == 0, "{one}");
+    // Every act drawn appears in the table with its name.
+    assert!(one.contains("| boot, empty pan |"), "{one}");
+    assert!(one.contains("| all |"), "{one}");
+}
+
+#[test]
+fn one_run_alone_gives_its_share_and_a_trace_of_truth_and_readings() {
+    let trace = support::scratch("torture", "run2.csv");
+    let (alone, _) = torture(&[
+        "--runs",
+        "6",
+        "--seed",
+        "3",
+        "--only-run",
+        "2",
+        "--trace",
+        trace.to_str().unwrap(),
+    ]);
+    let (_, shown, runs) = last_line(&alone);
+    assert_eq!(runs, 1);
+    let text = std::fs::read_to_string(&trace).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("t_s,truth_low_g,truth_high_g,mass_g,state,act,tare_truth_g,event")
+    );
+    let readouts: Vec<Vec<&str>> = lines
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .filter(|f| !f[0].is_empty())
+        .collect();
+    // One line per 50 ms readout; the run starts on an empty pan at power-up.
+    assert!(readouts.len() as u64 >= shown);
+    assert_eq!(readouts[0][0], "0.050");
+    assert_eq!(readouts[0][1], "0.0000");
+    assert_eq!(readouts[0][5], "boot");
+    let shown_settled = readouts
+        .iter()
+        .filter(|f| matches!(f[4], "stable" | "empty") && !f[3].is_empty())
+        .count() as u64;
+    assert_eq!(shown_settled, shown);
+}
