@@ -64,6 +64,8 @@ pub mod montecarlo;
 #[cfg(feature = "std")]
 pub mod ramp_study;
 #[cfg(feature = "std")]
+pub mod replay;
+#[cfg(feature = "std")]
 pub mod scene;
 #[cfg(feature = "std")]
 pub mod stability;

@@ -5,4 +5,5 @@ pub mod core_check;
 pub mod e2e;
 pub mod firmware_log;
 pub mod qemu;
+pub mod replay_check;
 pub mod weighing_constants;

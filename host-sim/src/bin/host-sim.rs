@@ -61,6 +61,37 @@ enum Command {
     /// permissible error. Last line: `silent wrong readings: W of M shown in N runs`; exits
     /// non-zero when W > 0.
     Torture(TortureArgs),
+    /// Run exactly what the firmware runs (the scale with the configured method, onset
+    /// detection, zero tracking, flags) on a recording or a scene, and print its readout as
+    /// CSV `t_s,mass_g,u_g,state,final`, one row per 20 Hz readout line. `estimate` runs
+    /// the bare estimator; this runs the instrument.
+    Replay(ReplayArgs),
+}
+
+#[derive(Args)]
+#[command(allow_negative_numbers = true)]
+struct ReplayArgs {
+    /// A recording: CSV with a column `y` of ADC codes at the configuration's sample rate.
+    /// Converted with the configuration's gain and zero.
+    #[arg(long, conflicts_with = "scene", required_unless_present = "scene")]
+    input: Option<PathBuf>,
+    /// A scene file or the name of a shipped scene, simulated on its own chain and converted
+    /// with that chain's gain and zero (a board calibrated on that cell); or `qemu-demo`,
+    /// `qemu-checked-demo`: the QEMU board's scenes with its factory calibration, exactly
+    /// what `cargo xtask demo` plays.
+    #[arg(long)]
+    scene: Option<String>,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// The weighing configuration (default: the firmware's shipped one, built in).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Convert with this gain instead (counts per gram).
+    #[arg(long)]
+    counts_per_gram: Option<f64>,
+    /// Convert with this zero instead (counts).
+    #[arg(long)]
+    zero_counts: Option<f64>,
 }
 
 #[derive(Args)]
@@ -367,6 +398,7 @@ fn main() -> Result<()> {
         Command::Study(args) => study_command(args),
         Command::Bench(args) => bench(args),
         Command::Torture(args) => torture(args),
+        Command::Replay(args) => replay(args),
     }
 }
 
@@ -919,17 +951,11 @@ fn charts(
     Ok(())
 }
 
-/// The firmware's weighing configuration as shipped (what its images are built with).
-const SHIPPED_WEIGHING_CONFIG: &str = include_str!("../../../firmware/weighing.toml");
-
 fn torture(args: TortureArgs) -> Result<()> {
     use host_sim::torture::{self, judge::Limits, TortureSettings};
     let (weighing, _precision) = match &args.config {
         Some(path) => calibrate::load_config(path)?,
-        None => calibrate::parse_config(
-            std::path::Path::new("firmware/weighing.toml"),
-            SHIPPED_WEIGHING_CONFIG,
-        )?,
+        None => host_sim::replay::shipped_config()?,
     };
     let threads = args
         .threads
@@ -969,5 +995,62 @@ fn torture(args: TortureArgs) -> Result<()> {
     if tallies.total().silent_wrong > 0 {
         std::process::exit(1);
     }
+    Ok(())
+}
+
+fn replay(args: ReplayArgs) -> Result<()> {
+    use host_sim::qemu_scenes;
+    use host_sim::replay::{self, calibration, converter_samples, recorded_samples};
+    let (weighing, _precision) = match &args.config {
+        Some(path) => calibrate::load_config(path)?,
+        None => replay::shipped_config()?,
+    };
+    let (samples, (gain, zero)) = match (&args.input, args.scene.as_deref()) {
+        (Some(path), _) => {
+            let codes = calibrate::read_drop(path)?;
+            let rails = (weighing.onset.rail_low, weighing.onset.rail_high);
+            (
+                recorded_samples(&codes, rails.0, rails.1),
+                (weighing.counts_per_gram, weighing.zero_counts),
+            )
+        }
+        (None, Some(name @ ("qemu-demo" | "qemu-checked-demo"))) => {
+            let mut cell = if name == "qemu-demo" {
+                qemu_scenes::demo_scene()
+            } else {
+                qemu_scenes::checked_demo_scene()
+            };
+            let count = (cell.script().end_s() * host_sim::SAMPLE_RATE_HZ).round() as usize;
+            let factory = qemu_scenes::factory_calibration().map_err(|e| {
+                anyhow::anyhow!("the QEMU board's factory calibration failed: {e:?}")
+            })?;
+            (
+                converter_samples(&mut cell, count),
+                (
+                    f64::from(factory.counts_per_gram),
+                    f64::from(factory.zero_counts),
+                ),
+            )
+        }
+        (None, Some(name)) => {
+            let scene = Scene::load(name)?;
+            let mut adc = scene.adc(args.seed);
+            (
+                converter_samples(&mut adc, scene.samples()),
+                (scene.chain.counts_per_gram(), scene.chain.zero_code()),
+            )
+        }
+        (None, None) => anyhow::bail!("give --input FILE.csv or --scene NAME"),
+    };
+    let counts = calibration(gain, zero, args.counts_per_gram, args.zero_counts);
+    let mut scale = Box::new(
+        replay::ConfiguredScale::configured(&weighing, counts)
+            .map_err(|e| anyhow::anyhow!("the weighing configuration is refused: {e}"))?,
+    );
+    let rows = replay::replay(samples, &mut scale);
+    let stdout = std::io::stdout();
+    let mut out = BufWriter::new(stdout.lock());
+    replay::write_csv(&rows, weighing.sample_rate_hz(), &mut out)?;
+    out.flush()?;
     Ok(())
 }

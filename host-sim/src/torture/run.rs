@@ -2,26 +2,22 @@
 //! state machine (estimator-core, unchanged) read it, and every readout line is judged.
 
 use estimator_core::weighing::{
-    Command, CommandConfig, Commands, CountsScale, RawSample, Scale, ScaleReading, ScaleState,
-    WeighingConfig, WeighingEstimator,
+    Command, CommandConfig, Commands, CountsScale, RawSample, ScaleReading, ScaleState,
+    WeighingConfig,
 };
 
 use super::judge::{Limits, Line, Tallies, Truth, Wrong};
 use super::plan::PLAN_EVENTS;
 use super::plan::{ActKind, Instrument, Plan, PlannedCommand};
 use super::TortureSettings;
-use crate::calibrate::BANK_CANDIDATES;
-use crate::montecarlo::CAPACITY;
-use crate::sensor::{SensorChain, STATES};
+use crate::replay::ConfiguredScale;
+use crate::sensor::SensorChain;
 use crate::simulated::run_seed;
 use crate::simulated::SimulatedAdc;
 use std::io::Write as _;
 
-/// The scale the firmware builds from a weighing configuration, with host-sim's sizes.
-pub type TortureScale = Scale<WeighingEstimator<f32, CAPACITY, STATES, BANK_CANDIDATES>>;
-
 /// Raw samples per readout line (the firmware's 20 Hz readout at 4 kHz).
-pub const READOUT_SAMPLES: u64 = 200;
+const READOUT_SAMPLES: u64 = crate::replay::READOUT_SAMPLES as u64;
 
 /// A command refused is pressed again each readout for this many samples (2 s).
 const RETRY_SAMPLES: u64 = 8000;
@@ -52,7 +48,7 @@ pub fn run_plan(
         counts_per_gram: adc.counts_per_gram() as f32,
         zero_counts: adc.zero_code() as f32,
     };
-    let mut scale = Box::new(TortureScale::configured(weighing, calibration)?);
+    let mut scale = Box::new(ConfiguredScale::configured(weighing, calibration)?);
     let rate_hz = 1.0 / chain.conversion_period_s();
     let mut commands = Commands::new(CommandConfig::weighing_default(rate_hz as f32));
     let mut next_command = 0;

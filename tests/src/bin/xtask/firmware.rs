@@ -21,6 +21,7 @@ use tests::commands::{self, CommandScript};
 use tests::e2e::{self, RunLog, Scene};
 use tests::firmware_log;
 use tests::qemu::{MACHINE_ARGS, QEMU};
+use tests::replay_check;
 
 use crate::util::{cargo, run_checked, target_dir, THUMB_TARGET};
 
@@ -133,6 +134,18 @@ fn e2e_demo(elf: &Path) -> Result<()> {
         "the firmware's readout fails the acceptance criteria",
     )?;
     println!("firmware end-to-end: all criteria met");
+    let rows = replay_check::qemu_demo_rows()?;
+    let differences = replay_check::differences(&rows, &run);
+    if !differences.is_empty() {
+        bail!(
+            "`host-sim replay --scene qemu-demo` differs from the QEMU firmware's readout:\n  - {}",
+            differences.join("\n  - ")
+        );
+    }
+    println!(
+        "host-sim replay --scene qemu-demo: all {} rows are the QEMU firmware's readout lines",
+        rows.len()
+    );
     Ok(())
 }
 
