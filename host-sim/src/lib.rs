@@ -45,8 +45,8 @@ pub mod simulated;
 
 pub use sensor::{Adc, DiscreteSensor, Ina114, LoadCell, SensorChain, SAMPLE_RATE_HZ};
 pub use simulated::{
-    run_seed, white_noise_for_snr, Disturbances, Gaussian, LoadEvent, Script, ScriptError,
-    SimulatedAdc, StepResponse,
+    dropped_from_height, placed_by_hand, run_seed, white_noise_for_snr, Disturbances, Gaussian,
+    LoadEvent, Script, ScriptError, SimulatedAdc, StepResponse,
 };
 
 #[cfg(feature = "std")]

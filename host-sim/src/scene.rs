@@ -18,7 +18,21 @@
 //! creep_time_constant_s = 60  # ... with this time constant
 //! [adc]
 //! bits = 16                   # 12 or 16
+//! [cell]                      # every key optional: the reference cell
+//! ring_hz = 25.0              # natural frequency carrying design_load_g
+//! damping_ratio = 0.03
+//! design_load_g = 138.32
+//! platform_mass_kg = 0.120
+//! capacity_g = 600.0          # Max, with the rated output at it
+//! rated_output_mv_per_v = 2.0
+//! creep_fraction = 0.0        # creep (here or in [noise], not both)
+//! creep_time_constant_s = 60
 //! ```
+//!
+//! An event's load may arrive three ways: `how = "step"` (default; a ramp when `ramp_s` >
+//! 0), `how = "hand"` (rising over `rise_s`, overshooting by `overshoot` of the change,
+//! back over `bounce_s`) or `how = "drop"` (from `height_mm`, the impact lasting
+//! `contact_ms`).
 
 use std::path::{Path, PathBuf};
 
@@ -27,7 +41,8 @@ use serde::Deserialize;
 
 use crate::sensor::{Adc, Ina114, LoadCell, SensorChain, SAMPLE_RATE_HZ};
 use crate::simulated::{
-    white_noise_for_snr, Disturbances, LoadEvent, Script, SimulatedAdc, SNR_WINDOW_SAMPLES,
+    dropped_from_height, placed_by_hand, white_noise_for_snr, Disturbances, LoadEvent, Script,
+    SimulatedAdc, SNR_WINDOW_SAMPLES,
 };
 
 /// The most events a scene file may hold.
@@ -40,6 +55,32 @@ struct EventFile {
     mass_g: f64,
     #[serde(default)]
     ramp_s: f64,
+    /// `step` (default; a ramp when `ramp_s` > 0), `hand` or `drop`.
+    #[serde(default)]
+    how: Placement,
+    /// `hand`: the rise, s (default 0.15).
+    rise_s: Option<f64>,
+    /// `hand`: the overshoot, a fraction of the change (default 0.05).
+    overshoot: Option<f64>,
+    /// `hand`: back from the overshoot to the load, s (default 0.04).
+    bounce_s: Option<f64>,
+    /// `drop`: the height the item falls from, mm (default 10).
+    height_mm: Option<f64>,
+    /// `drop`: how long the impact lasts, ms (default 5).
+    contact_ms: Option<f64>,
+}
+
+/// How an event's load arrives.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+enum Placement {
+    /// At once (or along `ramp_s`).
+    #[default]
+    Step,
+    /// By hand: rising, overshooting, bouncing back.
+    Hand,
+    /// Dropped from a height: an impact, then the load.
+    Drop,
 }
 
 #[derive(Debug, Deserialize)]
@@ -103,15 +144,24 @@ struct CellFile {
     design_load_g: f64,
     ring_hz: f64,
     damping_ratio: f64,
+    capacity_g: f64,
+    rated_output_mv_per_v: f64,
+    creep_fraction: Option<f64>,
+    creep_time_constant_s: Option<f64>,
 }
 
 impl Default for CellFile {
     fn default() -> Self {
+        let reference = LoadCell::reference();
         Self {
             platform_mass_kg: 0.120,
             design_load_g: 138.32,
             ring_hz: 25.0,
             damping_ratio: 0.03,
+            capacity_g: reference.capacity_g,
+            rated_output_mv_per_v: reference.rated_output_mv_per_v,
+            creep_fraction: None,
+            creep_time_constant_s: None,
         }
     }
 }
@@ -248,9 +298,24 @@ fn adc_of(file: &Path, adc: &AdcFile) -> Result<Adc> {
     })
 }
 
-/// The `[cell]` section: a cell designed to ring at `ring_hz` with the design load, with the
-/// reference cell's capacity.
+/// The `[cell]` section: a cell designed to ring at `ring_hz` (its natural frequency) with
+/// the design load, of `capacity_g` at `rated_output_mv_per_v` (the reference cell's unless
+/// given).
 fn cell_of(file: &Path, c: &CellFile) -> Result<LoadCell> {
+    check(
+        file,
+        "cell.capacity_g",
+        finite_positive(c.capacity_g),
+        "a positive capacity in grams",
+        c.capacity_g,
+    )?;
+    check(
+        file,
+        "cell.rated_output_mv_per_v",
+        finite_positive(c.rated_output_mv_per_v),
+        "a positive rated output in mV/V",
+        c.rated_output_mv_per_v,
+    )?;
     check(
         file,
         "cell.platform_mass_kg",
@@ -278,8 +343,53 @@ fn cell_of(file: &Path, c: &CellFile) -> Result<LoadCell> {
         c.ring_hz,
         c.damping_ratio,
     );
-    cell.capacity_g = LoadCell::reference().capacity_g;
+    cell.capacity_g = c.capacity_g;
+    cell.rated_output_mv_per_v = c.rated_output_mv_per_v;
     Ok(cell)
+}
+
+/// The cell's creep (`cell.creep_fraction`, `cell.creep_time_constant_s`): a property of the
+/// cell, so it belongs in `[cell]`; `[noise]` keeps its keys for older scenes, and a scene
+/// may give it in one place only.
+fn creep_of(
+    file: &Path,
+    c: &CellFile,
+    n: &NoiseFile,
+    disturbances: &mut Disturbances,
+) -> Result<()> {
+    if c.creep_fraction.is_none() && c.creep_time_constant_s.is_none() {
+        return Ok(());
+    }
+    let noise_default = NoiseFile::default();
+    check(
+        file,
+        "cell.creep_fraction",
+        n.creep_fraction == noise_default.creep_fraction
+            && n.creep_time_constant_s == noise_default.creep_time_constant_s,
+        "creep in [cell] or in [noise], not both",
+        "both",
+    )?;
+    let fraction = c.creep_fraction.unwrap_or(0.0);
+    let time_constant = c
+        .creep_time_constant_s
+        .unwrap_or(noise_default.creep_time_constant_s);
+    check(
+        file,
+        "cell.creep_fraction",
+        fraction.is_finite() && fraction.abs() < 0.1,
+        "a fraction of the load below 0.1 in size",
+        fraction,
+    )?;
+    check(
+        file,
+        "cell.creep_time_constant_s",
+        finite_positive(time_constant),
+        "a positive time constant in seconds",
+        time_constant,
+    )?;
+    disturbances.creep_fraction = fraction;
+    disturbances.creep_time_constant_s = time_constant;
+    Ok(())
 }
 
 /// At least one `[[events]]` entry, and no more than a script holds.
@@ -308,21 +418,103 @@ fn script_of(
     capacity_g: f64,
 ) -> Result<Script<MAX_EVENTS>> {
     let mut script = Script::new(duration_s);
+    let mut previous_g = 0.0;
     for (index, event) in events.iter().enumerate() {
         let key = format!("events[{index}]");
+        // Up to 1.5 Max: a scene may overload the cell.
         check(
             file,
             &format!("{key}.mass_g"),
-            event.mass_g.is_finite() && (0.0..=capacity_g).contains(&event.mass_g),
-            "a mass in 0..=600 g",
+            event.mass_g.is_finite() && (0.0..=1.5 * capacity_g).contains(&event.mass_g),
+            &format!(
+                "a mass in 0..={} g (1.5 times the cell's capacity)",
+                1.5 * capacity_g
+            ),
             event.mass_g,
         )?;
+        for load in placement_events(file, &key, event, previous_g)? {
+            push_event(file, &key, &mut script, load, duration_s)?;
+        }
+        previous_g = event.mass_g;
+    }
+    Ok(script)
+}
+
+/// The load events of one `[[events]]` entry: one for a step or ramp, two for a placement
+/// by hand or a drop from a height (see `simulated::placed_by_hand`, `dropped_from_height`).
+fn placement_events(
+    file: &Path,
+    key: &str,
+    event: &EventFile,
+    previous_g: f64,
+) -> Result<Vec<LoadEvent>> {
+    let option = |name: &str, value: Option<f64>, default: f64, ok: fn(f64) -> bool| {
+        let value = value.unwrap_or(default);
+        check(
+            file,
+            &format!("{key}.{name}"),
+            ok(value),
+            "a finite, non-negative number (positive for a duration)",
+            value,
+        )
+        .map(|()| value)
+    };
+    let hand_keys = event.rise_s.is_some() || event.overshoot.is_some() || event.bounce_s.is_some();
+    let drop_keys = event.height_mm.is_some() || event.contact_ms.is_some();
+    check(
+        file,
+        &format!("{key}.how"),
+        (event.how == Placement::Hand || !hand_keys) && (event.how == Placement::Drop || !drop_keys),
+        "`how = \"hand\"` with rise_s/overshoot/bounce_s, `how = \"drop\"` with height_mm/contact_ms",
+        format!("{:?}", event.how).to_lowercase(),
+    )?;
+    let non_negative = |v: f64| v.is_finite() && v >= 0.0;
+    Ok(match event.how {
+        Placement::Step => vec![LoadEvent {
+            time_s: event.time_s,
+            mass_g: event.mass_g,
+            ramp_s: event.ramp_s,
+        }],
+        Placement::Hand => {
+            let rise = option("rise_s", event.rise_s, 0.15, finite_positive)?;
+            let overshoot = option("overshoot", event.overshoot, 0.05, non_negative)?;
+            let bounce = option("bounce_s", event.bounce_s, 0.04, finite_positive)?;
+            placed_by_hand(
+                event.time_s,
+                previous_g,
+                event.mass_g,
+                rise,
+                overshoot,
+                bounce,
+            )
+            .to_vec()
+        }
+        Placement::Drop => {
+            let height = option("height_mm", event.height_mm, 10.0, non_negative)?;
+            let contact = option("contact_ms", event.contact_ms, 5.0, finite_positive)?;
+            dropped_from_height(
+                event.time_s,
+                previous_g,
+                event.mass_g,
+                height * 1e-3,
+                contact * 1e-3,
+            )
+            .to_vec()
+        }
+    })
+}
+
+/// Add one load event of `[[events]]` entry `key` to the script.
+fn push_event(
+    file: &Path,
+    key: &str,
+    script: &mut Script<MAX_EVENTS>,
+    event: LoadEvent,
+    duration_s: f64,
+) -> Result<()> {
+    {
         script
-            .push(LoadEvent {
-                time_s: event.time_s,
-                mass_g: event.mass_g,
-                ramp_s: event.ramp_s,
-            })
+            .push(event)
             .map_err(|error| {
                 anyhow::anyhow!(
                     "scene file {}: key `{key}.time_s`: expected a time after the previous event ends and within duration_s = {}, found {} ({error:?})",
@@ -332,7 +524,7 @@ fn script_of(
                 )
             })?;
     }
-    Ok(script)
+    Ok(())
 }
 
 /// The `[noise]` section, the white noise resolved from its SNR on `snr_step_g`.
@@ -417,7 +609,8 @@ impl Scene {
         };
         let script = script_of(file, &raw.events, raw.duration_s, cell.capacity_g)?;
         let snr_step_g = raw.noise.snr_step_g.unwrap_or(raw.events[0].mass_g.abs());
-        let disturbances = disturbances_of(file, &raw.noise, &chain, snr_step_g)?;
+        let mut disturbances = disturbances_of(file, &raw.noise, &chain, snr_step_g)?;
+        creep_of(file, &raw.cell, &raw.noise, &mut disturbances)?;
         Ok(Self {
             name: file
                 .file_stem()
@@ -495,10 +688,72 @@ mod tests {
             "conveyor-ramp",
             "vibration",
             "calibration-drop",
+            "placed-by-hand",
+            "dropped-from-height",
+            "quick-succession",
+            "rig-noise",
+            "small-cell",
         ] {
             let scene = Scene::load(name).unwrap_or_else(|e| panic!("{name}: {e:#}"));
             assert!(scene.samples() > 0, "{name}");
         }
+    }
+
+    #[test]
+    fn placements_expand_into_load_events_and_refuse_keys_of_another_kind() {
+        let scene = Scene::parse(
+            Path::new("p.toml"),
+            "duration_s = 3.0\n[[events]]\ntime_s = 0.5\nmass_g = 100.0\nhow = \"hand\"\nrise_s = 0.2\novershoot = 0.1\n\
+             [[events]]\ntime_s = 1.5\nmass_g = 150.0\nhow = \"drop\"\nheight_mm = 10.0\ncontact_ms = 5.0\n",
+        )
+        .unwrap();
+        let events = scene.script.events();
+        assert_eq!(events.len(), 4);
+        // By hand: up to 110 g over 0.2 s, back to 100 g over the default 40 ms.
+        assert_eq!((events[0].mass_g, events[0].ramp_s), (110.0, 0.2));
+        assert_eq!(
+            (events[1].time_s, events[1].mass_g, events[1].ramp_s),
+            (0.7, 100.0, 0.04)
+        );
+        // Dropped: 50 g with the momentum of a 10 mm fall over 5 ms, then 150 g.
+        let impact = events[2].mass_g - 150.0;
+        assert!((impact * 0.005 - 50.0 * (2.0 * 9.80665f64 * 0.01).sqrt() / 9.80665).abs() < 1e-9);
+        assert_eq!((events[3].time_s, events[3].mass_g), (1.505, 150.0));
+        let message = error_of("[[events]]\ntime_s = 0.0\nmass_g = 1.0\nheight_mm = 3.0\n");
+        assert!(message.contains("`events[0].how`"), "{message}");
+        let message =
+            error_of("[[events]]\ntime_s = 0.0\nmass_g = 1.0\nhow = \"hand\"\nrise_s = -1.0\n");
+        assert!(message.contains("`events[0].rise_s`"), "{message}");
+        let message = error_of("[[events]]\ntime_s = 0.0\nmass_g = 1.0\nhow = \"throw\"\n");
+        assert!(
+            message.contains("throw") && message.contains("hand"),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn the_cell_section_sets_capacity_rated_output_and_creep() {
+        let scene = Scene::load("small-cell").unwrap();
+        let reference = SensorChain::reference();
+        // 1 mV/V over 100 g against 2 mV/V over 600 g: three times the sensitivity.
+        let ratio = scene.chain.counts_per_gram() / reference.counts_per_gram();
+        assert!((ratio - 3.0).abs() < 1e-9, "{ratio}");
+        assert_eq!(scene.disturbances.creep_fraction, 0.0003);
+        assert_eq!(scene.disturbances.creep_time_constant_s, 30.0);
+        // 40 Hz with its design load of 50 g.
+        let hz = scene.chain.cell.natural_frequency_rad_s(50.0) / (2.0 * std::f64::consts::PI);
+        assert!((hz - 40.0).abs() < 1e-9, "{hz}");
+        // Beyond 1.5 Max, and creep in two places, are refused.
+        let message =
+            error_of("[cell]\ncapacity_g = 100.0\n[[events]]\ntime_s = 0.0\nmass_g = 160.0\n");
+        assert!(
+            message.contains("`events[0].mass_g`") && message.contains("150 g"),
+            "{message}"
+        );
+        let message = error_of(
+            "[cell]\ncreep_fraction = 0.001\n[noise]\ncreep_fraction = 0.001\n[[events]]\ntime_s = 0.0\nmass_g = 1.0\n",
+        );
+        assert!(message.contains("not both"), "{message}");
     }
 
     #[test]

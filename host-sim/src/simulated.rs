@@ -31,6 +31,54 @@ impl LoadEvent {
     }
 }
 
+/// Standard gravity, m/s².
+pub const STANDARD_GRAVITY: f64 = 9.806_65;
+
+/// A load placed by hand: from `time_s` the load rises over `rise_s` to `mass_g` plus
+/// `overshoot` (a fraction) of the change from `previous_g`, then settles back to `mass_g`
+/// over `bounce_s` (the hand lets go).
+pub fn placed_by_hand(
+    time_s: f64,
+    previous_g: f64,
+    mass_g: f64,
+    rise_s: f64,
+    overshoot: f64,
+    bounce_s: f64,
+) -> [LoadEvent; 2] {
+    let peak = mass_g + overshoot * (mass_g - previous_g);
+    [
+        LoadEvent {
+            time_s,
+            mass_g: peak,
+            ramp_s: rise_s,
+        },
+        LoadEvent {
+            time_s: time_s + rise_s,
+            mass_g,
+            ramp_s: bounce_s,
+        },
+    ]
+}
+
+/// An item dropped from `height_m` onto a pan holding `previous_g`, so that it then holds
+/// `mass_g`: the impact is a force pulse of `contact_s` carrying the item's momentum
+/// m·√(2gh) (an extra load of m·√(2gh)/(g·contact_s)), then the load stays.
+pub fn dropped_from_height(
+    time_s: f64,
+    previous_g: f64,
+    mass_g: f64,
+    height_m: f64,
+    contact_s: f64,
+) -> [LoadEvent; 2] {
+    let item_g = mass_g - previous_g;
+    let speed = libm::sqrt(2.0 * STANDARD_GRAVITY * height_m.max(0.0));
+    let impact_g = item_g * speed / (STANDARD_GRAVITY * contact_s);
+    [
+        LoadEvent::step(time_s, mass_g + impact_g),
+        LoadEvent::step(time_s + contact_s, mass_g),
+    ]
+}
+
 /// Why a script refused an event.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ScriptError {
@@ -553,6 +601,19 @@ mod tests {
         assert!((script.load_over(100, h) - 0.5).abs() < 1e-9);
         assert!((script.load_over(149, h) - 49.5).abs() < 1e-9);
         assert_eq!(script.load_over(400, h), 100.0);
+    }
+
+    #[test]
+    fn a_hand_overshoots_and_bounces_back_and_a_drop_carries_its_momentum() {
+        let [rise, back] = placed_by_hand(1.0, 100.0, 150.0, 0.2, 0.1, 0.05);
+        assert_eq!((rise.time_s, rise.mass_g, rise.ramp_s), (1.0, 155.0, 0.2));
+        assert_eq!((back.time_s, back.mass_g, back.ramp_s), (1.2, 150.0, 0.05));
+        // 50 g from 10 mm over 5 ms: the impulse (extra load × contact time, in g·s) is the
+        // item's momentum over g: 50 g × 0.443 m/s / 9.807 m/s² = 2.258 g·s.
+        let [impact, rest] = dropped_from_height(2.0, 100.0, 150.0, 0.010, 0.005);
+        let impulse = (impact.mass_g - 150.0) * (rest.time_s - impact.time_s);
+        assert!((impulse - 50.0 * (2.0 * 9.80665f64 * 0.01).sqrt() / 9.80665).abs() < 1e-9);
+        assert_eq!((rest.mass_g, rest.ramp_s), (150.0, 0.0));
     }
 
     #[test]

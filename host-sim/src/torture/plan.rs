@@ -2,8 +2,9 @@
 //! the operator's commands and the samples the hand-off loses, all drawn from one seed.
 //!
 //! What a run may contain (each act is drawn with the weights in [`Plan::draw`]): loads from
-//! a gram to beyond capacity placed by hand (rising over 50–300 ms, with a bounce), dropped
-//! from a height (an impact of 0.5–2 times the load for 3–10 ms) or set down at once;
+//! a gram to beyond capacity placed by hand (rising over 50–300 ms, overshooting up to 10 %
+//! and bouncing back over 20–60 ms), dropped from 0.5–10 mm (the impact lasting 3–10 ms) or
+//! set down at once;
 //! removals by hand; small additions (0.1–0.5 g) to a load that has sat for 20–60 s;
 //! trickles (0.005–0.05 g/s for 5–40 s); tare and clear-tare; calibration with the right
 //! reference mass or a wrong one; bursts of lost samples. Noise: white at 40–60 dB on the
@@ -11,7 +12,7 @@
 
 use crate::sensor::SensorChain;
 use crate::simulated::{
-    white_noise_for_snr, Disturbances, Gaussian, LoadEvent, Script, REFERENCE_STEP_G,
+    dropped_from_height, placed_by_hand, white_noise_for_snr, Disturbances, Gaussian, LoadEvent, Script, REFERENCE_STEP_G,
     SNR_WINDOW_SAMPLES,
 };
 
@@ -193,26 +194,31 @@ impl Drawing<'_> {
         libm::exp(self.uniform(0.0, libm::log(high_g.max(1.0))))
     }
 
-    /// Put `mass_g` more on the pan, in one of the three ways.
+    /// Put `added_g` more on the pan, in one of the three ways.
     fn place(&mut self, added_g: f64, kind: ActKind) {
         let target = self.load_g + added_g;
-        match kind {
+        let events = match kind {
             ActKind::Hand => {
                 let rise = self.uniform(0.05, 0.3);
-                let overshoot = self.uniform(0.0, 0.1) * added_g;
-                self.load(target + overshoot, rise);
+                let overshoot = self.uniform(0.0, 0.1);
                 let back = self.uniform(0.02, 0.06);
-                self.load(target, back);
+                placed_by_hand(self.time_s, self.load_g, target, rise, overshoot, back)
             }
             ActKind::Drop | ActKind::Overload => {
-                let impact = self.uniform(0.5, 2.0) * added_g;
-                self.load(target + impact, 0.0);
-                let hold = self.uniform(0.003, 0.01);
-                self.wait(hold);
-                self.load(target, 0.0);
+                let height_m = self.uniform(0.5e-3, 10e-3);
+                let contact_s = self.uniform(0.003, 0.01);
+                dropped_from_height(self.time_s, self.load_g, target, height_m, contact_s)
             }
-            _ => self.load(target, 0.0),
+            _ => {
+                self.load(target, 0.0);
+                return;
+            }
+        };
+        for event in events {
+            self.events.push(event);
+            self.time_s = event.time_s + event.ramp_s;
         }
+        self.load_g = target;
     }
 }
 
