@@ -35,6 +35,20 @@ pub enum InvalidReason {
 }
 
 impl InvalidReason {
+    /// The reason in one word, as the console and host-sim write it (`ill_conditioned`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::NonFiniteInput => "non_finite_input",
+            Self::OutOfRange => "out_of_range",
+            Self::IllConditioned => "ill_conditioned",
+            Self::NonFiniteUpdate => "non_finite_update",
+            Self::MissingSample => "missing_sample",
+            Self::OutsideModelRange => "outside_model_range",
+            Self::LostDefiniteness => "lost_definiteness",
+            Self::ModelMismatch => "model_mismatch",
+        }
+    }
+
     /// True for the faults that latch until `reset()`: all but [`Self::IllConditioned`],
     /// [`Self::OutsideModelRange`] and [`Self::ModelMismatch`], which describe the data so
     /// far and may clear.

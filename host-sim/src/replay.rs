@@ -12,12 +12,10 @@ use std::io::Write;
 
 use anyhow::Result;
 use estimator_core::sensor::AdcSource;
+use estimator_core::weighing::console::StateWord;
 use estimator_core::weighing::{
-    CountsScale, RawSample, Scale, ScaleEstimator, ScaleFault, ScaleReading, ScaleState,
+    CountsScale, RawSample, Scale, ScaleEstimator, ScaleReading, ScaleState,
 };
-use estimator_core::State;
-
-use crate::estimate::state_name;
 
 /// The scale both boards build from a weighing configuration (`Scale::configured`), with
 /// host-sim's sizes: any order up to its capacity, its bank size. The firmware sizes the
@@ -66,28 +64,11 @@ impl ReplayRow {
     }
 }
 
-/// The state as the replay CSV names it: `empty`, `estimating`, `stable`, or
-/// `invalid:<reason>` (`saturated`, `sample_lost`, `uncalibrated`, or the estimator's
-/// reason as `host-sim estimate` names it: `ill_conditioned`, `model_mismatch`, …).
+/// The state as the replay CSV names it: the console's word (`empty`, `estimating`,
+/// `stable`, or `invalid:<reason>`: `saturated`, `sample_lost`, `uncalibrated`, or the
+/// estimator's reason, `ill_conditioned`, `model_mismatch`, …).
 pub fn state_word(state: &ScaleState) -> String {
-    match state {
-        ScaleState::Empty => "empty".into(),
-        ScaleState::Estimating => "estimating".into(),
-        ScaleState::Stable => "stable".into(),
-        ScaleState::Invalid(fault) => format!("invalid:{}", fault_word(fault)),
-    }
-}
-
-fn fault_word(fault: &ScaleFault) -> &'static str {
-    match fault {
-        ScaleFault::Saturated => "saturated",
-        ScaleFault::SampleLost => "sample_lost",
-        ScaleFault::Uncalibrated => "uncalibrated",
-        ScaleFault::Estimator(reason) => {
-            let name = state_name(State::Invalid(*reason));
-            name.strip_prefix("invalid_").unwrap_or(name)
-        }
-    }
+    StateWord(*state).to_string()
 }
 
 /// Push `samples` through `scale` and keep the reading of every `READOUT_SAMPLES`-th

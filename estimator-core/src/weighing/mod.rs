@@ -10,6 +10,7 @@
 
 mod calibration;
 mod command;
+pub mod console;
 mod key;
 mod method;
 mod scale;

@@ -12,8 +12,8 @@
 
 use crate::sensor::SensorChain;
 use crate::simulated::{
-    dropped_from_height, placed_by_hand, white_noise_for_snr, Disturbances, Gaussian, LoadEvent, Script, REFERENCE_STEP_G,
-    SNR_WINDOW_SAMPLES,
+    dropped_from_height, placed_by_hand, white_noise_for_snr, Disturbances, Gaussian, LoadEvent,
+    Script, REFERENCE_STEP_G, SNR_WINDOW_SAMPLES,
 };
 
 /// Load events a plan may hold (a hand placement takes two).
