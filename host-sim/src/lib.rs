@@ -60,6 +60,8 @@ pub mod estimate;
 #[cfg(feature = "std")]
 pub mod method;
 #[cfg(feature = "std")]
+pub mod monitor;
+#[cfg(feature = "std")]
 pub mod montecarlo;
 #[cfg(feature = "std")]
 pub mod ramp_study;

@@ -70,3 +70,33 @@ fn replay_needs_a_recording_or_a_scene() {
     let error = run_refused(host_sim().args(["replay", "--scene", "no-such-scene"]));
     assert!(error.contains("no-such-scene"), "{error}");
 }
+
+/// `monitor` reads `replay`'s rows (as it reads the console and the firmware's log), logs
+/// them as CSV, and without a terminal prints its last frame.
+#[test]
+fn the_monitor_logs_a_replay_and_prints_its_last_frame() {
+    let rows = support::scratch("replay", "demo-rows.csv");
+    let csv = support::scratch("replay", "monitor.csv");
+    let out = run_ok(host_sim().args(["replay", "--scene", "qemu-demo"]));
+    std::fs::write(&rows, &out).unwrap();
+    let frame = run_ok(
+        host_sim()
+            .args(["monitor", "--input"])
+            .arg(&rows)
+            .arg("--csv")
+            .arg(&csv),
+    );
+    assert!(frame.contains("80 readings, 1 other lines"), "{frame}");
+    assert!(frame.contains("stable"), "{frame}");
+    // The CSV holds the replay's rows, in the same form.
+    let logged = std::fs::read_to_string(&csv).unwrap();
+    assert_eq!(logged.lines().count(), 81);
+    let last_logged: Vec<&str> = logged.lines().last().unwrap().split(',').collect();
+    let last_row: Vec<&str> = out.lines().last().unwrap().split(',').collect();
+    assert_eq!(last_logged[3], last_row[3]);
+    let (a, b): (f64, f64) = (
+        last_logged[1].parse().unwrap(),
+        last_row[1].parse().unwrap(),
+    );
+    assert_eq!(a as f32, b as f32);
+}

@@ -66,6 +66,30 @@ enum Command {
     /// CSV `t_s,mass_g,u_g,state,final`, one row per 20 Hz readout line. `estimate` runs
     /// the bare estimator; this runs the instrument.
     Replay(ReplayArgs),
+    /// A live view of a weighing board: reads its lines (the serial console, the firmware's
+    /// log from probe-rs or QEMU, or `replay`'s CSV) from a file, a serial device or stdin,
+    /// plots mass with its ±2u band and logs every reading as CSV. On a terminal it is
+    /// interactive (q quits); otherwise it prints the last frame as text.
+    Monitor(MonitorArgs),
+}
+
+#[derive(Args)]
+struct MonitorArgs {
+    /// Where the lines come from: a file, a serial device (e.g. /dev/ttyACM0), or - for stdin.
+    #[arg(long, default_value = "-")]
+    input: PathBuf,
+    /// Log every reading to this CSV (t_s,mass_g,u_g,state,final).
+    #[arg(long)]
+    csv: Option<PathBuf>,
+    /// Seconds of readings on the plot.
+    #[arg(long, default_value_t = 5.0)]
+    window_s: f64,
+    /// The sample rate that times the firmware's log lines (`sample=`), Hz.
+    #[arg(long, default_value_t = 4000.0)]
+    sample_rate_hz: f64,
+    /// Print the last frame as text even on a terminal.
+    #[arg(long)]
+    text: bool,
 }
 
 #[derive(Args)]
@@ -399,6 +423,7 @@ fn main() -> Result<()> {
         Command::Bench(args) => bench(args),
         Command::Torture(args) => torture(args),
         Command::Replay(args) => replay(args),
+        Command::Monitor(args) => monitor(args),
     }
 }
 
@@ -1052,5 +1077,47 @@ fn replay(args: ReplayArgs) -> Result<()> {
     let mut out = BufWriter::new(stdout.lock());
     replay::write_csv(&rows, weighing.sample_rate_hz(), &mut out)?;
     out.flush()?;
+    Ok(())
+}
+
+fn monitor(args: MonitorArgs) -> Result<()> {
+    use host_sim::monitor::{self, MonitorSettings};
+    use std::io::{BufRead, IsTerminal};
+    let input: Box<dyn BufRead + Send> = if args.input.as_os_str() == "-" {
+        Box::new(BufReader::new(std::io::stdin()))
+    } else {
+        let file = File::open(&args.input)
+            .with_context(|| format!("cannot open {}", args.input.display()))?;
+        Box::new(BufReader::new(file))
+    };
+    let (sender, receiver) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in input.lines() {
+            let Ok(line) = line else { break };
+            if sender.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    let csv: Option<Box<dyn Write>> = match &args.csv {
+        Some(path) => Some(Box::new(BufWriter::new(
+            File::create(path).with_context(|| format!("cannot write {}", path.display()))?,
+        ))),
+        None => None,
+    };
+    let settings = MonitorSettings {
+        window_s: args.window_s,
+        sample_rate_hz: args.sample_rate_hz,
+        interactive: std::io::stdout().is_terminal() && !args.text,
+        text_size: (100, 24),
+    };
+    let csv_name = args.csv.as_ref().map(|p| p.display().to_string());
+    let history = monitor::run(receiver, &settings, csv, csv_name)?;
+    if !settings.interactive {
+        print!(
+            "{}",
+            monitor::text_frame(&history, settings.window_s, settings.text_size)?
+        );
+    }
     Ok(())
 }

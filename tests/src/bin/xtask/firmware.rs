@@ -62,6 +62,60 @@ pub fn demo() -> Result<()> {
     Ok(())
 }
 
+/// `cargo xtask monitor`: the QEMU demo in real time, its readout lines fed to host-sim's
+/// monitor as they arrive (a live plot on a terminal, the last frame as text otherwise),
+/// every reading logged to `target/monitor/qemu-demo.csv`.
+pub fn monitor() -> Result<()> {
+    use host_sim::monitor::{self, MonitorSettings};
+    use std::io::IsTerminal;
+    let elf = build(Board::Qemu, false)?;
+    let dir = target_dir().join("monitor");
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let csv_path = dir.join("qemu-demo.csv");
+    let csv = std::fs::File::create(&csv_path)
+        .with_context(|| format!("cannot write {}", csv_path.display()))?;
+    let (sender, receiver) = mpsc::channel();
+    let qemu = thread::spawn(move || {
+        run_firmware_scene(&elf, &ICOUNT_REAL_TIME, false, "demo", None, Some(sender))
+    });
+    let settings = MonitorSettings {
+        window_s: 5.0,
+        sample_rate_hz: e2e::SAMPLE_RATE_HZ,
+        interactive: std::io::stdout().is_terminal(),
+        text_size: (100, 24),
+    };
+    let history = monitor::run(
+        receiver,
+        &settings,
+        Some(Box::new(std::io::BufWriter::new(csv))),
+        Some(csv_path.display().to_string()),
+    )?;
+    if !settings.interactive {
+        print!(
+            "{}",
+            monitor::text_frame(&history, settings.window_s, settings.text_size)?
+        );
+    }
+    let run = qemu
+        .join()
+        .map_err(|_| anyhow!("the QEMU thread panicked"))??;
+    if !run.exited_successfully {
+        bail!(
+            "QEMU did not end cleanly: {}",
+            run.lines.last().cloned().unwrap_or_default()
+        );
+    }
+    if history.readings.is_empty() {
+        bail!("the monitor saw no reading");
+    }
+    println!(
+        "{} readings logged to {}",
+        history.readings.len(),
+        csv_path.display()
+    );
+    Ok(())
+}
+
 /// The firmware checks of `cargo xtask test`: the STM32F411 image builds and leaves at least
 /// half the chip's flash free (the firmware's size budget), the demo scene in QEMU meets the readout criteria
 /// of `tests::e2e::check`, the command scene (tare, refused tare, calibration typed on
@@ -180,7 +234,7 @@ fn e2e_checked_demo(elf: &Path) -> Result<()> {
         "checked demo: the demo after {:.1} s more of empty pan, the consistency check live from the first drop",
         scene.loads[1].0 - Scene::demo().loads[1].0
     );
-    let run = run_firmware_scene(elf, &ICOUNT_FAST, false, "checked-demo", None)?;
+    let run = run_firmware_scene(elf, &ICOUNT_FAST, false, "checked-demo", None, None)?;
     let mut report = e2e::check(&scene, &run);
     let metered = run
         .lines
@@ -509,17 +563,19 @@ fn run_firmware(
     live: bool,
     script: Option<&mut CommandScript>,
 ) -> Result<RunLog> {
-    run_firmware_scene(elf, icount, live, "demo", script)
+    run_firmware_scene(elf, icount, live, "demo", script, None)
 }
 
 /// [`run_firmware`] on the scene `scene` (the firmware's `qemu::Scene` name; a command
-/// `script` plays the command scene whatever `scene` says).
+/// `script` plays the command scene whatever `scene` says), each decoded line also sent to
+/// `tap` as it arrives.
 fn run_firmware_scene(
     elf: &Path,
     icount: &[&str],
     live: bool,
     scene: &str,
     mut script: Option<&mut CommandScript>,
+    tap: Option<mpsc::Sender<String>>,
 ) -> Result<RunLog> {
     let elf_bytes = std::fs::read(elf).with_context(|| format!("reading {}", elf.display()))?;
     let table = defmt_decoder::Table::parse(&elf_bytes)
@@ -561,6 +617,10 @@ fn run_firmware_scene(
             Ok(chunk) => {
                 decoder.received(&chunk);
                 let mut on_line = |line: String| {
+                    if let Some(tap) = &tap {
+                        // A closed tap (the monitor quit) only stops the forwarding.
+                        let _ = tap.send(line.clone());
+                    }
                     answer_line(&line, live, script.as_deref_mut(), console.as_mut());
                     lines.push(line);
                 };

@@ -27,6 +27,7 @@ usage: cargo xtask <command>
 commands:
   test [all|host|target]  install missing tools, then run what CI checks (default: all)
   demo                    run the firmware demo in QEMU and print the live readout
+  monitor                 the QEMU demo in host-sim's live monitor (plot of mass and u, CSV log)
   bench                   print host and on-target benchmark figures and estimator sizes
   install                 install what a fresh machine lacks (thumb target, QEMU, flip-link)
 ";
@@ -39,6 +40,7 @@ fn main() -> ExitCode {
         ["test", "host"] => test(Scope::Host),
         ["test", "target"] => test(Scope::Target),
         ["demo"] => install::ensure_tools().and_then(|()| firmware::demo()),
+        ["monitor"] => install::ensure_tools().and_then(|()| firmware::monitor()),
         ["bench"] => bench::run(),
         ["install"] => install::ensure_tools(),
         ["help"] | ["--help"] | ["-h"] => {
