@@ -85,8 +85,11 @@ pub struct Wrong {
     pub act: ActKind,
     /// What the scale showed, g.
     pub shown_g: f64,
-    /// The true net load (mid of the period), g.
-    pub truth_g: f64,
+    /// The true net load over the period before the line, g: least and greatest.
+    pub truth_g: (f64, f64),
+    /// How far the shown mass lies outside that range, g (infinite: a mass shown settled
+    /// above Max + 9 e).
+    pub error_g: f64,
     /// The permissible error, g.
     pub permissible_g: f64,
     /// The state shown.
@@ -137,13 +140,14 @@ impl Tallies {
     /// Silent wrong readings kept to show.
     pub const KEEP: usize = 8;
 
-    /// Count one judged readout line.
+    /// Count one judged readout line of `act`; `at` is (run, time in s, state shown), kept
+    /// with a silent wrong reading.
     pub fn judge(
         &mut self,
         act: ActKind,
         line: Line,
         limits: &Limits,
-        wrong: impl FnOnce() -> Wrong,
+        at: (u64, f64, &'static str),
     ) {
         let tally = self.by_act.entry(act).or_default();
         tally.readings += 1;
@@ -171,13 +175,18 @@ impl Tallies {
         tally.worst_ratio = tally.worst_ratio.max(ratio);
         if is_wrong {
             tally.silent_wrong += 1;
-            self.worst.push(wrong());
-            self.worst.sort_by(|a, b| {
-                let ra = (a.shown_g - a.truth_g).abs() / a.permissible_g;
-                let rb = (b.shown_g - b.truth_g).abs() / b.permissible_g;
-                rb.total_cmp(&ra)
+            let (run, time_s, state) = at;
+            self.worst.push(Wrong {
+                run,
+                time_s,
+                act,
+                shown_g,
+                truth_g: (line.truth.low_g, line.truth.high_g),
+                error_g: if over_capacity { f64::INFINITY } else { error },
+                permissible_g: permissible,
+                state,
             });
-            self.worst.truncate(Self::KEEP);
+            self.keep_worst();
         }
     }
 
@@ -187,13 +196,21 @@ impl Tallies {
             self.by_act.entry(*act).or_default().add(tally);
         }
         self.worst.extend(other.worst);
+        self.keep_worst();
+        self.runs += other.runs;
+    }
+
+    /// Keep the [`Self::KEEP`] wrong readings with the largest error over permissible
+    /// (ties: the earliest run and time), so the list does not depend on the threads.
+    fn keep_worst(&mut self) {
         self.worst.sort_by(|a, b| {
-            let ra = (a.shown_g - a.truth_g).abs() / a.permissible_g;
-            let rb = (b.shown_g - b.truth_g).abs() / b.permissible_g;
-            rb.total_cmp(&ra).then(a.run.cmp(&b.run))
+            let ra = a.error_g / a.permissible_g;
+            let rb = b.error_g / b.permissible_g;
+            rb.total_cmp(&ra)
+                .then(a.run.cmp(&b.run))
+                .then(a.time_s.total_cmp(&b.time_s))
         });
         self.worst.truncate(Self::KEEP);
-        self.runs += other.runs;
     }
 
     /// All acts together.
@@ -255,16 +272,9 @@ mod tests {
                 gross_low_g: 660.0,
             },
         };
-        let wrong = || Wrong {
-            run: 0,
-            time_s: 0.0,
-            act: ActKind::Overload,
-            shown_g: 660.0,
-            truth_g: 660.0,
-            permissible_g: 0.15,
-            state: "stable",
-        };
-        tallies.judge(ActKind::Overload, line, &limits(), wrong);
+        let at = (0, 0.0, "stable");
+        tallies.judge(ActKind::Overload, line, &limits(), at);
+        assert_eq!(tallies.worst[0].error_g, f64::INFINITY);
         assert_eq!(tallies.total().silent_wrong, 1);
         // The same line flagged (estimating) is a flagged wrong reading, not a silent one.
         let mut tallies = Tallies::default();
@@ -275,7 +285,7 @@ mod tests {
                 ..line
             },
             &limits(),
-            wrong,
+            at,
         );
         assert_eq!(tallies.total().silent_wrong, 0);
         assert_eq!(tallies.total().flagged_wrong, 1);

@@ -151,13 +151,15 @@ pub fn report(settings: &TortureSettings, tallies: &Tallies) -> String {
         for w in &tallies.worst {
             let _ = writeln!(
                 out,
-                "  run {} at {:.2} s ({}): shown {:.3} g {} , truth {:.3} g, permissible ±{:.3} g",
+                "  run {} at {:.2} s ({}): shown {:.3} g {}, truth {:.3}..{:.3} g, error {:.3} g, permissible ±{:.3} g",
                 w.run,
                 w.time_s,
                 w.act.name(),
                 w.shown_g,
                 w.state,
-                w.truth_g,
+                w.truth_g.0,
+                w.truth_g.1,
+                w.error_g,
                 w.permissible_g
             );
         }

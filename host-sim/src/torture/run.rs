@@ -6,7 +6,7 @@ use estimator_core::weighing::{
     WeighingConfig,
 };
 
-use super::judge::{Limits, Line, Tallies, Truth, Wrong};
+use super::judge::{Limits, Line, Tallies, Truth};
 use super::plan::PLAN_EVENTS;
 use super::plan::{ActKind, Instrument, Plan, PlannedCommand};
 use super::TortureSettings;
@@ -85,15 +85,7 @@ pub fn run_plan(
         let now = (sample + 1) as u32;
         let line = line_of(&reading, low, high, tare_truth_g);
         let time_s = (sample + 1) as f64 / rate_hz;
-        tallies.judge(act, line, limits, || Wrong {
-            run,
-            time_s,
-            act,
-            shown_g: line.mass_g.unwrap_or(f64::NAN),
-            truth_g: 0.5 * (line.truth.low_g + line.truth.high_g),
-            permissible_g: limits.permissible_g(0.5 * (line.truth.low_g + line.truth.high_g)),
-            state: state_name(&reading.state),
-        });
+        tallies.judge(act, line, limits, (run, time_s, state_name(&reading.state)));
         if let Some(out) = trace.as_mut() {
             let _ = writeln!(
                 out,
