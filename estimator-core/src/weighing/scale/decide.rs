@@ -74,7 +74,7 @@ impl<E: ScaleEstimator> Scale<E> {
         if self.restart_pending {
             self.restart_as_load_change();
         }
-        self.samples_since_change = self.samples_since_change.saturating_add(1);
+        self.samples_since_change += 1;
     }
 
     /// The estimator flagged its reading: show why. A latched fault needs a restart;
@@ -120,7 +120,9 @@ impl<E: ScaleEstimator> Scale<E> {
         } else {
             ScaleState::Estimating
         };
-        if stable || (empty && self.samples_since_change > self.config.stable_hold_samples) {
+        if stable
+            || (empty && self.samples_since_change > u64::from(self.config.stable_hold_samples))
+        {
             self.settled_samples = self.settled_samples.saturating_add(1);
         } else {
             self.settled_samples = 0;
@@ -132,7 +134,7 @@ impl<E: ScaleEstimator> Scale<E> {
     fn set_fault(&mut self, fault: ScaleFault) -> ScaleReading {
         self.state = ScaleState::Invalid(fault);
         self.gross_g = None;
-        self.samples_since_change = self.samples_since_change.saturating_add(1);
+        self.samples_since_change += 1;
         self.reading()
     }
 }
@@ -184,6 +186,33 @@ mod tests {
         assert_eq!(last.state, ScaleState::Empty, "{last:?}");
         assert!(last.mass_g.unwrap().abs() < 0.05, "{last:?}");
         assert_eq!(last.load_changes, 2);
+    }
+
+    /// A run longer than 2³² samples (12.4 days at 4 kHz) still has a working residual
+    /// test: the run's sample count must neither wrap nor saturate (a saturated count never
+    /// again falls on an update, and the test stopped silently). The raw test is switched
+    /// off so that only the residual test can see the change.
+    #[test]
+    fn the_residual_test_still_alarms_after_two_to_the_32_samples() {
+        let config = ScaleConfig {
+            raw_threshold_g: f32::INFINITY,
+            ..ScaleConfig::weighing_default(FS)
+        };
+        let estimator = StepScale::<8>::step_estimator(7, 16, 1.0).unwrap();
+        let mut scale = Scale::new(config, estimator, calibration());
+        let mut cell = Cell::new(0.4);
+        cell.load_g = 100.0;
+        run(&mut scale, &mut cell, 8000);
+        assert_eq!(scale.reading().state, ScaleState::Stable);
+        scale.skip_samples_for_test(1 << 32);
+        run(&mut scale, &mut cell, 4000);
+        assert_eq!(scale.reading().load_changes, 0, "{:?}", scale.reading());
+        assert_eq!(scale.reading().samples_since_change, u32::MAX);
+        cell.load_g = 150.0;
+        let readings = run(&mut scale, &mut cell, 8000);
+        let last = readings.last().unwrap();
+        assert_eq!(last.load_changes, 1, "the change went unseen: {last:?}");
+        assert!((last.mass_g.unwrap() - 150.0).abs() < 0.2, "{last:?}");
     }
 
     /// The step estimator, its readings flagged `IllConditioned` (not latched) from the

@@ -85,7 +85,9 @@ pub struct Scale<E> {
     tare_g: f32,
     residual_cusum: TwoSidedCusum,
     raw_cusum: TwoSidedCusum,
-    samples_since_change: u32,
+    /// Raw samples of this run: `u64`, so it never wraps or saturates (2⁶⁴ samples at 4 kHz
+    /// are 146 million years); the residual test's update phase depends on it.
+    samples_since_change: u64,
     load_changes: u32,
     /// Where the stability band is centred, and how long the estimate stayed in it.
     stable_centre_g: f32,
@@ -193,7 +195,7 @@ impl<E: ScaleEstimator> Scale<E> {
                 _ => self.gross_g.map(|gross| gross - self.tare_g),
             },
             state: self.state,
-            samples_since_change: self.samples_since_change,
+            samples_since_change: u32::try_from(self.samples_since_change).unwrap_or(u32::MAX),
             load_changes: self.load_changes,
         }
     }
@@ -248,6 +250,14 @@ impl<E: ScaleEstimator> Scale<E> {
     }
 
     /// A new run that counts as a load change.
+    /// Count `samples` more raw samples in this run without pushing them (tests of runs
+    /// longer than a test can feed: 2³² samples are 12.4 days at 4 kHz). Keep `samples` a
+    /// multiple of the estimator's update so the residual test's phase stays aligned.
+    #[cfg(test)]
+    pub(crate) fn skip_samples_for_test(&mut self, samples: u64) {
+        self.samples_since_change += samples;
+    }
+
     fn restart_as_load_change(&mut self) {
         self.restart();
         self.load_changes = self.load_changes.saturating_add(1);

@@ -68,7 +68,9 @@ pub struct ScaleReading {
     pub mass_g: Option<f32>,
     /// What the pan holds.
     pub state: ScaleState,
-    /// Raw samples since the last detected load change (or restart).
+    /// Raw samples since the last detected load change (or restart), shown saturating at
+    /// `u32::MAX` (12.4 days at 4 kHz, past every threshold that reads it); the scale's own
+    /// count is `u64` and never saturates.
     pub samples_since_change: u32,
     /// Load changes detected since boot (saturating).
     pub load_changes: u32,
