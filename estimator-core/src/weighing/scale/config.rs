@@ -8,6 +8,7 @@
 //! lowered below what a settled run without a change reaches, or the scale announces load
 //! changes that did not happen.
 
+use crate::reading::ConfigError;
 use crate::weighing::method::WeighingMethod;
 
 /// Tuning of the weighing decisions. All masses in grams, all durations in raw samples.
@@ -109,6 +110,48 @@ impl ScaleConfig {
         }
     }
 
+    /// Check every field: `Err(ConfigError::ScaleField(name))` names the first one out of
+    /// its domain. Rates, bands, drifts and zero tracking must be finite and not negative
+    /// (the sample rate positive); the CUSUM thresholds positive and not NaN (`+∞` switches
+    /// a test off); the noise window at least one sample. [`super::Scale::new`] refuses an
+    /// invalid configuration with this error instead of panicking on it later.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let finite_non_negative = |value: f32| value.is_finite() && value >= 0.0;
+        let threshold = |value: f32| value > 0.0; // false for NaN; +∞ allowed
+        let checks = [
+            (
+                "sample_rate_hz",
+                self.sample_rate_hz.is_finite() && self.sample_rate_hz > 0.0,
+            ),
+            ("empty_band_g", finite_non_negative(self.empty_band_g)),
+            ("stable_band_g", finite_non_negative(self.stable_band_g)),
+            (
+                "stable_band_relative",
+                finite_non_negative(self.stable_band_relative),
+            ),
+            (
+                "residual_drift_g",
+                finite_non_negative(self.residual_drift_g),
+            ),
+            ("residual_threshold_g", threshold(self.residual_threshold_g)),
+            ("raw_drift_g", finite_non_negative(self.raw_drift_g)),
+            ("raw_threshold_g", threshold(self.raw_threshold_g)),
+            (
+                "zero_tracking_band_g",
+                finite_non_negative(self.zero_tracking_band_g),
+            ),
+            (
+                "zero_tracking_rate_g_per_s",
+                finite_non_negative(self.zero_tracking_rate_g_per_s),
+            ),
+            ("noise_window_samples", self.noise_window_samples > 0),
+        ];
+        match checks.iter().find(|(_, ok)| !ok) {
+            Some((field, _)) => Err(ConfigError::ScaleField(field)),
+            None => Ok(()),
+        }
+    }
+
     /// [`Self::weighing_default`] with the residual test's thresholds for `method`, set from
     /// the residuals measured on host-sim's reference demo, each method run alone from a
     /// restart at each change and 100 samples after it (where the scale restarts), and
@@ -132,5 +175,57 @@ impl ScaleConfig {
                 ..defaults
             },
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_scene::{calibration, FS};
+    use super::super::StepScale;
+    use super::*;
+
+    /// Every bad value of every checked field is refused by `Scale::new` as a typed error
+    /// naming the field, never a panic (a NaN or negative zero-tracking rate panicked in
+    /// `f32::clamp` on the first empty reading).
+    #[test]
+    fn a_bad_field_is_refused_by_name_not_a_panic() {
+        let good = ScaleConfig::weighing_default(FS);
+        assert_eq!(good.validate(), Ok(()));
+        type Set = fn(&mut ScaleConfig, f32);
+        let fields: [(&str, Set); 10] = [
+            ("sample_rate_hz", |c, v| c.sample_rate_hz = v),
+            ("empty_band_g", |c, v| c.empty_band_g = v),
+            ("stable_band_g", |c, v| c.stable_band_g = v),
+            ("stable_band_relative", |c, v| c.stable_band_relative = v),
+            ("residual_drift_g", |c, v| c.residual_drift_g = v),
+            ("residual_threshold_g", |c, v| c.residual_threshold_g = v),
+            ("raw_drift_g", |c, v| c.raw_drift_g = v),
+            ("raw_threshold_g", |c, v| c.raw_threshold_g = v),
+            ("zero_tracking_band_g", |c, v| c.zero_tracking_band_g = v),
+            ("zero_tracking_rate_g_per_s", |c, v| {
+                c.zero_tracking_rate_g_per_s = v
+            }),
+        ];
+        for (name, set) in fields {
+            for bad in [f32::NAN, -1.0, f32::NEG_INFINITY] {
+                let mut config = good;
+                set(&mut config, bad);
+                let estimator = StepScale::<8>::step_estimator(7, 16, 1.0).unwrap();
+                let built = super::super::Scale::new(config, estimator, calibration());
+                assert_eq!(
+                    built.err(),
+                    Some(ConfigError::ScaleField(name)),
+                    "{name} = {bad}"
+                );
+            }
+        }
+        let config = ScaleConfig {
+            noise_window_samples: 0,
+            ..good
+        };
+        assert_eq!(
+            config.validate(),
+            Err(ConfigError::ScaleField("noise_window_samples"))
+        );
     }
 }

@@ -199,7 +199,7 @@ mod tests {
             ..ScaleConfig::weighing_default(FS)
         };
         let estimator = StepScale::<8>::step_estimator(7, 16, 1.0).unwrap();
-        let mut scale = Scale::new(config, estimator, calibration());
+        let mut scale = Scale::new(config, estimator, calibration()).unwrap();
         let mut cell = Cell::new(0.4);
         cell.load_g = 100.0;
         run(&mut scale, &mut cell, 8000);
@@ -262,7 +262,7 @@ mod tests {
             from,
             to,
         };
-        Scale::new(ScaleConfig::weighing_default(FS), estimator, calibration())
+        Scale::new(ScaleConfig::weighing_default(FS), estimator, calibration()).unwrap()
     }
 
     #[test]

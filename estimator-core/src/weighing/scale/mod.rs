@@ -65,6 +65,7 @@ pub use estimator::ScaleEstimator;
 pub use reading::{CountsScale, RawSample, ScaleFault, ScaleReading, ScaleState, TareError};
 
 use crate::estimators::step::StepEstimator;
+use crate::reading::ConfigError;
 use change::TwoSidedCusum;
 use noise::NoiseMetering;
 use zero::round_to_i32;
@@ -116,8 +117,14 @@ pub type StepScale<const N: usize> = Scale<StepEstimator<f32, N>>;
 impl<E: ScaleEstimator> Scale<E> {
     /// A scale running `estimator` (built in counts, see [`ScaleEstimator`]) with the
     /// decisions of `config`, converting counts with `calibration`. An impossible
-    /// calibration (zero or non-finite gain) shows `Invalid(Uncalibrated)`.
-    pub fn new(config: ScaleConfig, estimator: E, calibration: CountsScale) -> Self {
+    /// calibration (zero or non-finite gain) shows `Invalid(Uncalibrated)`. A `config`
+    /// out of its domain is refused ([`ScaleConfig::validate`] names the field).
+    pub fn new(
+        config: ScaleConfig,
+        estimator: E,
+        calibration: CountsScale,
+    ) -> Result<Self, ConfigError> {
+        config.validate()?;
         let samples_per_update = estimator.samples_per_update().max(1);
         let mut scale = Self {
             config,
@@ -145,7 +152,7 @@ impl<E: ScaleEstimator> Scale<E> {
             noise_metered: false,
         };
         scale.start_with(calibration);
-        scale
+        Ok(scale)
     }
 
     /// Everything but the configuration, the estimator and the load-change count as a
