@@ -81,6 +81,13 @@ pub struct Scale<E> {
     grams_per_count: f32,
     /// The tracked zero, in counts.
     zero_counts: f32,
+    /// The zero the scale started (or was recalibrated) with: zero tracking stays within
+    /// `zero_tracking_range_g` of it.
+    power_up_zero_counts: f32,
+    /// How far zero tracking has moved the zero from the power-up zero: kept on its own,
+    /// small, so that tracking steps of 10⁻⁴ counts are not lost in rounding a zero of
+    /// tens of thousands of counts (`f32` spacing there is 0.002 counts).
+    zero_tracked_counts: f32,
     /// The zero the current estimator run subtracts (integer, so the subtraction is exact).
     run_zero_counts: i32,
     tare_g: f32,
@@ -133,6 +140,8 @@ impl<E: ScaleEstimator> Scale<E> {
             counts_per_gram: 1.0,
             grams_per_count: 1.0,
             zero_counts: 0.0,
+            power_up_zero_counts: 0.0,
+            zero_tracked_counts: 0.0,
             run_zero_counts: 0,
             tare_g: 0.0,
             residual_cusum: TwoSidedCusum::default(),
@@ -171,6 +180,8 @@ impl<E: ScaleEstimator> Scale<E> {
         } else {
             0.0
         };
+        self.power_up_zero_counts = self.zero_counts;
+        self.zero_tracked_counts = 0.0;
         self.tare_g = 0.0;
         self.stable_centre_g = 0.0;
         self.restart();
