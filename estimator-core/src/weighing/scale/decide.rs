@@ -42,6 +42,9 @@ impl<E: ScaleEstimator> Scale<E> {
         // The tracked zero may have moved since the run started.
         let zero_shift_g = (self.zero_counts - self.run_zero_counts as f32) * self.grams_per_count;
         let estimate_g = estimate_counts * self.grams_per_count - zero_shift_g;
+        if estimate_g > self.overload_limit_g() {
+            return self.overloaded();
+        }
         if self.show(estimate_g) {
             self.meter_empty_pan(centred_counts);
             self.track_zero(estimate_g);
@@ -130,6 +133,22 @@ impl<E: ScaleEstimator> Scale<E> {
         empty && stable
     }
 
+    /// The largest gross mass the scale shows: Max + 9 e (OIML R 76 4.4.3).
+    fn overload_limit_g(&self) -> f32 {
+        self.config.capacity_g + 9.0 * self.config.scale_interval_g
+    }
+
+    /// The estimate is above [`Self::overload_limit_g`]: no mass, and the run's stability
+    /// and settling start over (the raw test is off without a shown mass; the residual
+    /// test still sees the load leave).
+    fn overloaded(&mut self) -> ScaleReading {
+        self.stable_samples = 0;
+        self.settled_samples = 0;
+        self.state = ScaleState::Invalid(ScaleFault::Overload);
+        self.gross_g = None;
+        self.reading()
+    }
+
     /// Show `fault`: no mass.
     fn set_fault(&mut self, fault: ScaleFault) -> ScaleReading {
         self.state = ScaleState::Invalid(fault);
@@ -186,6 +205,59 @@ mod tests {
         assert_eq!(last.state, ScaleState::Empty, "{last:?}");
         assert!(last.mass_g.unwrap().abs() < 0.05, "{last:?}");
         assert_eq!(last.load_changes, 2);
+    }
+
+    /// A load above Max + 9 e never shows a mass, and a front end clipping short of the
+    /// ADC's rail (here at 665.2 g, 40 codes below it on the reference cell) does not turn
+    /// 700 g or 900 g into a stable 665.2 g; Max itself still reads, and the scale reads
+    /// again once the load is taken off.
+    #[test]
+    fn above_max_plus_nine_e_is_overload_even_when_the_front_end_clips() {
+        let e = ScaleConfig::SCALE_INTERVAL_G;
+        let clip_counts = (ZERO + 665.2 * super::super::test_scene::CPG) as i32;
+        let clipped = |sample: RawSample| match sample {
+            RawSample::Counts(counts) => RawSample::Counts(counts.min(clip_counts)),
+            other => other,
+        };
+        for load_g in [
+            ScaleConfig::CAPACITY_G as f64 + 10.0 * e as f64,
+            660.0,
+            700.0,
+            900.0,
+        ] {
+            let (mut scale, mut cell) = scene(0.4);
+            cell.load_g = load_g;
+            // A fresh estimate may still be on its way up (Estimating, below the limit);
+            // none above the limit is ever shown, none is ever stable, and the settled
+            // answer is an overload.
+            let mut last = scale.reading();
+            for k in 0..12_000 {
+                last = scale.push(clipped(cell.sample()));
+                let limit = ScaleConfig::CAPACITY_G + 9.0 * e;
+                assert!(
+                    last.mass_g.is_none_or(|m| m <= limit),
+                    "{load_g} g at {k}: {last:?}"
+                );
+                assert_ne!(last.state, ScaleState::Stable, "{load_g} g at {k}");
+            }
+            assert_eq!(
+                last.state,
+                ScaleState::Invalid(ScaleFault::Overload),
+                "{load_g} g"
+            );
+            cell.load_g = 100.0;
+            let last = *run(&mut scale, &mut cell, 12_000).last().unwrap();
+            assert_eq!(
+                last.state,
+                ScaleState::Stable,
+                "{load_g} g, then 100 g: {last:?}"
+            );
+            assert!((last.mass_g.unwrap() - 100.0).abs() < 0.1, "{last:?}");
+        }
+        let (mut scale, mut cell) = scene(0.4);
+        cell.load_g = ScaleConfig::CAPACITY_G as f64;
+        let last = *run(&mut scale, &mut cell, 12_000).last().unwrap();
+        assert_eq!(last.state, ScaleState::Stable, "Max: {last:?}");
     }
 
     /// A run longer than 2³² samples (12.4 days at 4 kHz) still has a working residual

@@ -44,6 +44,10 @@ pub enum ScaleFault {
     Estimator(InvalidReason),
     /// The calibration in use is not a valid record (non-finite or zero gain).
     Uncalibrated,
+    /// The gross mass is above Max + 9 e (OIML R 76 4.4.3): beyond what the scale may
+    /// show. A front end that clips a few codes short of the ADC's rail reads every
+    /// heavier load as the clip level; this is what keeps that level off the display.
+    Overload,
 }
 
 /// What the pan holds, as the display says it.
