@@ -54,6 +54,8 @@ mod change;
 mod config;
 mod decide;
 mod estimator;
+#[cfg(test)]
+mod fuzz;
 mod noise;
 mod reading;
 #[cfg(test)]
