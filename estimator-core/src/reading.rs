@@ -127,6 +127,9 @@ pub enum ConfigError {
     /// A weighing configuration outside the valid region the stability map measured
     /// (`tuning::WeighingConfig::check_region` says why).
     OutsideValidRegion,
+    /// A field of the weighing decisions' configuration (`ScaleConfig`, named here) is NaN,
+    /// infinite where it must be finite, negative, or zero where it must be positive.
+    ScaleField(&'static str),
 }
 
 impl core::fmt::Display for ConfigError {
@@ -148,6 +151,12 @@ impl core::fmt::Display for ConfigError {
             }
             ConfigError::OutsideValidRegion => {
                 f.write_str("configuration outside the valid region of the stability map")
+            }
+            ConfigError::ScaleField(field) => {
+                write!(
+                    f,
+                    "scale configuration field `{field}` is out of its domain"
+                )
             }
         }
     }

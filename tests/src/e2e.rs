@@ -744,6 +744,7 @@ mod host_replay_tests {
                 StepScale::<8>::step_estimator(order, decimation, 1.0).unwrap(),
                 calibration,
             )
+            .unwrap()
         }
     }
 

@@ -69,7 +69,10 @@ pub struct Baseline<T: Real, const K: usize> {
     /// stability map found the `f32` settled average measurably worse than `f64`).
     settled_sum: T,
     settled_origin: T,
-    settled_count: u32,
+    /// Samples in the settled average since it became stable: `u64`, so it never wraps
+    /// (a `u32` wrapped after 12.4 days at 4 kHz and divided by zero); past
+    /// [`SETTLED_WINDOW`] the average forgets with that window instead of growing.
+    settled_count: u64,
     /// The noise variance of one block mean (estimate's unit²) and the largest ratio of the
     /// block means' sample variance to it that is consistent with a constant load.
     noise: Option<(T, T)>,
@@ -163,12 +166,33 @@ impl<T: Real, const K: usize> Baseline<T, K> {
         (max - min, sum / T::from_u32(K as u32))
     }
 
+    /// The number of samples the settled sum stands for: the count, up to the window.
+    fn settled_weight(&self) -> T {
+        let weight = u32::try_from(self.settled_count.min(u64::from(SETTLED_WINDOW)));
+        T::from_u32(weight.unwrap_or(SETTLED_WINDOW))
+    }
+
+    /// Count `samples` more settled samples equal to the current average without pushing
+    /// them (tests of runs longer than a test can feed).
+    #[cfg(test)]
+    pub(crate) fn skip_settled_samples_for_test(&mut self, samples: u64) {
+        let mean = self.settled_sum / self.settled_weight();
+        self.settled_count = self.settled_count.saturating_add(samples);
+        self.settled_sum = mean * self.settled_weight();
+    }
+
     /// One sample `x` in the estimate's unit.
     fn update(&mut self, x: T) {
         if self.settled_count > 0 && self.config.mode == BaselineMode::SettledAverage {
-            self.settled_sum += x - self.settled_origin;
-            self.settled_count += 1;
-            let average = self.settled_origin + self.settled_sum / T::from_u32(self.settled_count);
+            let deviation = x - self.settled_origin;
+            self.settled_count = self.settled_count.saturating_add(1);
+            if self.settled_count <= u64::from(SETTLED_WINDOW) {
+                self.settled_sum += deviation;
+            } else {
+                // Exponential forgetting over the window: the sum stays `window · mean`.
+                self.settled_sum += deviation - self.settled_sum / T::from_u32(SETTLED_WINDOW);
+            }
+            let average = self.settled_origin + self.settled_sum / self.settled_weight();
             self.intake.estimating(average, None);
             return;
         }
@@ -195,7 +219,7 @@ impl<T: Real, const K: usize> Baseline<T, K> {
             self.intake.estimating(mean, None);
             if self.config.mode == BaselineMode::SettledAverage {
                 // Everything in the stable window counts towards the average.
-                let count = K as u32 * self.config.block as u32;
+                let count = K as u64 * u64::from(self.config.block);
                 self.settled_origin = mean;
                 self.settled_sum = T::ZERO;
                 self.settled_count = count;
@@ -205,6 +229,10 @@ impl<T: Real, const K: usize> Baseline<T, K> {
         }
     }
 }
+
+/// The settled average's window: 2²² raw samples (17.5 minutes at 4 kHz), far longer than
+/// any weighing, short enough that an `f32` sum of deviations keeps its precision.
+const SETTLED_WINDOW: u32 = 1 << 22;
 
 estimator_via_intake!(Baseline<T, const K>);
 
@@ -245,6 +273,37 @@ mod tests {
             assert!((2000..4400).contains(&k), "{mode:?}: first stable at {k}");
             assert!((estimate - 100.0).abs() < 0.1, "{mode:?}: {estimate}");
         }
+    }
+
+    /// A settled average past 2³² samples (12.4 days at 4 kHz) still reads the load: its
+    /// count must not wrap (a `u32` count wrapped to zero and read `NaN`).
+    #[test]
+    fn the_settled_average_survives_two_to_the_32_samples() {
+        let config = BaselineConfig {
+            mode: BaselineMode::SettledAverage,
+            gain: 1.0,
+            block: 4,
+            stable_band: 1.0,
+            noise_reference: None,
+        };
+        let mut baseline = Baseline::<f32, 4>::new(config).unwrap();
+        for k in 0..100 {
+            baseline.push(50.0 + if k % 2 == 0 { 0.1 } else { -0.1 });
+        }
+        assert!(baseline.push(50.0).estimate.is_some());
+        baseline.skip_settled_samples_for_test((1 << 32) - 10);
+        for k in 0..100 {
+            let reading = baseline.push(50.0);
+            let estimate = reading.estimate.unwrap_or(f32::NAN);
+            assert!((estimate - 50.0).abs() < 0.01, "{k}: {reading:?}");
+        }
+        // Past the window the average still follows the data (forgetting, not frozen): half a
+        // window of a 1 unit step moves it by 1 − e^(−1/2) = 0.3935.
+        for _ in 0..(SETTLED_WINDOW / 2) {
+            baseline.push(51.0);
+        }
+        let estimate = baseline.push(51.0).estimate.unwrap();
+        assert!((estimate - 50.3935).abs() < 0.01, "{estimate}");
     }
 
     #[test]

@@ -29,11 +29,11 @@ impl<const N: usize> Scale<StepEstimator<f32, N>> {
         sample_rate_hz: f32,
         calibration: CountsScale,
     ) -> Result<Self, ConfigError> {
-        Ok(Self::new(
+        Self::new(
             ScaleConfig::weighing_default(sample_rate_hz),
             Self::step_estimator(7, 16, 1.0)?,
             calibration,
-        ))
+        )
     }
 }
 
@@ -46,11 +46,11 @@ impl<const N: usize, const S: usize, const K: usize> Scale<WeighingEstimator<f32
         weighing: &WeighingConfig,
         calibration: CountsScale,
     ) -> Result<Self, ConfigError> {
-        Ok(Self::new(
+        Self::new(
             decisions_for(weighing)?,
             WeighingEstimator::in_counts(weighing)?,
             calibration,
-        ))
+        )
     }
 }
 
@@ -69,7 +69,7 @@ impl<'a, const N: usize, const S: usize, const K: usize>
     ) -> Result<Self, ConfigError> {
         let config = decisions_for(weighing)?;
         let estimator = storage.write(WeighingEstimator::in_counts(weighing)?);
-        Ok(Self::new(config, estimator, calibration))
+        Self::new(config, estimator, calibration)
     }
 }
 

@@ -8,6 +8,7 @@
 //! lowered below what a settled run without a change reaches, or the scale announces load
 //! changes that did not happen.
 
+use crate::reading::ConfigError;
 use crate::weighing::method::WeighingMethod;
 
 /// Tuning of the weighing decisions. All masses in grams, all durations in raw samples.
@@ -41,11 +42,21 @@ pub struct ScaleConfig {
     /// valid one in the same run before the scale takes it as a load change and restarts
     /// it.
     pub flag_restart_samples: u32,
+    /// Capacity Max of the scale (OIML R 76).
+    pub capacity_g: f32,
+    /// Scale interval e (verification scale interval, OIML R 76): the displayed resolution
+    /// and the unit of the maximum permissible errors.
+    pub scale_interval_g: f32,
     /// Zero tracking runs only while empty, stable, and within ±this of zero.
     pub zero_tracking_band_g: f32,
-    /// The largest rate the zero may move at while tracking (OIML R76 style: slow, so a
-    /// slowly added load is not tracked away).
+    /// The largest rate the zero may move at while tracking (OIML R 76: at most 0.5 e per
+    /// second).
     pub zero_tracking_rate_g_per_s: f32,
+    /// Zero tracking never moves the zero further than ±this from the power-up zero (the
+    /// calibrated zero the scale started or was recalibrated with). OIML R 76 allows up to
+    /// 4 % of Max for zero setting and tracking together; see
+    /// [`Self::weighing_default`] for why the default is far tighter.
+    pub zero_tracking_range_g: f32,
     /// Check every run after the first metered empty period against the noise metered on
     /// the empty pan (`crate::estimators::consistency`; see the `Scale` module docs, "The consistency check").
     pub consistency_check: bool,
@@ -58,6 +69,16 @@ pub struct ScaleConfig {
 }
 
 impl ScaleConfig {
+    /// Capacity Max of the reference cell.
+    pub const CAPACITY_G: f32 = 600.0;
+
+    /// Scale interval e of the reference cell: 0.1 g, so n = Max/e = 6000 ≤ 10 000, an OIML
+    /// R 76 class III instrument with MPE 0.5 e = 0.05 g up to 500 e (50 g), 1 e up to
+    /// 2000 e (200 g), 1.5 e above. Finer is not honest: the step estimator's target
+    /// standard deviation on this cell is 0.069 g (`firmware/weighing.toml`), and a reading
+    /// must be good to a fraction of e; 0.1 g is the 1-2-5 interval just above it.
+    pub const SCALE_INTERVAL_G: f32 = 0.1;
+
     /// The method the defaults' residual thresholds were measured with, and the firmware's
     /// choice before calibration wrote one: the step estimator, n = 7, D = 16, λ = 1
     /// (`tests::e2e` study, see `firmware/README.md`): block-averaging cuts the
@@ -86,7 +107,17 @@ impl ScaleConfig {
     /// - residual CUSUM: ν = 1 g, h = 10 g·updates, from the residuals measured on
     ///   host-sim's reference demo at n = 7, D = 16: neither a settled empty fit nor a
     ///   fresh loaded fit accumulates, and a drop alarms within a few updates. Smaller ν
-    ///   and h alarm sooner but falsely on some noise seeds.
+    ///   and h alarm sooner but falsely on some noise seeds;
+    /// - zero tracking (OIML R 76 4.5.7 sets the outer limits: only at zero and stable, at
+    ///   most 0.5 e/s, zero setting and tracking together within 4 % of Max): within
+    ///   ±0.5 e of zero, at 0.1 e/s, and at most ±0.5 e from the power-up zero in total. A
+    ///   tracker cannot tell a drifting zero from a load trickling on slower than it tracks
+    ///   (sand, a leaking cup): whatever rate it allows, some trickle stays inside its band
+    ///   and is tracked away in full, up to the tracker's total range. Only that range
+    ///   bounds the error, so it is the MPE at small loads (0.5 e), not 4 % of Max (24 g).
+    ///   A zero drifting further is the cell's, and shows as such (the empty band is 0.25 g);
+    ///   nothing is tracked until the pan has been settled for `raw_arm_samples` after a
+    ///   start (the first readings of a noisy pan moved the zero for the whole run).
     pub fn weighing_default(sample_rate_hz: f32) -> Self {
         Self {
             sample_rate_hz,
@@ -101,11 +132,68 @@ impl ScaleConfig {
             raw_threshold_g: 25.0,
             raw_arm_samples: (1.5 * sample_rate_hz) as u32,
             flag_restart_samples: (0.025 * sample_rate_hz) as u32,
-            zero_tracking_band_g: 0.25,
-            zero_tracking_rate_g_per_s: 0.25,
+            capacity_g: Self::CAPACITY_G,
+            scale_interval_g: Self::SCALE_INTERVAL_G,
+            zero_tracking_band_g: 0.5 * Self::SCALE_INTERVAL_G,
+            zero_tracking_rate_g_per_s: 0.1 * Self::SCALE_INTERVAL_G,
+            zero_tracking_range_g: 0.5 * Self::SCALE_INTERVAL_G,
             consistency_check: true,
             noise_window_samples: (0.3 * sample_rate_hz) as u32,
             noise_guard_samples: (0.05 * sample_rate_hz) as u32,
+        }
+    }
+
+    /// Check every field: `Err(ConfigError::ScaleField(name))` names the first one out of
+    /// its domain. Rates, bands, drifts and zero tracking must be finite and not negative
+    /// (the sample rate positive); the CUSUM thresholds positive and not NaN (`+∞` switches
+    /// a test off); the noise window at least one sample. [`super::Scale::new`] refuses an
+    /// invalid configuration with this error instead of panicking on it later.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let finite_non_negative = |value: f32| value.is_finite() && value >= 0.0;
+        let threshold = |value: f32| value > 0.0; // false for NaN; +∞ allowed
+        let checks = [
+            (
+                "sample_rate_hz",
+                self.sample_rate_hz.is_finite() && self.sample_rate_hz > 0.0,
+            ),
+            (
+                "capacity_g",
+                self.capacity_g.is_finite() && self.capacity_g > 0.0,
+            ),
+            (
+                "scale_interval_g",
+                self.scale_interval_g.is_finite() && self.scale_interval_g > 0.0,
+            ),
+            ("empty_band_g", finite_non_negative(self.empty_band_g)),
+            ("stable_band_g", finite_non_negative(self.stable_band_g)),
+            (
+                "stable_band_relative",
+                finite_non_negative(self.stable_band_relative),
+            ),
+            (
+                "residual_drift_g",
+                finite_non_negative(self.residual_drift_g),
+            ),
+            ("residual_threshold_g", threshold(self.residual_threshold_g)),
+            ("raw_drift_g", finite_non_negative(self.raw_drift_g)),
+            ("raw_threshold_g", threshold(self.raw_threshold_g)),
+            (
+                "zero_tracking_band_g",
+                finite_non_negative(self.zero_tracking_band_g),
+            ),
+            (
+                "zero_tracking_rate_g_per_s",
+                finite_non_negative(self.zero_tracking_rate_g_per_s),
+            ),
+            (
+                "zero_tracking_range_g",
+                finite_non_negative(self.zero_tracking_range_g),
+            ),
+            ("noise_window_samples", self.noise_window_samples > 0),
+        ];
+        match checks.iter().find(|(_, ok)| !ok) {
+            Some((field, _)) => Err(ConfigError::ScaleField(field)),
+            None => Ok(()),
         }
     }
 
@@ -132,5 +220,60 @@ impl ScaleConfig {
                 ..defaults
             },
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_scene::{calibration, FS};
+    use super::super::StepScale;
+    use super::*;
+
+    /// Every bad value of every checked field is refused by `Scale::new` as a typed error
+    /// naming the field, never a panic (a NaN or negative zero-tracking rate panicked in
+    /// `f32::clamp` on the first empty reading).
+    #[test]
+    fn a_bad_field_is_refused_by_name_not_a_panic() {
+        let good = ScaleConfig::weighing_default(FS);
+        assert_eq!(good.validate(), Ok(()));
+        type Set = fn(&mut ScaleConfig, f32);
+        let fields: [(&str, Set); 13] = [
+            ("sample_rate_hz", |c, v| c.sample_rate_hz = v),
+            ("capacity_g", |c, v| c.capacity_g = v),
+            ("scale_interval_g", |c, v| c.scale_interval_g = v),
+            ("zero_tracking_range_g", |c, v| c.zero_tracking_range_g = v),
+            ("empty_band_g", |c, v| c.empty_band_g = v),
+            ("stable_band_g", |c, v| c.stable_band_g = v),
+            ("stable_band_relative", |c, v| c.stable_band_relative = v),
+            ("residual_drift_g", |c, v| c.residual_drift_g = v),
+            ("residual_threshold_g", |c, v| c.residual_threshold_g = v),
+            ("raw_drift_g", |c, v| c.raw_drift_g = v),
+            ("raw_threshold_g", |c, v| c.raw_threshold_g = v),
+            ("zero_tracking_band_g", |c, v| c.zero_tracking_band_g = v),
+            ("zero_tracking_rate_g_per_s", |c, v| {
+                c.zero_tracking_rate_g_per_s = v
+            }),
+        ];
+        for (name, set) in fields {
+            for bad in [f32::NAN, -1.0, f32::NEG_INFINITY] {
+                let mut config = good;
+                set(&mut config, bad);
+                let estimator = StepScale::<8>::step_estimator(7, 16, 1.0).unwrap();
+                let built = super::super::Scale::new(config, estimator, calibration());
+                assert_eq!(
+                    built.err(),
+                    Some(ConfigError::ScaleField(name)),
+                    "{name} = {bad}"
+                );
+            }
+        }
+        let config = ScaleConfig {
+            noise_window_samples: 0,
+            ..good
+        };
+        assert_eq!(
+            config.validate(),
+            Err(ConfigError::ScaleField("noise_window_samples"))
+        );
     }
 }

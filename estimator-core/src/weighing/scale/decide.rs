@@ -42,6 +42,9 @@ impl<E: ScaleEstimator> Scale<E> {
         // The tracked zero may have moved since the run started.
         let zero_shift_g = (self.zero_counts - self.run_zero_counts as f32) * self.grams_per_count;
         let estimate_g = estimate_counts * self.grams_per_count - zero_shift_g;
+        if estimate_g > self.overload_limit_g() {
+            return self.overloaded();
+        }
         if self.show(estimate_g) {
             self.meter_empty_pan(centred_counts);
             self.track_zero(estimate_g);
@@ -74,7 +77,7 @@ impl<E: ScaleEstimator> Scale<E> {
         if self.restart_pending {
             self.restart_as_load_change();
         }
-        self.samples_since_change = self.samples_since_change.saturating_add(1);
+        self.samples_since_change += 1;
     }
 
     /// The estimator flagged its reading: show why. A latched fault needs a restart;
@@ -120,7 +123,9 @@ impl<E: ScaleEstimator> Scale<E> {
         } else {
             ScaleState::Estimating
         };
-        if stable || (empty && self.samples_since_change > self.config.stable_hold_samples) {
+        if stable
+            || (empty && self.samples_since_change > u64::from(self.config.stable_hold_samples))
+        {
             self.settled_samples = self.settled_samples.saturating_add(1);
         } else {
             self.settled_samples = 0;
@@ -128,11 +133,27 @@ impl<E: ScaleEstimator> Scale<E> {
         empty && stable
     }
 
+    /// The largest gross mass the scale shows: Max + 9 e (OIML R 76 4.4.3).
+    fn overload_limit_g(&self) -> f32 {
+        self.config.capacity_g + 9.0 * self.config.scale_interval_g
+    }
+
+    /// The estimate is above [`Self::overload_limit_g`]: no mass, and the run's stability
+    /// and settling start over (the raw test is off without a shown mass; the residual
+    /// test still sees the load leave).
+    fn overloaded(&mut self) -> ScaleReading {
+        self.stable_samples = 0;
+        self.settled_samples = 0;
+        self.state = ScaleState::Invalid(ScaleFault::Overload);
+        self.gross_g = None;
+        self.reading()
+    }
+
     /// Show `fault`: no mass.
     fn set_fault(&mut self, fault: ScaleFault) -> ScaleReading {
         self.state = ScaleState::Invalid(fault);
         self.gross_g = None;
-        self.samples_since_change = self.samples_since_change.saturating_add(1);
+        self.samples_since_change += 1;
         self.reading()
     }
 }
@@ -186,6 +207,86 @@ mod tests {
         assert_eq!(last.load_changes, 2);
     }
 
+    /// A load above Max + 9 e never shows a mass, and a front end clipping short of the
+    /// ADC's rail (here at 665.2 g, 40 codes below it on the reference cell) does not turn
+    /// 700 g or 900 g into a stable 665.2 g; Max itself still reads, and the scale reads
+    /// again once the load is taken off.
+    #[test]
+    fn above_max_plus_nine_e_is_overload_even_when_the_front_end_clips() {
+        let e = ScaleConfig::SCALE_INTERVAL_G;
+        let clip_counts = (ZERO + 665.2 * super::super::test_scene::CPG) as i32;
+        let clipped = |sample: RawSample| match sample {
+            RawSample::Counts(counts) => RawSample::Counts(counts.min(clip_counts)),
+            other => other,
+        };
+        for load_g in [
+            ScaleConfig::CAPACITY_G as f64 + 10.0 * e as f64,
+            660.0,
+            700.0,
+            900.0,
+        ] {
+            let (mut scale, mut cell) = scene(0.4);
+            cell.load_g = load_g;
+            // A fresh estimate may still be on its way up (Estimating, below the limit);
+            // none above the limit is ever shown, none is ever stable, and the settled
+            // answer is an overload.
+            let mut last = scale.reading();
+            for k in 0..12_000 {
+                last = scale.push(clipped(cell.sample()));
+                let limit = ScaleConfig::CAPACITY_G + 9.0 * e;
+                assert!(
+                    last.mass_g.is_none_or(|m| m <= limit),
+                    "{load_g} g at {k}: {last:?}"
+                );
+                assert_ne!(last.state, ScaleState::Stable, "{load_g} g at {k}");
+            }
+            assert_eq!(
+                last.state,
+                ScaleState::Invalid(ScaleFault::Overload),
+                "{load_g} g"
+            );
+            cell.load_g = 100.0;
+            let last = *run(&mut scale, &mut cell, 12_000).last().unwrap();
+            assert_eq!(
+                last.state,
+                ScaleState::Stable,
+                "{load_g} g, then 100 g: {last:?}"
+            );
+            assert!((last.mass_g.unwrap() - 100.0).abs() < 0.1, "{last:?}");
+        }
+        let (mut scale, mut cell) = scene(0.4);
+        cell.load_g = ScaleConfig::CAPACITY_G as f64;
+        let last = *run(&mut scale, &mut cell, 12_000).last().unwrap();
+        assert_eq!(last.state, ScaleState::Stable, "Max: {last:?}");
+    }
+
+    /// A run longer than 2³² samples (12.4 days at 4 kHz) still has a working residual
+    /// test: the run's sample count must neither wrap nor saturate (a saturated count never
+    /// again falls on an update, and the test stopped silently). The raw test is switched
+    /// off so that only the residual test can see the change.
+    #[test]
+    fn the_residual_test_still_alarms_after_two_to_the_32_samples() {
+        let config = ScaleConfig {
+            raw_threshold_g: f32::INFINITY,
+            ..ScaleConfig::weighing_default(FS)
+        };
+        let estimator = StepScale::<8>::step_estimator(7, 16, 1.0).unwrap();
+        let mut scale = Scale::new(config, estimator, calibration()).unwrap();
+        let mut cell = Cell::new(0.4);
+        cell.load_g = 100.0;
+        run(&mut scale, &mut cell, 8000);
+        assert_eq!(scale.reading().state, ScaleState::Stable);
+        scale.skip_samples_for_test(1 << 32);
+        run(&mut scale, &mut cell, 4000);
+        assert_eq!(scale.reading().load_changes, 0, "{:?}", scale.reading());
+        assert_eq!(scale.reading().samples_since_change, u32::MAX);
+        cell.load_g = 150.0;
+        let readings = run(&mut scale, &mut cell, 8000);
+        let last = readings.last().unwrap();
+        assert_eq!(last.load_changes, 1, "the change went unseen: {last:?}");
+        assert!((last.mass_g.unwrap() - 150.0).abs() < 0.2, "{last:?}");
+    }
+
     /// The step estimator, its readings flagged `IllConditioned` (not latched) from the
     /// `from`-th to before the `to`-th sample of each run, as IV can be on a fresh drop.
     struct FlaggedWindow {
@@ -233,7 +334,7 @@ mod tests {
             from,
             to,
         };
-        Scale::new(ScaleConfig::weighing_default(FS), estimator, calibration())
+        Scale::new(ScaleConfig::weighing_default(FS), estimator, calibration()).unwrap()
     }
 
     #[test]

@@ -54,6 +54,8 @@ mod change;
 mod config;
 mod decide;
 mod estimator;
+#[cfg(test)]
+mod fuzz;
 mod noise;
 mod reading;
 #[cfg(test)]
@@ -65,6 +67,7 @@ pub use estimator::ScaleEstimator;
 pub use reading::{CountsScale, RawSample, ScaleFault, ScaleReading, ScaleState, TareError};
 
 use crate::estimators::step::StepEstimator;
+use crate::reading::ConfigError;
 use change::TwoSidedCusum;
 use noise::NoiseMetering;
 use zero::round_to_i32;
@@ -80,12 +83,21 @@ pub struct Scale<E> {
     grams_per_count: f32,
     /// The tracked zero, in counts.
     zero_counts: f32,
+    /// The zero the scale started (or was recalibrated) with: zero tracking stays within
+    /// `zero_tracking_range_g` of it.
+    power_up_zero_counts: f32,
+    /// How far zero tracking has moved the zero from the power-up zero: kept on its own,
+    /// small, so that tracking steps of 10⁻⁴ counts are not lost in rounding a zero of
+    /// tens of thousands of counts (`f32` spacing there is 0.002 counts).
+    zero_tracked_counts: f32,
     /// The zero the current estimator run subtracts (integer, so the subtraction is exact).
     run_zero_counts: i32,
     tare_g: f32,
     residual_cusum: TwoSidedCusum,
     raw_cusum: TwoSidedCusum,
-    samples_since_change: u32,
+    /// Raw samples of this run: `u64`, so it never wraps or saturates (2⁶⁴ samples at 4 kHz
+    /// are 146 million years); the residual test's update phase depends on it.
+    samples_since_change: u64,
     load_changes: u32,
     /// Where the stability band is centred, and how long the estimate stayed in it.
     stable_centre_g: f32,
@@ -114,8 +126,14 @@ pub type StepScale<const N: usize> = Scale<StepEstimator<f32, N>>;
 impl<E: ScaleEstimator> Scale<E> {
     /// A scale running `estimator` (built in counts, see [`ScaleEstimator`]) with the
     /// decisions of `config`, converting counts with `calibration`. An impossible
-    /// calibration (zero or non-finite gain) shows `Invalid(Uncalibrated)`.
-    pub fn new(config: ScaleConfig, estimator: E, calibration: CountsScale) -> Self {
+    /// calibration (zero or non-finite gain) shows `Invalid(Uncalibrated)`. A `config`
+    /// out of its domain is refused ([`ScaleConfig::validate`] names the field).
+    pub fn new(
+        config: ScaleConfig,
+        estimator: E,
+        calibration: CountsScale,
+    ) -> Result<Self, ConfigError> {
+        config.validate()?;
         let samples_per_update = estimator.samples_per_update().max(1);
         let mut scale = Self {
             config,
@@ -124,6 +142,8 @@ impl<E: ScaleEstimator> Scale<E> {
             counts_per_gram: 1.0,
             grams_per_count: 1.0,
             zero_counts: 0.0,
+            power_up_zero_counts: 0.0,
+            zero_tracked_counts: 0.0,
             run_zero_counts: 0,
             tare_g: 0.0,
             residual_cusum: TwoSidedCusum::default(),
@@ -143,7 +163,7 @@ impl<E: ScaleEstimator> Scale<E> {
             noise_metered: false,
         };
         scale.start_with(calibration);
-        scale
+        Ok(scale)
     }
 
     /// Everything but the configuration, the estimator and the load-change count as a
@@ -162,6 +182,8 @@ impl<E: ScaleEstimator> Scale<E> {
         } else {
             0.0
         };
+        self.power_up_zero_counts = self.zero_counts;
+        self.zero_tracked_counts = 0.0;
         self.tare_g = 0.0;
         self.stable_centre_g = 0.0;
         self.restart();
@@ -193,7 +215,7 @@ impl<E: ScaleEstimator> Scale<E> {
                 _ => self.gross_g.map(|gross| gross - self.tare_g),
             },
             state: self.state,
-            samples_since_change: self.samples_since_change,
+            samples_since_change: u32::try_from(self.samples_since_change).unwrap_or(u32::MAX),
             load_changes: self.load_changes,
         }
     }
@@ -248,6 +270,14 @@ impl<E: ScaleEstimator> Scale<E> {
     }
 
     /// A new run that counts as a load change.
+    /// Count `samples` more raw samples in this run without pushing them (tests of runs
+    /// longer than a test can feed: 2³² samples are 12.4 days at 4 kHz). Keep `samples` a
+    /// multiple of the estimator's update so the residual test's phase stays aligned.
+    #[cfg(test)]
+    pub(crate) fn skip_samples_for_test(&mut self, samples: u64) {
+        self.samples_since_change += samples;
+    }
+
     fn restart_as_load_change(&mut self) {
         self.restart();
         self.load_changes = self.load_changes.saturating_add(1);

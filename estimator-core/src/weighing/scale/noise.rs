@@ -267,7 +267,7 @@ mod tests {
         // then), so the window completes with the onset in its last block.
         let scene = |config: ScaleConfig| {
             let estimator = StepScale::<8>::step_estimator(7, 16, 1.0).unwrap();
-            let mut scale = Scale::new(config, estimator, calibration());
+            let mut scale = Scale::new(config, estimator, calibration()).unwrap();
             let mut cell = Cell::new(0.4);
             run(&mut scale, &mut cell, completes - 4);
             cell.load_g = 138.32;
@@ -303,7 +303,7 @@ mod tests {
             ..config
         };
         let estimator = StepScale::<8>::step_estimator(7, 16, 1.0).unwrap();
-        let mut scale = Scale::new(config, estimator, calibration());
+        let mut scale = Scale::new(config, estimator, calibration()).unwrap();
         let mut cell = Cell::new(0.4);
         run(&mut scale, &mut cell, empty);
         cell.load_g = 138.32;

@@ -44,6 +44,10 @@ pub enum ScaleFault {
     Estimator(InvalidReason),
     /// The calibration in use is not a valid record (non-finite or zero gain).
     Uncalibrated,
+    /// The gross mass is above Max + 9 e (OIML R 76 4.4.3): beyond what the scale may
+    /// show. A front end that clips a few codes short of the ADC's rail reads every
+    /// heavier load as the clip level; this is what keeps that level off the display.
+    Overload,
 }
 
 /// What the pan holds, as the display says it.
@@ -68,7 +72,9 @@ pub struct ScaleReading {
     pub mass_g: Option<f32>,
     /// What the pan holds.
     pub state: ScaleState,
-    /// Raw samples since the last detected load change (or restart).
+    /// Raw samples since the last detected load change (or restart), shown saturating at
+    /// `u32::MAX` (12.4 days at 4 kHz, past every threshold that reads it); the scale's own
+    /// count is `u64` and never saturates.
     pub samples_since_change: u32,
     /// Load changes detected since boot (saturating).
     pub load_changes: u32,

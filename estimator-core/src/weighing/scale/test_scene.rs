@@ -54,6 +54,14 @@ impl Cell {
         }
     }
 
+    /// A cell with noise from its own `seed` (a different realisation per seed).
+    pub(crate) fn seeded(noise_g: f64, seed: u64) -> Self {
+        Self {
+            noise_state: 0x9E37_79B9_7F4A_7C15 ^ seed.wrapping_mul(0xD1B5_4A32_D192_ED03),
+            ..Self::new(noise_g)
+        }
+    }
+
     fn noise(&mut self) -> f64 {
         // Sum of 4 uniforms: near-Gaussian, unit variance.
         let mut sum = 0.0;
