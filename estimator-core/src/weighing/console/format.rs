@@ -41,6 +41,7 @@ pub fn fault_name(fault: ScaleFault) -> &'static str {
         ScaleFault::Saturated => "saturated",
         ScaleFault::SampleLost => "sample_lost",
         ScaleFault::Uncalibrated => "uncalibrated",
+        ScaleFault::Overload => "overload",
         ScaleFault::Estimator(reason) => reason.name(),
     }
 }
