@@ -572,17 +572,47 @@ pub fn configured_estimator(
     precision: Precision,
     zero_counts: f64,
 ) -> Result<BoxedEstimator> {
+    checked_configured_estimator(config, precision, zero_counts, None)
+}
+
+/// [`configured_estimator`] checking its fit against the noise variance `noise` (raw units²
+/// at the method's D, known exactly): a fit whose residuals exceed what that noise explains
+/// is flagged `invalid_model_mismatch` (the consistency check; a bank of three or more
+/// candidates does not flag). `None`: no check.
+pub fn checked_configured_estimator(
+    config: &WeighingConfig,
+    precision: Precision,
+    zero_counts: f64,
+    noise: Option<f64>,
+) -> Result<BoxedEstimator> {
+    use estimator_core::{Estimator, NoiseReference};
     let named =
         |e: estimator_core::ConfigError| anyhow!("configured method {}: {e}", config.method);
     Ok(match precision {
-        Precision::F64 => Box::new(
-            WeighingEstimator::<f64, CAPACITY, STATES, BANK_CANDIDATES>::new(config, zero_counts)
-                .map_err(named)?,
-        ),
-        Precision::F32 => Box::new(InF32(Box::new(
-            WeighingEstimator::<f32, CAPACITY, STATES, BANK_CANDIDATES>::new(config, zero_counts)
-                .map_err(named)?,
-        ))),
+        Precision::F64 => {
+            let mut estimator = WeighingEstimator::<f64, CAPACITY, STATES, BANK_CANDIDATES>::new(
+                config,
+                zero_counts,
+            )
+            .map_err(named)?;
+            estimator
+                .set_noise_reference(noise.map(|variance| NoiseReference::new(variance, 0)))
+                .map_err(named)?;
+            estimator.reset();
+            Box::new(estimator)
+        }
+        Precision::F32 => {
+            let mut estimator = WeighingEstimator::<f32, CAPACITY, STATES, BANK_CANDIDATES>::new(
+                config,
+                zero_counts,
+            )
+            .map_err(named)?;
+            estimator
+                .set_noise_reference(noise.map(|variance| NoiseReference::new(variance as f32, 0)))
+                .map_err(named)?;
+            estimator.reset();
+            Box::new(InF32(Box::new(estimator)))
+        }
     })
 }
 

@@ -166,8 +166,10 @@ struct SimulateArgs {
 struct EstimateArgs {
     #[arg(long)]
     input: PathBuf,
-    /// A weighing configuration written by `calibrate`: runs exactly the configured
-    /// method as the firmware builds it, with its gain and zero (--zero overrides the zero).
+    /// A weighing configuration written by `calibrate`: runs the configured method's bare
+    /// estimator as the firmware builds it, with its gain and zero (--zero overrides the
+    /// zero), its fit checked against the configuration's noise. It assumes the load landed
+    /// at the first row: `replay` runs the whole scale (onset detection, load changes).
     #[arg(long, conflicts_with_all = ["method", "order", "forgetting", "decimation", "precision", "gain"])]
     config: Option<PathBuf>,
     /// The estimator: step, covariance, model, settled, moving, ramp, iv or bc with its
@@ -206,6 +208,11 @@ struct EstimateArgs {
     /// `--tare-variance`.
     #[arg(long, requires = "tare_variance", conflicts_with = "config")]
     check_residuals: bool,
+    /// With --config: do not check the fit against the configuration's measured noise
+    /// (checked by default, so a record the method does not fit, e.g. an empty pan before
+    /// the drop, is flagged `invalid_model_mismatch` instead of read far off).
+    #[arg(long, requires = "config")]
+    no_check_residuals: bool,
 }
 
 #[derive(Args)]
@@ -629,16 +636,29 @@ fn bench(args: BenchArgs) -> Result<()> {
 /// `estimate`: a configuration written by `calibrate`, or a method given on the command line.
 fn estimate(args: EstimateArgs) -> Result<()> {
     match args.config.clone() {
-        Some(config) => estimate_configured(args.input, config, args.zero),
+        Some(config) => {
+            estimate_configured(args.input, config, args.zero, !args.no_check_residuals)
+        }
         None => estimate_method(args),
     }
 }
 
 /// `estimate --config`: exactly the configured method, as the firmware builds it.
-fn estimate_configured(input: PathBuf, config: PathBuf, zero: Option<f64>) -> Result<()> {
+fn estimate_configured(
+    input: PathBuf,
+    config: PathBuf,
+    zero: Option<f64>,
+    check_residuals: bool,
+) -> Result<()> {
     let (config, precision) = calibrate::load_config(&config)?;
     let zero = zero.unwrap_or(config.zero_counts);
-    let estimator = calibrate::configured_estimator(&config, precision, zero)?;
+    // The config's measured noise checks the fit unless asked not to (or there is none).
+    let noise = Some(config.noise_variance_counts2)
+        .filter(|variance| check_residuals && variance.is_finite() && *variance > 0.0);
+    if check_residuals && noise.is_none() {
+        eprintln!("note: the configuration has no noise variance; the fit is not checked");
+    }
+    let estimator = calibrate::checked_configured_estimator(&config, precision, zero, noise)?;
     let file = File::open(&input).with_context(|| format!("cannot open {}", input.display()))?;
     let stdout = std::io::stdout();
     let mut out = BufWriter::new(stdout.lock());

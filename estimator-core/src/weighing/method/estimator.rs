@@ -1,6 +1,7 @@
 //! The configured method as one estimator: the enum the scale runs.
 
 use crate::estimators::bias_compensated::{BiasCompensatedConfig, BiasCompensatedStepEstimator};
+use crate::estimators::consistency::NoiseReference;
 use crate::estimators::iv::{IvConfig, IvStepEstimator};
 use crate::estimators::model::{InitialState, ModelBank};
 use crate::estimators::step::{StepConfig, StepEstimator};
@@ -54,6 +55,22 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
         in_counts.onset.rail_low = f64::NEG_INFINITY;
         in_counts.onset.rail_high = f64::INFINITY;
         Self::with_method(&in_counts, &config.method, 0.0)
+    }
+
+    /// Check every run after the next [`Estimator::reset`] against the noise of `reference`
+    /// (`None`: no check): the configured method flags a fit whose residuals exceed what
+    /// that noise explains (`Invalid(ModelMismatch)`; a model bank of three or more
+    /// candidates checks but does not flag, see [`crate::ModelBank`]).
+    pub fn set_noise_reference(
+        &mut self,
+        reference: Option<NoiseReference<T>>,
+    ) -> Result<(), ConfigError> {
+        match self {
+            Self::Step(e) => e.set_noise_reference(reference),
+            Self::BiasCompensated(e) => e.set_noise_reference(reference),
+            Self::InstrumentalVariable(e) => e.set_noise_reference(reference),
+            Self::ModelBank(e) => e.set_noise_reference(reference),
+        }
     }
 
     /// Any method with the constants of `config` (calibration uses it to try candidates),

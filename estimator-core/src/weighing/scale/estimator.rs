@@ -88,11 +88,6 @@ impl<const N: usize, const S: usize, const K: usize> ScaleEstimator
         &mut self,
         reference: Option<NoiseReference<f32>>,
     ) -> Result<(), ConfigError> {
-        match self {
-            Self::Step(e) => e.set_noise_reference(reference),
-            Self::BiasCompensated(e) => e.set_noise_reference(reference),
-            Self::InstrumentalVariable(e) => e.set_noise_reference(reference),
-            Self::ModelBank(e) => e.set_noise_reference(reference),
-        }
+        WeighingEstimator::set_noise_reference(self, reference)
     }
 }
