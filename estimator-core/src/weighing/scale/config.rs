@@ -217,6 +217,24 @@ impl ScaleConfig {
         }
     }
 
+    /// These decisions for a scale of capacity `capacity_g` and scale interval
+    /// `scale_interval_g`: the fields set in scale intervals follow e (zero tracking band,
+    /// rate and range; the block test's ν and h), in the proportions of
+    /// [`Self::weighing_default`].
+    pub fn with_scale(self, capacity_g: f32, scale_interval_g: f32) -> Self {
+        let per_e = scale_interval_g / Self::SCALE_INTERVAL_G;
+        Self {
+            capacity_g,
+            scale_interval_g,
+            zero_tracking_band_g: self.zero_tracking_band_g * per_e,
+            zero_tracking_rate_g_per_s: self.zero_tracking_rate_g_per_s * per_e,
+            zero_tracking_range_g: self.zero_tracking_range_g * per_e,
+            block_drift_g: self.block_drift_g * per_e,
+            block_threshold_g: self.block_threshold_g * per_e,
+            ..self
+        }
+    }
+
     /// [`Self::weighing_default`] with the residual test's thresholds for `method`, set from
     /// the residuals measured on host-sim's reference demo, each method run alone from a
     /// restart at each change and 100 samples after it (where the scale restarts), and
