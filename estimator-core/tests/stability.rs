@@ -575,6 +575,8 @@ fn weighing_config(method: WeighingMethod) -> WeighingConfig {
         prediction,
         recorded_drops: 0,
         recorded_worst_error_g: 0.0,
+        capacity_g: estimator_core::weighing::WeighingConfig::REFERENCE_CAPACITY_G,
+        scale_interval_g: estimator_core::weighing::WeighingConfig::REFERENCE_SCALE_INTERVAL_G,
         loads: LoadCoverage::calibration_mass_only(MASS_G, prediction),
     }
 }

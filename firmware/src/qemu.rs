@@ -68,6 +68,10 @@ impl<M: AdcSource> AdcSource for SimulatedConverter<M> {
         self.data_register.take().unwrap_or(Err(AdcError::NotReady))
     }
 
+    fn rail_guard_codes(&self) -> u32 {
+        self.model.rail_guard_codes()
+    }
+
     fn is_saturated(&self, code: u32) -> bool {
         self.model.is_saturated(code)
     }

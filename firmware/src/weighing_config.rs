@@ -41,6 +41,8 @@ pub const WEIGHING: WeighingConfig = WeighingConfig {
             None,
         ],
     },
+    capacity_g: 600.0,
+    scale_interval_g: 0.1,
 };
 /// Largest model order the estimator holds: the configured order (1 for the bank).
 pub const ORDER_CAPACITY: usize = 5;

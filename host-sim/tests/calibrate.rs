@@ -780,6 +780,8 @@ fn config_with(method: WeighingMethod) -> WeighingConfig {
         },
         recorded_drops: 3,
         recorded_worst_error_g: 0.085_5,
+        capacity_g: estimator_core::weighing::WeighingConfig::REFERENCE_CAPACITY_G,
+        scale_interval_g: estimator_core::weighing::WeighingConfig::REFERENCE_SCALE_INTERVAL_G,
         loads: coverage(None),
     }
 }
@@ -938,6 +940,22 @@ fn the_toml_round_trips_and_refuses_what_it_cannot_use() {
     assert!(message.contains("`format`"), "{message}");
     let message = refused(&text[..ranged_from]);
     assert!(message.contains("`range`"), "{message}");
+    // A file written before Max and e were keys reads the reference cell's; given, they
+    // are read.
+    assert!(text.contains("capacity_g = ") && text.contains("scale_interval_g = "));
+    let without_scale: String = text
+        .lines()
+        .filter(|line| !line.starts_with("capacity_g") && !line.starts_with("scale_interval_g"))
+        .map(|line| format!("{line}\n"))
+        .collect();
+    let (read, _) = calibrate::parse_config(Path::new("w.toml"), &without_scale).unwrap();
+    assert_eq!(read.capacity_g, 600.0);
+    assert_eq!(read.scale_interval_g, 0.1);
+    let smaller = text
+        .replace("capacity_g = 600.0", "capacity_g = 300.0")
+        .replace("scale_interval_g = 0.1", "scale_interval_g = 0.05");
+    let (read, _) = calibrate::parse_config(Path::new("w.toml"), &smaller).unwrap();
+    assert_eq!((read.capacity_g, read.scale_interval_g), (300.0, 0.05));
     // A bank whose size the host's bank type does not hold.
     let bank = bank_toml(17, 0.6, 1.4);
     let message = refused(&bank);

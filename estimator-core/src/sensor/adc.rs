@@ -23,8 +23,58 @@ pub trait AdcSource {
     /// The next conversion.
     fn read(&mut self) -> Result<u32, AdcError>;
 
-    /// True when `code` sits on a rail of the converter.
+    /// Codes at each end of the converter's range the front end in front of it cannot
+    /// reach: a rail-to-rail amplifier still stops a few codes short of the rails, and
+    /// clips there. `0` (the default) trusts the front end to reach the rails; a board
+    /// whose front end clips short sets its measured margin here.
+    fn rail_guard_codes(&self) -> u32 {
+        0
+    }
+
+    /// True when `code` sits on a rail of the converter or within
+    /// [`Self::rail_guard_codes`] of one: the input is out of range.
     fn is_saturated(&self, code: u32) -> bool {
-        code == 0 || code >= self.max_code()
+        let guard = self.rail_guard_codes();
+        code <= guard || code >= self.max_code().saturating_sub(guard)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 16-bit converter behind a front end that clips 40 codes short of each rail.
+    struct ClippingFrontEnd;
+
+    impl AdcSource for ClippingFrontEnd {
+        fn max_code(&self) -> u32 {
+            65_535
+        }
+
+        fn read(&mut self) -> Result<u32, AdcError> {
+            Ok(65_495)
+        }
+
+        fn rail_guard_codes(&self) -> u32 {
+            40
+        }
+    }
+
+    /// A code within the guard band of either rail is saturated: a front end clipping 40
+    /// codes below the rail read as an ordinary (stable) load before.
+    #[test]
+    fn the_guard_band_is_saturated() {
+        let adc = ClippingFrontEnd;
+        for code in [0, 1, 40, 65_495, 65_534, 65_535, u32::MAX] {
+            assert!(adc.is_saturated(code), "{code}");
+        }
+        for code in [41, 30_000, 65_494] {
+            assert!(!adc.is_saturated(code), "{code}");
+        }
+        let mut adc = ClippingFrontEnd;
+        assert_eq!(
+            crate::weighing::RawSample::read(&mut adc),
+            crate::weighing::RawSample::Saturated
+        );
     }
 }

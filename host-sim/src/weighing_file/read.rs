@@ -64,6 +64,20 @@ struct ScaleFile {
     zero_counts: f64,
     noise_variance_counts2: f64,
     raw_noise_variance_counts2: f64,
+    /// Capacity Max, g; files written before it was a key load the reference cell's.
+    #[serde(default = "default_capacity_g")]
+    capacity_g: f64,
+    /// Scale interval e, g; files written before it was a key load the reference cell's.
+    #[serde(default = "default_scale_interval_g")]
+    scale_interval_g: f64,
+}
+
+fn default_capacity_g() -> f64 {
+    estimator_core::weighing::WeighingConfig::REFERENCE_CAPACITY_G
+}
+
+fn default_scale_interval_g() -> f64 {
+    estimator_core::weighing::WeighingConfig::REFERENCE_SCALE_INTERVAL_G
 }
 
 #[derive(Debug, Deserialize)]
@@ -194,6 +208,8 @@ pub fn parse_config(path: &Path, text: &str) -> Result<(WeighingConfig, Precisio
         recorded_drops: file.measured.recorded_drops,
         recorded_worst_error_g: file.measured.recorded_worst_error_g,
         loads: file.coverage(path, prediction)?,
+        capacity_g: scale.capacity_g,
+        scale_interval_g: scale.scale_interval_g,
     };
     check_method(path, &file.method, &config, precision)?;
     Ok((config, precision))

@@ -110,6 +110,8 @@ pub fn rust_const(config: &WeighingConfig) -> String {
             float(config.recorded_worst_error_g),
         ),
         ("loads", coverage(&config.loads)),
+        ("capacity_g", float(config.capacity_g)),
+        ("scale_interval_g", float(config.scale_interval_g)),
     ];
     let mut out = String::from("pub const WEIGHING: WeighingConfig = WeighingConfig {\n");
     for (field, value) in fields {

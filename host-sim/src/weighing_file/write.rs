@@ -206,6 +206,13 @@ fn scale(w: &mut String, config: &WeighingConfig) {
             number(variance)
         );
     }
+    let _ = writeln!(
+        w,
+        "# Capacity Max and scale interval e (OIML R 76): overload above Max + 9 e; zero\n\
+         # tracking and the block-mean change test are set in e (estimator-core ScaleConfig)."
+    );
+    let _ = writeln!(w, "capacity_g = {}", number(config.capacity_g));
+    let _ = writeln!(w, "scale_interval_g = {}", number(config.scale_interval_g));
 }
 
 /// `[onset]`.

@@ -113,6 +113,20 @@ pub struct WeighingConfig {
     /// The loads the method was scored at (`prediction` is the one at the calibration
     /// mass) and what it did at each: the range the target holds over.
     pub loads: LoadCoverage,
+    /// Capacity Max of the scale, g (OIML R 76; the scale shows overload above Max + 9 e).
+    pub capacity_g: f64,
+    /// Scale interval e, g (OIML R 76: the display's resolution, the MPE's unit; see
+    /// [`crate::weighing::ScaleConfig::SCALE_INTERVAL_G`] for the reference cell's).
+    pub scale_interval_g: f64,
+}
+
+impl WeighingConfig {
+    /// The reference cell's capacity Max, g ([`crate::weighing::ScaleConfig::CAPACITY_G`]);
+    /// what a file written before Max was a key loads.
+    pub const REFERENCE_CAPACITY_G: f64 = 600.0;
+    /// The reference cell's scale interval e, g
+    /// ([`crate::weighing::ScaleConfig::SCALE_INTERVAL_G`], argued there).
+    pub const REFERENCE_SCALE_INTERVAL_G: f64 = 0.1;
 }
 
 /// A data-driven method's decimated Nyquist frequency may be at most this many times the
@@ -348,6 +362,8 @@ mod tests {
             prediction: Prediction::default(),
             recorded_drops: 0,
             recorded_worst_error_g: 0.0,
+            capacity_g: crate::weighing::WeighingConfig::REFERENCE_CAPACITY_G,
+            scale_interval_g: crate::weighing::WeighingConfig::REFERENCE_SCALE_INTERVAL_G,
             loads: LoadCoverage::calibration_mass_only(138.32, Prediction::default()),
         }
     }

@@ -79,7 +79,8 @@ fn decisions_for(weighing: &WeighingConfig) -> Result<ScaleConfig, ConfigError> 
     if !(sample_rate_hz.is_finite() && sample_rate_hz > 0.0) {
         return Err(ConfigError::Model);
     }
-    Ok(ScaleConfig::for_method(&weighing.method, sample_rate_hz))
+    Ok(ScaleConfig::for_method(&weighing.method, sample_rate_hz)
+        .with_scale(weighing.capacity_g as f32, weighing.scale_interval_g as f32))
 }
 
 #[cfg(test)]
@@ -114,6 +115,8 @@ mod tests {
             prediction,
             recorded_drops: 0,
             recorded_worst_error_g: 0.0,
+            capacity_g: crate::weighing::WeighingConfig::REFERENCE_CAPACITY_G,
+            scale_interval_g: crate::weighing::WeighingConfig::REFERENCE_SCALE_INTERVAL_G,
             loads: LoadCoverage::calibration_mass_only(138.32, prediction),
         }
     }
@@ -189,6 +192,34 @@ mod tests {
         });
         assert!(
             Scale::<WeighingEstimator<f32, 8, 5, 1>>::configured(&too_big, calibration()).is_err()
+        );
+    }
+
+    /// Max and e of the weighing configuration reach the scale: a 300 g scale with
+    /// e = 0.05 g shows overload above 300.45 g, and its e-set fields follow e.
+    #[test]
+    fn capacity_and_scale_interval_come_from_the_weighing_configuration() {
+        let config = WeighingConfig {
+            capacity_g: 300.0,
+            scale_interval_g: 0.05,
+            ..weighing(ScaleConfig::DEFAULT_METHOD)
+        };
+        let mut scale =
+            Scale::<WeighingEstimator<f32, 8, 5, 1>>::configured(&config, calibration()).unwrap();
+        let decisions = *scale.config();
+        assert_eq!(decisions.capacity_g, 300.0);
+        assert_eq!(decisions.scale_interval_g, 0.05);
+        let default = ScaleConfig::weighing_default(FS);
+        assert_eq!(
+            decisions.zero_tracking_range_g,
+            default.zero_tracking_range_g / 2.0
+        );
+        let mut cell = Cell::new(0.4);
+        cell.load_g = 320.0;
+        let last = *run(&mut scale, &mut cell, 12_000).last().unwrap();
+        assert_eq!(
+            last.state,
+            ScaleState::Invalid(super::super::ScaleFault::Overload)
         );
     }
 }

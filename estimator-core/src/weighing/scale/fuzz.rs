@@ -118,9 +118,9 @@ proptest! {
     fn an_arbitrary_configuration_builds_or_is_refused(
         values in proptest::collection::vec(
             prop_oneof![any::<f32>(), -10.0f32..1000.0, Just(f32::NAN), Just(0.0)],
-            13,
+            15,
         ),
-        counts in proptest::collection::vec(any::<u32>(), 6),
+        counts in proptest::collection::vec(any::<u32>(), 7),
         codes in proptest::collection::vec(any::<i32>(), 0..500),
     ) {
         let config = ScaleConfig {
@@ -137,6 +137,9 @@ proptest! {
             zero_tracking_band_g: values[10],
             zero_tracking_rate_g_per_s: values[11],
             zero_tracking_range_g: values[12],
+            block_drift_g: values[13],
+            block_threshold_g: values[14],
+            block_samples: counts[6] % 10_000,
             stable_hold_samples: counts[0],
             residual_arm_samples: counts[1],
             raw_arm_samples: counts[2] % 100_000,

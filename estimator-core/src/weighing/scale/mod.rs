@@ -95,6 +95,10 @@ pub struct Scale<E> {
     tare_g: f32,
     residual_cusum: TwoSidedCusum,
     raw_cusum: TwoSidedCusum,
+    block_cusum: TwoSidedCusum,
+    /// Σ (sample − gross) in grams and the samples in it, of the block in progress.
+    block_sum_g: f32,
+    block_filled: u32,
     /// Raw samples of this run: `u64`, so it never wraps or saturates (2⁶⁴ samples at 4 kHz
     /// are 146 million years); the residual test's update phase depends on it.
     samples_since_change: u64,
@@ -148,6 +152,9 @@ impl<E: ScaleEstimator> Scale<E> {
             tare_g: 0.0,
             residual_cusum: TwoSidedCusum::default(),
             raw_cusum: TwoSidedCusum::default(),
+            block_cusum: TwoSidedCusum::default(),
+            block_sum_g: 0.0,
+            block_filled: 0,
             samples_since_change: 0,
             load_changes: 0,
             stable_centre_g: 0.0,
@@ -260,6 +267,9 @@ impl<E: ScaleEstimator> Scale<E> {
         self.run_zero_counts = round_to_i32(self.zero_counts);
         self.residual_cusum = TwoSidedCusum::default();
         self.raw_cusum = TwoSidedCusum::default();
+        self.block_cusum = TwoSidedCusum::default();
+        self.block_sum_g = 0.0;
+        self.block_filled = 0;
         self.samples_since_change = 0;
         self.stable_samples = 0;
         self.settled_samples = 0;
