@@ -135,12 +135,12 @@ struct TortureArgs {
     /// one, built into this binary).
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Max, g.
-    #[arg(long, default_value_t = 600.0)]
-    capacity_g: f64,
-    /// The scale interval e, g.
-    #[arg(long, default_value_t = 0.1)]
-    e_g: f64,
+    /// Max, g (default: the configuration's).
+    #[arg(long)]
+    capacity_g: Option<f64>,
+    /// The scale interval e, g (default: the configuration's).
+    #[arg(long)]
+    e_g: Option<f64>,
     /// Worker threads (default: the machine's).
     #[arg(long)]
     threads: Option<usize>,
@@ -1010,8 +1010,8 @@ fn torture(args: TortureArgs) -> Result<()> {
         seed: args.seed,
         threads,
         limits: Limits {
-            capacity_g: args.capacity_g,
-            scale_interval_g: args.e_g,
+            capacity_g: args.capacity_g.unwrap_or(weighing.capacity_g),
+            scale_interval_g: args.e_g.unwrap_or(weighing.scale_interval_g),
             target_relative: weighing.target_relative,
             target_mass_g: weighing.calibration_mass_g,
         },
