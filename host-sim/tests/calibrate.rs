@@ -1103,7 +1103,8 @@ fn the_command_end_to_end_and_estimate_config_equals_the_core() {
     assert_eq!(precision, Precision::F32);
 
     // `estimate --config` on a fresh drop: exactly the core's configured estimator, built
-    // as the firmware builds it, fed the same samples with the config's zero.
+    // as the firmware builds it, its fit checked against the config's noise, fed the same
+    // samples with the config's zero.
     let input = temp("fresh.csv");
     run_ok(
         host_sim()
@@ -1123,7 +1124,14 @@ fn the_command_end_to_end_and_estimate_config_equals_the_core() {
             .arg("--input")
             .arg(&input),
     );
+    // Checked against the config's noise, as `estimate --config` runs it by default.
     let mut core = WeighingEstimator::<f32, 40, 5, 33>::new(&config, config.zero_counts).unwrap();
+    core.set_noise_reference(Some(estimator_core::NoiseReference::new(
+        config.noise_variance_counts2 as f32,
+        0,
+    )))
+    .unwrap();
+    estimator_core::Estimator::reset(&mut core);
     let mut expected = vec!["k,estimate,state".to_string()];
     for (k, sample) in samples.iter().enumerate() {
         let reading = core.push((sample - config.zero_counts) as f32);
@@ -1138,7 +1146,8 @@ fn the_command_end_to_end_and_estimate_config_equals_the_core() {
     for (line, (g, e)) in got.iter().zip(&expected).enumerate() {
         assert_eq!(g, e, "line {line}");
     }
-    // The spec the TOML records gives the same numbers through the method layer.
+    // The spec the TOML records gives the same numbers through the method layer (with the
+    // same check, given as the tare's variance).
     let spec = calibrate::method_spec(&config, precision).to_string();
     let by_spec = run_ok(
         host_sim()
@@ -1150,6 +1159,9 @@ fn the_command_end_to_end_and_estimate_config_equals_the_core() {
                 &config.counts_per_gram.to_string(),
                 "--zero",
                 &config.zero_counts.to_string(),
+                "--tare-variance",
+                &config.noise_variance_counts2.to_string(),
+                "--check-residuals",
                 "--input",
             ])
             .arg(&input),
