@@ -135,16 +135,23 @@ pub struct Readout {
 pub struct Pipeline {
     scale: FirmwareScale,
     commands: Commands,
+    /// The commands' configuration: the board's nominal gain checks every calibration.
+    command_config: CommandConfig,
     next_sequence: u32,
     dropped: u32,
 }
 
 impl Pipeline {
-    /// A pipeline around a configured scale.
-    pub fn new(scale: FirmwareScale) -> Self {
+    /// A pipeline around a configured scale, on a board whose front end's nominal
+    /// calibration is `nominal` (a calibration whose gain is not within
+    /// `estimator_core::weighing::GAIN_TOLERANCE` of it is refused).
+    pub fn new(scale: FirmwareScale, nominal: &Calibration) -> Self {
+        let command_config =
+            CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32).with_nominal(nominal);
         Self {
             scale,
-            commands: Commands::new(CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32)),
+            commands: Commands::new(command_config),
+            command_config,
             next_sequence: 0,
             dropped: 0,
         }
@@ -157,7 +164,7 @@ impl Pipeline {
     pub fn restart(&mut self) {
         self.scale.forget_noise_reference();
         self.scale.recalibrate(self.scale.counts_scale());
-        self.commands = Commands::new(CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32));
+        self.commands = Commands::new(self.command_config);
         self.next_sequence = 0;
         self.dropped = 0;
     }

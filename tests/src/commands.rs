@@ -610,7 +610,9 @@ pub fn host_replay(seed: u64) -> RunLog {
     let weighing = e2e::firmware_weighing_config().expect("firmware/weighing.toml");
     let mut scale = e2e::configured_scale(&weighing, calibration.counts_scale())
         .expect("the firmware's configuration");
-    let mut commands = Commands::new(CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32));
+    let mut commands = Commands::new(
+        CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32).with_nominal(&defaults),
+    );
     let mut script = CommandScript::new();
     let mut adc = qemu_scenes::command_scene_with_seed(seed);
     let samples = Timeline::sample(timeline.end_s);

@@ -36,7 +36,17 @@ pub enum CalibrationError {
     OutOfDomain,
     /// A calibration run gave no usable gain (known mass ≤ 0, or no change in counts).
     NoSpan,
+    /// The gain is further from the front end's nominal gain than its tolerance
+    /// ([`GAIN_TOLERANCE`]): the wrong reference mass, or a fault in the analogue chain.
+    Implausible,
 }
+
+/// How far a chain's gain may lie from its front end's nominal gain, as a fraction either
+/// way. The parts that set it: the cell's rated output (a 1004-class cell: 2 mV/V ± 10 %),
+/// the INA114's gain (R_G at 1 %, the amplifier's own ±0.5 %), the ADC's reference (a 3.3 V
+/// rail at ±3 %): ±14 % at worst, so ±15 %. A calibration or a stored record outside it is
+/// the wrong mass or a broken chain, never a gain to weigh with.
+pub const GAIN_TOLERANCE: f32 = 0.15;
 
 /// Where the calibration in use came from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -78,6 +88,12 @@ impl Calibration {
         } else {
             Err(CalibrationError::NoSpan)
         }
+    }
+
+    /// A gain within `tolerance` (a fraction, either way) of `nominal`'s.
+    pub fn is_plausible(&self, nominal: &Calibration, tolerance: f32) -> bool {
+        let ratio = self.counts_per_gram / nominal.counts_per_gram;
+        self.is_valid() && (ratio - 1.0).abs() <= tolerance
     }
 
     /// Finite, positive gain and finite zero.
@@ -188,12 +204,19 @@ impl FrontEnd {
 }
 
 /// The stored record if it is good, else `defaults` and the reason (never garbage).
-/// `stored` is `None` when the store has nothing at all.
+/// `stored` is `None` when the store has nothing at all. `defaults` are the front end's
+/// nominal values: a record whose gain is not within [`GAIN_TOLERANCE`] of theirs is not
+/// used ([`CalibrationError::Implausible`]; a CRC says the bytes are intact, not that they
+/// describe this chain).
 pub fn load_or_default(
     stored: Option<&[u8]>,
     defaults: Calibration,
 ) -> (Calibration, CalibrationSource) {
     match stored.map(Calibration::decode) {
+        Some(Ok(calibration)) if !calibration.is_plausible(&defaults, GAIN_TOLERANCE) => (
+            defaults,
+            CalibrationSource::Defaults(CalibrationError::Implausible),
+        ),
         Some(Ok(calibration)) => (calibration, CalibrationSource::Stored),
         Some(Err(error)) => (defaults, CalibrationSource::Defaults(error)),
         None => (
@@ -319,6 +342,39 @@ mod tests {
         counts_per_gram: 50.0,
         zero_counts: 32_768.0,
     };
+
+    /// A record with a valid CRC and 1e-6 counts/g (or 30 % off nominal) was used at boot;
+    /// it is not: the nominal values are, with the reason.
+    #[test]
+    fn a_stored_gain_far_from_nominal_is_not_used() {
+        let nominal = Calibration {
+            counts_per_gram: 73.25,
+            zero_counts: 16_764.0,
+        };
+        for gain in [1e-6, 0.7 * 73.25, 1.2 * 73.25] {
+            let record = Calibration {
+                counts_per_gram: gain,
+                zero_counts: 16_760.0,
+            }
+            .encode();
+            assert_eq!(
+                load_or_default(Some(&record), nominal),
+                (
+                    nominal,
+                    CalibrationSource::Defaults(CalibrationError::Implausible)
+                ),
+                "{gain}"
+            );
+        }
+        let within = Calibration {
+            counts_per_gram: 1.1 * 73.25,
+            zero_counts: 16_760.0,
+        };
+        assert_eq!(
+            load_or_default(Some(&within.encode()), nominal),
+            (within, CalibrationSource::Stored)
+        );
+    }
 
     #[test]
     fn crc_matches_the_standard_check_value() {

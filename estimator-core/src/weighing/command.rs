@@ -102,8 +102,9 @@ pub enum CommandRefusal {
 pub enum CalibrationFailure {
     /// The known mass made no positive change in counts.
     NoSpan,
-    /// The new gain differs from the one in use by more than the allowed ratio: the wrong
-    /// reference mass, or a fault in the analogue chain.
+    /// The new gain is further from the front end's nominal gain than its tolerance (or,
+    /// with no nominal gain known, from the one in use by more than the allowed ratio): the
+    /// wrong reference mass, or a fault in the analogue chain.
     GainImplausible,
     /// No settled known mass within the timeout.
     TimedOut,
@@ -119,8 +120,16 @@ pub struct CommandConfig {
     /// The calibration zero is refused (`NotEmpty`) when the pan reads more than this
     /// fraction of the known mass with the calibration in use.
     pub zero_limit_fraction: f32,
-    /// The new gain must be within this ratio of the gain in use, either way.
+    /// Without a nominal gain: the new gain must be within this ratio of the gain in use,
+    /// either way.
     pub max_gain_ratio: f32,
+    /// The front end's nominal gain, counts per gram (NaN: not known). When known, a new
+    /// gain must be within `gain_tolerance` of it, whatever the gain in use: a check
+    /// relative to the gain in use lets repeated wrong calibrations drift further.
+    pub nominal_counts_per_gram: f32,
+    /// How far a new gain may lie from the nominal one, a fraction either way
+    /// ([`crate::weighing::GAIN_TOLERANCE`]).
+    pub gain_tolerance: f32,
     /// A calibration waiting this long for the known mass gives up (`TimedOut`).
     pub calibration_timeout_samples: u32,
 }
@@ -144,7 +153,16 @@ impl CommandConfig {
             zero_limit_fraction: 0.1,
             max_gain_ratio: 1.5,
             calibration_timeout_samples: (60.0 * sample_rate_hz) as u32,
+            nominal_counts_per_gram: f32::NAN,
+            gain_tolerance: super::calibration::GAIN_TOLERANCE,
         }
+    }
+
+    /// Check every new gain against the front end's `nominal` calibration (within
+    /// `gain_tolerance`) instead of against the gain in use.
+    pub fn with_nominal(mut self, nominal: &Calibration) -> Self {
+        self.nominal_counts_per_gram = nominal.counts_per_gram;
+        self
     }
 }
 
@@ -300,9 +318,16 @@ impl Commands {
             Ok(measured) => measured,
             Err(_) => return Some(Err(CalibrationFailure::NoSpan)),
         };
-        let ratio = measured.counts_per_gram / scale.counts_scale().counts_per_gram;
-        let limit = self.config.max_gain_ratio;
-        if ratio <= limit && ratio >= 1.0 / limit {
+        let nominal = self.config.nominal_counts_per_gram;
+        let plausible = if nominal.is_finite() && nominal > 0.0 {
+            let ratio = measured.counts_per_gram / nominal;
+            (ratio - 1.0).abs() <= self.config.gain_tolerance
+        } else {
+            let ratio = measured.counts_per_gram / scale.counts_scale().counts_per_gram;
+            let limit = self.config.max_gain_ratio;
+            ratio <= limit && ratio >= 1.0 / limit
+        };
+        if plausible {
             Some(Ok(measured))
         } else {
             Some(Err(CalibrationFailure::GainImplausible))
@@ -703,6 +728,50 @@ mod tests {
             Some(Err(CalibrationFailure::GainImplausible))
         );
         assert!(!bench.commands.is_calibrating());
+    }
+
+    /// 140, 250 or 290 g placed for 200 g gave gains 30 % low to 45 % high, all accepted
+    /// against the gain in use (±50 %); against the front end's nominal gain (±15 %) each
+    /// is refused, also after the gain in use drifted, and the right mass still calibrates.
+    #[test]
+    fn a_wrong_mass_is_refused_against_the_nominal_gain_whatever_gain_is_in_use() {
+        let nominal = Calibration {
+            counts_per_gram: CPG,
+            zero_counts: ZERO,
+        };
+        for (placed_g, in_use_factor) in [(140.0, 1.0), (250.0, 1.0), (290.0, 1.0), (250.0, 1.3)] {
+            let mut bench = Bench::new(1.0);
+            bench.commands =
+                Commands::new(CommandConfig::weighing_default(FS).with_nominal(&nominal));
+            bench.scale.recalibrate(CountsScale {
+                counts_per_gram: CPG * in_use_factor,
+                zero_counts: ZERO,
+            });
+            bench.run_s(1.0);
+            assert!(bench
+                .command(Command::Calibrate {
+                    known_mass_g: KNOWN_MASS_G
+                })
+                .is_ok());
+            bench.cell.load_g = placed_g;
+            assert_eq!(
+                bench.poll_for_s(2.0),
+                Some(Err(CalibrationFailure::GainImplausible)),
+                "{placed_g} g placed for {KNOWN_MASS_G} g, gain in use x{in_use_factor}"
+            );
+        }
+        // A cell 8 % more sensitive than nominal (within the tolerance) calibrates.
+        let mut bench = Bench::new(1.08);
+        bench.commands = Commands::new(CommandConfig::weighing_default(FS).with_nominal(&nominal));
+        bench.run_s(1.0);
+        assert!(bench
+            .command(Command::Calibrate {
+                known_mass_g: KNOWN_MASS_G
+            })
+            .is_ok());
+        bench.cell.load_g = KNOWN_MASS_G as f64;
+        let measured = bench.poll_for_s(2.0).expect("no result").expect("refused");
+        assert!((measured.counts_per_gram / (1.08 * CPG) - 1.0).abs() < 0.001);
     }
 
     #[test]

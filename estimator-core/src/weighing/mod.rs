@@ -17,7 +17,8 @@ mod scale;
 
 pub use calibration::{
     load_calibration, load_or_default, store_calibration, Calibration, CalibrationError,
-    CalibrationSource, CalibrationStore, FrontEnd, StoreFailure, RECORD_LEN, RECORD_VERSION,
+    CalibrationSource, CalibrationStore, FrontEnd, StoreFailure, GAIN_TOLERANCE, RECORD_LEN,
+    RECORD_VERSION,
 };
 pub use command::{
     CalibrationFailure, Command, CommandConfig, CommandOutcome, CommandRefusal, Commands,

@@ -185,7 +185,7 @@ mod app {
         (
             Shared {
                 latest: None,
-                pipeline: Pipeline::new(scale),
+                pipeline: Pipeline::new(scale, &FRONT_END.nominal_calibration()),
                 key,
             },
             Local {

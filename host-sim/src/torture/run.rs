@@ -50,7 +50,14 @@ pub fn run_plan(
     };
     let mut scale = Box::new(ConfiguredScale::configured(weighing, calibration)?);
     let rate_hz = 1.0 / chain.conversion_period_s();
-    let mut commands = Commands::new(CommandConfig::weighing_default(rate_hz as f32));
+    // The board checks every calibration against its front end's nominal gain: here the
+    // chain's own, the design the simulated cell is built to.
+    let nominal = estimator_core::weighing::Calibration {
+        counts_per_gram: calibration.counts_per_gram,
+        zero_counts: calibration.zero_counts,
+    };
+    let mut commands =
+        Commands::new(CommandConfig::weighing_default(rate_hz as f32).with_nominal(&nominal));
     let mut next_command = 0;
     let mut pending: Option<(u64, PlannedCommand)> = None;
     let mut next_loss = 0;
