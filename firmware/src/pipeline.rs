@@ -14,8 +14,8 @@ use rtic::Mutex;
 use estimator_core::sensor::AdcSource;
 use estimator_core::weighing::{self, CalibrationStore, StoreFailure};
 use estimator_core::weighing::{
-    Calibration, CalibrationFailure, CalibrationSource, Command, CommandConfig, CommandOutcome,
-    CommandRefusal, Commands, CountsScale, RawSample, Scale, ScaleReading,
+    Calibration, CalibrationFailure, CalibrationLimits, CalibrationSource, Command, CommandConfig,
+    CommandOutcome, CommandRefusal, Commands, CountsScale, RawSample, Scale, ScaleReading,
 };
 use estimator_core::weighing::{WeighingEstimator, WeighingMethod};
 use estimator_core::ConfigError;
@@ -134,17 +134,20 @@ pub struct Readout {
 /// bookkeeping around them.
 pub struct Pipeline {
     scale: FirmwareScale,
+    limits: CalibrationLimits,
     commands: Commands,
     next_sequence: u32,
     dropped: u32,
 }
 
 impl Pipeline {
-    /// A pipeline around a configured scale.
-    pub fn new(scale: FirmwareScale) -> Self {
+    /// A pipeline around a configured scale, on a board whose calibrations must fall within
+    /// `limits`.
+    pub fn new(scale: FirmwareScale, limits: CalibrationLimits) -> Self {
         Self {
             scale,
-            commands: Commands::new(CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32)),
+            limits,
+            commands: Commands::new(command_config(limits)),
             next_sequence: 0,
             dropped: 0,
         }
@@ -157,7 +160,7 @@ impl Pipeline {
     pub fn restart(&mut self) {
         self.scale.forget_noise_reference();
         self.scale.recalibrate(self.scale.counts_scale());
-        self.commands = Commands::new(CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32));
+        self.commands = Commands::new(command_config(self.limits));
         self.next_sequence = 0;
         self.dropped = 0;
     }
@@ -234,6 +237,11 @@ impl Pipeline {
             None
         }
     }
+}
+
+/// The operator commands' configuration on a board with these calibration limits.
+fn command_config(limits: CalibrationLimits) -> CommandConfig {
+    CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32, limits)
 }
 
 /// The scale both boards run: the configured method (`firmware/weighing.toml`) with the

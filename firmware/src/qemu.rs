@@ -9,7 +9,7 @@ use core::mem::MaybeUninit;
 
 use estimator_core::sensor::{AdcError, AdcSource};
 use estimator_core::weighing::{self, CalibrationStore};
-use estimator_core::weighing::{Calibration, CalibrationSource, RECORD_LEN};
+use estimator_core::weighing::{Calibration, CalibrationLimits, CalibrationSource, RECORD_LEN};
 use host_sim::qemu_scenes;
 
 use crate::pipeline::{self, SampleMessage};
@@ -86,9 +86,10 @@ impl RamCalibrationStore {
         Self { record }
     }
 
-    /// The calibration to use at boot: the stored one if valid, else `defaults` + reason.
-    pub fn load(&self, defaults: Calibration) -> (Calibration, CalibrationSource) {
-        weighing::load_calibration(self, defaults)
+    /// The calibration to use at boot: the stored one if valid and within `limits`, else
+    /// the nominal values + reason.
+    pub fn load(&mut self, limits: &CalibrationLimits) -> (Calibration, CalibrationSource) {
+        weighing::load_calibration(self, limits)
     }
 }
 
@@ -100,8 +101,8 @@ impl CalibrationStore for RamCalibrationStore {
         Ok(())
     }
 
-    fn read_record(&self) -> Option<[u8; RECORD_LEN]> {
-        Some(self.record)
+    fn read_record(&mut self) -> Result<Option<[u8; RECORD_LEN]>, Infallible> {
+        Ok(Some(self.record))
     }
 }
 

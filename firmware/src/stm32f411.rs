@@ -103,8 +103,8 @@ impl FlashCalibrationStore {
 
     /// The calibration to use at boot: the flash record if valid, else the front end's
     /// nominal values with the reason (erased flash reads `Missing`).
-    pub fn load(&self) -> (Calibration, CalibrationSource) {
-        weighing::load_calibration(self, FRONT_END.nominal_calibration())
+    pub fn load(&mut self) -> (Calibration, CalibrationSource) {
+        weighing::load_calibration(self, &FRONT_END.calibration_limits())
     }
 
     /// Flush the ART data cache, which may still hold the sector as it was before the
@@ -147,15 +147,17 @@ impl CalibrationStore for FlashCalibrationStore {
         result.map_err(FlashError::from)
     }
 
-    fn read_record(&self) -> Option<[u8; RECORD_LEN]> {
+    fn read_record(&mut self) -> Result<Option<[u8; RECORD_LEN]>, FlashError> {
         if !self.has_record_sector() {
-            return None;
+            return Err(FlashError::NoRecordSector);
         }
         let offset = Self::offset();
-        let bytes = self.flash.read().get(offset..offset + RECORD_LEN)?;
+        let Some(bytes) = self.flash.read().get(offset..offset + RECORD_LEN) else {
+            return Ok(None);
+        };
         let mut record = [0u8; RECORD_LEN];
         record.copy_from_slice(bytes);
-        Some(record)
+        Ok(Some(record))
     }
 }
 

@@ -90,7 +90,8 @@ impl Timeline {
 
 /// The calibration settling time of the firmware's command configuration, in samples.
 fn settle_samples() -> u32 {
-    CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32).calibration_settle_samples
+    CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32, qemu_scenes::calibration_limits())
+        .calibration_settle_samples
 }
 
 /// The harness's side of the scene: which byte to type after which readout line. Each
@@ -589,8 +590,10 @@ impl CalibrationStore for RamStore {
         self.0 = *record;
         Ok(())
     }
-    fn read_record(&self) -> Option<[u8; estimator_core::weighing::RECORD_LEN]> {
-        Some(self.0)
+    fn read_record(
+        &mut self,
+    ) -> Result<Option<[u8; estimator_core::weighing::RECORD_LEN]>, Self::Error> {
+        Ok(Some(self.0))
     }
 }
 
@@ -602,15 +605,18 @@ impl CalibrationStore for RamStore {
 pub fn host_replay(seed: u64) -> RunLog {
     let timeline = Timeline::new();
     let mut lines = Vec::new();
-    let defaults = qemu_scenes::nominal_calibration();
+    let limits = qemu_scenes::calibration_limits();
     let factory = qemu_scenes::factory_calibration().expect("the factory calibration runs");
     let mut store = RamStore(factory.encode());
-    let (calibration, source) = weighing::load_calibration(&store, defaults);
+    let (calibration, source) = weighing::load_calibration(&mut store, &limits);
     lines.push(firmware_log::boot_calibration(&calibration, &source));
     let weighing = e2e::firmware_weighing_config().expect("firmware/weighing.toml");
     let mut scale = e2e::configured_scale(&weighing, calibration.counts_scale())
         .expect("the firmware's configuration");
-    let mut commands = Commands::new(CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32));
+    let mut commands = Commands::new(CommandConfig::weighing_default(
+        SAMPLE_RATE_HZ as f32,
+        limits,
+    ));
     let mut script = CommandScript::new();
     let mut adc = qemu_scenes::command_scene_with_seed(seed);
     let samples = Timeline::sample(timeline.end_s);

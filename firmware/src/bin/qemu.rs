@@ -65,7 +65,7 @@ mod app {
         #[cfg(feature = "bench")]
         bench::paint_stack();
         defmt::println!("factory calibration: 6 s of the simulated cell, empty then 200 g...");
-        let defaults = qemu_scenes::nominal_calibration();
+        let limits = qemu_scenes::calibration_limits();
         let record = match qemu_scenes::factory_calibration() {
             Ok(factory) => factory.encode(),
             Err(error) => {
@@ -73,8 +73,8 @@ mod app {
                 [0xFF; estimator_core::weighing::RECORD_LEN]
             }
         };
-        let store = RamCalibrationStore::with_record(record);
-        let (calibration, source) = store.load(defaults);
+        let mut store = RamCalibrationStore::with_record(record);
+        let (calibration, source) = store.load(&limits);
         pipeline::log_calibration(&calibration, &source);
 
         let scale = match pipeline::scale(calibration.counts_scale(), cx.local.estimator) {
@@ -85,7 +85,7 @@ mod app {
             }
         };
         pipeline::log_config();
-        let pipeline = Pipeline::new(scale);
+        let pipeline = Pipeline::new(scale, limits);
 
         // The benchmarks replay a scene through the application's own pipeline and then
         // restart it: a second one would need a second estimator (20 KB for a model bank).

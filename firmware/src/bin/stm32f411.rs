@@ -129,7 +129,7 @@ mod app {
         core.DCB.enable_trace();
         core.DWT.enable_cycle_counter();
 
-        let store = FlashCalibrationStore::new(device.FLASH);
+        let mut store = FlashCalibrationStore::new(device.FLASH);
         let (calibration, source) = store.load();
         pipeline::log_calibration(&calibration, &source);
         let scale = match pipeline::scale(calibration.counts_scale(), cx.local.estimator) {
@@ -185,7 +185,7 @@ mod app {
         (
             Shared {
                 latest: None,
-                pipeline: Pipeline::new(scale),
+                pipeline: Pipeline::new(scale, FRONT_END.calibration_limits()),
                 key,
             },
             Local {
