@@ -20,7 +20,7 @@
 
 use std::fmt::Write as _;
 
-use estimator_core::weighing::{self, CalibrationStore};
+use estimator_core::weighing::{self, CalibrationStore, FlashStore, RamFlash};
 use estimator_core::weighing::{
     Calibration, CalibrationFailure, Command, CommandConfig, Commands, ScaleEstimator,
 };
@@ -578,24 +578,9 @@ impl Judge<'_> {
     }
 }
 
-/// The QEMU board's RAM store, on the host.
-struct RamStore([u8; estimator_core::weighing::RECORD_LEN]);
-
-impl CalibrationStore for RamStore {
-    type Error = std::convert::Infallible;
-    fn write_record(
-        &mut self,
-        record: &[u8; estimator_core::weighing::RECORD_LEN],
-    ) -> Result<(), Self::Error> {
-        self.0 = *record;
-        Ok(())
-    }
-    fn read_record(
-        &mut self,
-    ) -> Result<Option<[u8; estimator_core::weighing::RECORD_LEN]>, Self::Error> {
-        Ok(Some(self.0))
-    }
-}
+/// The QEMU board's calibration store (`firmware::qemu::QemuCalibrationStore`), on the host:
+/// the core's flash store over two 1 KiB pages of NOR flash in RAM.
+type QemuCalibrationStore = FlashStore<RamFlash<2, 1024>>;
 
 /// The command scene on the host with noise `seed`: the firmware's boot (factory record,
 /// read back), the same core calls as its tasks (`Scale::push` per sample; at each readout
@@ -607,7 +592,11 @@ pub fn host_replay(seed: u64) -> RunLog {
     let mut lines = Vec::new();
     let limits = qemu_scenes::calibration_limits();
     let factory = qemu_scenes::factory_calibration().expect("the factory calibration runs");
-    let mut store = RamStore(factory.encode());
+    let mut store = QemuCalibrationStore::new(RamFlash::new(), 0..RamFlash::<2, 1024>::CAPACITY)
+        .expect("two whole pages");
+    store
+        .write_record(&factory.encode())
+        .expect("the factory record is stored");
     let (calibration, source) = weighing::load_calibration(&mut store, &limits);
     lines.push(firmware_log::boot_calibration(&calibration, &source));
     let weighing = e2e::firmware_weighing_config().expect("firmware/weighing.toml");
@@ -653,7 +642,7 @@ pub fn host_replay(seed: u64) -> RunLog {
 fn finish_calibration(
     sample: u32,
     result: Result<Calibration, CalibrationFailure>,
-    store: &mut RamStore,
+    store: &mut QemuCalibrationStore,
     scale: &mut estimator_core::weighing::Scale<impl ScaleEstimator>,
 ) -> String {
     let measured = match result {

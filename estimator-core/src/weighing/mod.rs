@@ -20,6 +20,8 @@ pub use calibration::{
     CalibrationLimits, CalibrationSource, CalibrationStore, FrontEnd, StoreFailure, RECORD_LEN,
     RECORD_VERSION,
 };
+#[cfg(feature = "flash-store")]
+pub use calibration::{FlashStore, FlashStoreError, RamFlash, RamFlashError};
 pub use command::{
     CalibrationFailure, Command, CommandConfig, CommandOutcome, CommandRefusal, Commands,
 };
