@@ -128,6 +128,10 @@ pub struct Readout {
     pub reading: ScaleReading,
     /// Samples lost since boot (ADC overruns, full queue).
     pub dropped: u32,
+    /// Where the calibration converting the reading came from: the line says `cal=stored`,
+    /// or `cal=nominal` while the board weighs on the front end's nominal values (no valid
+    /// record), on every line, not only in the boot log.
+    pub calibration: CalibrationSource,
 }
 
 /// The estimator task's state: the scale, the operator's commands on it, and the
@@ -135,6 +139,7 @@ pub struct Readout {
 pub struct Pipeline {
     scale: FirmwareScale,
     limits: CalibrationLimits,
+    calibration_source: CalibrationSource,
     commands: Commands,
     next_sequence: u32,
     dropped: u32,
@@ -142,11 +147,16 @@ pub struct Pipeline {
 
 impl Pipeline {
     /// A pipeline around a configured scale, on a board whose calibrations must fall within
-    /// `limits`.
-    pub fn new(scale: FirmwareScale, limits: CalibrationLimits) -> Self {
+    /// `limits`, converting with the calibration that came from `calibration_source`.
+    pub fn new(
+        scale: FirmwareScale,
+        limits: CalibrationLimits,
+        calibration_source: CalibrationSource,
+    ) -> Self {
         Self {
             scale,
             limits,
+            calibration_source,
             commands: Commands::new(command_config(limits)),
             next_sequence: 0,
             dropped: 0,
@@ -198,9 +208,11 @@ impl Pipeline {
         self.commands.poll(&mut self.scale, self.next_sequence)
     }
 
-    /// Convert with `calibration` from now on (the estimate restarts, the tare clears).
+    /// Convert with `calibration`, which the store gave back, from now on (the estimate
+    /// restarts, the tare clears; the readout says `cal=stored`).
     pub fn apply_calibration(&mut self, calibration: &Calibration) {
-        self.scale.recalibrate(calibration.counts_scale())
+        self.scale.recalibrate(calibration.counts_scale());
+        self.calibration_source = CalibrationSource::Stored;
     }
 
     /// `samples` were lost without a gap in the sequence numbers (the CPU stalled while the
@@ -232,6 +244,7 @@ impl Pipeline {
                 sample: samples_done,
                 reading,
                 dropped: self.dropped,
+                calibration: self.calibration_source,
             })
         } else {
             None
@@ -317,21 +330,23 @@ pub fn log_readout(readout: &Readout) {
     let reading = &readout.reading;
     match reading.mass_g {
         Some(mass_g) => defmt::println!(
-            "readout sample={=u32} mass_g={=f32} state={} since={=u32} dropped={=u32} changes={=u32}",
+            "readout sample={=u32} mass_g={=f32} state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}",
             readout.sample,
             mass_g,
             reading.state,
             reading.samples_since_change,
             readout.dropped,
-            reading.load_changes
+            reading.load_changes,
+            readout.calibration.label()
         ),
         None => defmt::println!(
-            "readout sample={=u32} mass_g=none state={} since={=u32} dropped={=u32} changes={=u32}",
+            "readout sample={=u32} mass_g=none state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}",
             readout.sample,
             reading.state,
             reading.samples_since_change,
             readout.dropped,
-            reading.load_changes
+            reading.load_changes,
+            readout.calibration.label()
         ),
     }
 }

@@ -22,7 +22,8 @@ use std::fmt::Write as _;
 
 use estimator_core::weighing::{self, CalibrationStore, FlashStore, RamFlash};
 use estimator_core::weighing::{
-    Calibration, CalibrationFailure, Command, CommandConfig, Commands, ScaleEstimator,
+    Calibration, CalibrationFailure, CalibrationSource, Command, CommandConfig, Commands,
+    ScaleEstimator,
 };
 
 use crate::e2e::{self, ReadoutLine, RunLog, Scene, READOUT_HZ, SAMPLE_RATE_HZ};
@@ -597,7 +598,7 @@ pub fn host_replay(seed: u64) -> RunLog {
     store
         .write_record(&factory.encode())
         .expect("the factory record is stored");
-    let (calibration, source) = weighing::load_calibration(&mut store, &limits);
+    let (calibration, mut source) = weighing::load_calibration(&mut store, &limits);
     lines.push(firmware_log::boot_calibration(&calibration, &source));
     let weighing = e2e::firmware_weighing_config().expect("firmware/weighing.toml");
     let mut scale = e2e::configured_scale(&weighing, calibration.counts_scale())
@@ -622,11 +623,17 @@ pub fn host_replay(seed: u64) -> RunLog {
         if done % step != 0 {
             continue;
         }
-        let line = firmware_log::readout(done, &reading, 0);
+        let line = firmware_log::readout(done, &reading, 0, &source);
         let parsed = ReadoutLine::parse(&line).expect("the readout format");
         lines.push(line);
         if let Some(result) = commands.poll(&mut scale, done) {
-            lines.push(finish_calibration(done, result, &mut store, &mut scale));
+            lines.push(finish_calibration(
+                done,
+                result,
+                &mut store,
+                &mut scale,
+                &mut source,
+            ));
         }
         typed = script.respond(&parsed);
     }
@@ -637,13 +644,14 @@ pub fn host_replay(seed: u64) -> RunLog {
     }
 }
 
-/// The firmware's `pipeline::finish_calibration` on the host: store, read back, apply, and
-/// the line it logs.
+/// The firmware's `pipeline::finish_calibration` on the host: store, read back, apply (the
+/// readout then says `cal=stored`), and the line it logs.
 fn finish_calibration(
     sample: u32,
     result: Result<Calibration, CalibrationFailure>,
     store: &mut QemuCalibrationStore,
     scale: &mut estimator_core::weighing::Scale<impl ScaleEstimator>,
+    source: &mut CalibrationSource,
 ) -> String {
     let measured = match result {
         Ok(measured) => measured,
@@ -652,6 +660,7 @@ fn finish_calibration(
     match weighing::store_calibration(store, &measured) {
         Ok(stored) => {
             scale.recalibrate(stored.counts_scale());
+            *source = CalibrationSource::Stored;
             firmware_log::calibration_done(sample, &stored)
         }
         Err(failure) => firmware_log::store_failed(sample, &failure),
@@ -866,7 +875,7 @@ mod tests {
     fn the_script_sends_each_command_once_in_order() {
         let line = |sample: u32, state: &str, since: u32| {
             ReadoutLine::parse(&format!(
-                "readout sample={sample} mass_g=1 state={state} since={since} dropped=0 changes=1"
+                "readout sample={sample} mass_g=1 state={state} since={since} dropped=0 changes=1 cal=stored"
             ))
             .unwrap()
         };

@@ -88,7 +88,7 @@ mod app {
             }
         };
         pipeline::log_config();
-        let pipeline = Pipeline::new(scale, limits);
+        let pipeline = Pipeline::new(scale, limits, source);
 
         // The benchmarks replay a scene through the application's own pipeline and then
         // restart it: a second one would need a second estimator (20 KB for a model bank).

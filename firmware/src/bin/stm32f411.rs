@@ -185,7 +185,7 @@ mod app {
         (
             Shared {
                 latest: None,
-                pipeline: Pipeline::new(scale, FRONT_END.calibration_limits()),
+                pipeline: Pipeline::new(scale, FRONT_END.calibration_limits(), source),
                 key,
             },
             Local {
