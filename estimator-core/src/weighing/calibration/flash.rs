@@ -99,15 +99,32 @@ impl<F: NorFlash> FlashStore<F> {
     }
 }
 
-impl<F: NorFlash> CalibrationStore for FlashStore<F> {
-    type Error = FlashStoreError<F::Error>;
-
-    fn write_record(&mut self, record: &[u8; RECORD_LEN]) -> Result<(), Self::Error> {
+impl<F: NorFlash> FlashStore<F> {
+    fn append(&mut self, record: &[u8; RECORD_LEN]) -> Result<(), FlashStoreError<F::Error>> {
         let mut buffer = Buffer([0; BUFFER_BYTES]);
         let value: &[u8] = record;
         let stored = self.map.store_item(&mut buffer.0, &RECORD_KEY, &value);
         poll_once(stored).ok_or(FlashStoreError::WouldWait)??;
         Ok(())
+    }
+}
+
+impl<F: NorFlash> CalibrationStore for FlashStore<F> {
+    type Error = FlashStoreError<F::Error>;
+
+    /// Append `record`. Flash that holds something else than this store's items (another
+    /// firmware's data, a state the crate cannot repair) can leave no room or no way to
+    /// append (`Full`, `Corrupted`): then the store's pages are erased and the record
+    /// written into the empty store, the one case where a cut between the two loses the
+    /// previous record, which such a flash did not hold in this store's form anyway.
+    fn write_record(&mut self, record: &[u8; RECORD_LEN]) -> Result<(), Self::Error> {
+        match self.append(record) {
+            Err(FlashStoreError::Full | FlashStoreError::Corrupted) => {
+                poll_once(self.map.erase_all()).ok_or(FlashStoreError::WouldWait)??;
+                self.append(record)
+            }
+            appended => appended,
+        }
     }
 
     fn read_record(&mut self) -> Result<Option<[u8; RECORD_LEN]>, Self::Error> {

@@ -22,6 +22,8 @@ mod ram_flash;
 mod record;
 mod store;
 
+#[cfg(test)]
+mod fuzz_tests;
 #[cfg(all(test, feature = "flash-store"))]
 mod power_cut_tests;
 

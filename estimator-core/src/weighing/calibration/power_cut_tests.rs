@@ -227,3 +227,25 @@ fn the_harness_catches_the_old_erase_then_program_store() {
     // Every cut point loses the record: during the erase and during the programming.
     assert_eq!(lost, 256 + super::RECORD_LEN);
 }
+
+/// A board flashed over the earlier firmware holds that firmware's record (erase, then the
+/// 20 bytes at the start of sector 7, the store's second page) in the store's range: the
+/// store does not take it for its own, boots on the nominal values, and the next
+/// calibration is stored and read back.
+#[test]
+fn the_earlier_firmwares_record_in_the_range_does_not_block_the_store() {
+    let mut old = EraseThenProgram(SmallFlash::new());
+    let old_record = record(7);
+    let page = 256;
+    {
+        use embedded_storage_async::nor_flash::NorFlash;
+        poll(old.0.write(page, &old_record)).expect("programmed");
+    }
+    let mut store = store(old.0);
+    let found = store.read_record();
+    assert!(found != Ok(Some(old_record)), "{found:?}");
+    store
+        .write_record(&record(8))
+        .expect("a calibration is stored");
+    assert_eq!(store.read_record(), Ok(Some(record(8))));
+}
