@@ -246,4 +246,22 @@ mod tests {
             "command sample=5 tare=refused (Invalid(Saturated))"
         );
     }
+
+    /// A board without a valid record says so on every readout line, not only at boot.
+    #[test]
+    fn a_readout_on_the_nominal_calibration_says_so() {
+        use estimator_core::weighing::{CalibrationError, CountsScale, StepScale};
+        let calibration = CountsScale {
+            counts_per_gram: 50.0,
+            zero_counts: 30_000.0,
+        };
+        let reading = StepScale::<8>::step_default(4000.0, calibration)
+            .expect("the default scale")
+            .reading();
+        let nominal = CalibrationSource::Defaults(CalibrationError::BadCrc);
+        let line = readout(2000, &reading, 0, &nominal);
+        assert!(line.ends_with(" cal=nominal"), "{line}");
+        let line = readout(2000, &reading, 0, &CalibrationSource::Stored);
+        assert!(line.ends_with(" cal=stored"), "{line}");
+    }
 }
