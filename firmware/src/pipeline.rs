@@ -14,8 +14,8 @@ use rtic::Mutex;
 use estimator_core::sensor::AdcSource;
 use estimator_core::weighing::{self, CalibrationStore, StoreFailure};
 use estimator_core::weighing::{
-    Calibration, CalibrationFailure, CalibrationSource, Command, CommandConfig, CommandOutcome,
-    CommandRefusal, Commands, CountsScale, RawSample, Scale, ScaleReading,
+    Calibration, CalibrationFailure, CalibrationLimits, CalibrationSource, Command, CommandConfig,
+    CommandOutcome, CommandRefusal, Commands, CountsScale, RawSample, Scale, ScaleReading,
 };
 use estimator_core::weighing::{WeighingEstimator, WeighingMethod};
 use estimator_core::ConfigError;
@@ -128,30 +128,36 @@ pub struct Readout {
     pub reading: ScaleReading,
     /// Samples lost since boot (ADC overruns, full queue).
     pub dropped: u32,
+    /// Where the calibration converting the reading came from: the line says `cal=stored`,
+    /// or `cal=nominal` while the board weighs on the front end's nominal values (no valid
+    /// record), on every line, not only in the boot log.
+    pub calibration: CalibrationSource,
 }
 
 /// The estimator task's state: the scale, the operator's commands on it, and the
 /// bookkeeping around them.
 pub struct Pipeline {
     scale: FirmwareScale,
+    limits: CalibrationLimits,
+    calibration_source: CalibrationSource,
     commands: Commands,
-    /// The commands' configuration: the board's nominal gain checks every calibration.
-    command_config: CommandConfig,
     next_sequence: u32,
     dropped: u32,
 }
 
 impl Pipeline {
-    /// A pipeline around a configured scale, on a board whose front end's nominal
-    /// calibration is `nominal` (a calibration whose gain is not within
-    /// `estimator_core::weighing::GAIN_TOLERANCE` of it is refused).
-    pub fn new(scale: FirmwareScale, nominal: &Calibration) -> Self {
-        let command_config =
-            CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32).with_nominal(nominal);
+    /// A pipeline around a configured scale, on a board whose calibrations must fall within
+    /// `limits`, converting with the calibration that came from `calibration_source`.
+    pub fn new(
+        scale: FirmwareScale,
+        limits: CalibrationLimits,
+        calibration_source: CalibrationSource,
+    ) -> Self {
         Self {
             scale,
-            commands: Commands::new(command_config),
-            command_config,
+            limits,
+            calibration_source,
+            commands: Commands::new(command_config(limits)),
             next_sequence: 0,
             dropped: 0,
         }
@@ -164,7 +170,7 @@ impl Pipeline {
     pub fn restart(&mut self) {
         self.scale.forget_noise_reference();
         self.scale.recalibrate(self.scale.counts_scale());
-        self.commands = Commands::new(self.command_config);
+        self.commands = Commands::new(command_config(self.limits));
         self.next_sequence = 0;
         self.dropped = 0;
     }
@@ -202,9 +208,11 @@ impl Pipeline {
         self.commands.poll(&mut self.scale, self.next_sequence)
     }
 
-    /// Convert with `calibration` from now on (the estimate restarts, the tare clears).
+    /// Convert with `calibration`, which the store gave back, from now on (the estimate
+    /// restarts, the tare clears; the readout says `cal=stored`).
     pub fn apply_calibration(&mut self, calibration: &Calibration) {
-        self.scale.recalibrate(calibration.counts_scale())
+        self.scale.recalibrate(calibration.counts_scale());
+        self.calibration_source = CalibrationSource::Stored;
     }
 
     /// `samples` were lost without a gap in the sequence numbers (the CPU stalled while the
@@ -231,16 +239,22 @@ impl Pipeline {
         }
         let reading = self.scale.push(message.sample);
         let samples_done = message.sequence.wrapping_add(1);
-        if samples_done % SAMPLES_PER_READOUT == 0 {
+        if samples_done.is_multiple_of(SAMPLES_PER_READOUT) {
             Some(Readout {
                 sample: samples_done,
                 reading,
                 dropped: self.dropped,
+                calibration: self.calibration_source,
             })
         } else {
             None
         }
     }
+}
+
+/// The operator commands' configuration on a board with these calibration limits.
+fn command_config(limits: CalibrationLimits) -> CommandConfig {
+    CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32, limits)
 }
 
 /// The scale both boards run: the configured method (`firmware/weighing.toml`) with the
@@ -316,21 +330,23 @@ pub fn log_readout(readout: &Readout) {
     let reading = &readout.reading;
     match reading.mass_g {
         Some(mass_g) => defmt::println!(
-            "readout sample={=u32} mass_g={=f32} state={} since={=u32} dropped={=u32} changes={=u32}",
+            "readout sample={=u32} mass_g={=f32} state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}",
             readout.sample,
             mass_g,
             reading.state,
             reading.samples_since_change,
             readout.dropped,
-            reading.load_changes
+            reading.load_changes,
+            readout.calibration.label()
         ),
         None => defmt::println!(
-            "readout sample={=u32} mass_g=none state={} since={=u32} dropped={=u32} changes={=u32}",
+            "readout sample={=u32} mass_g=none state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}",
             readout.sample,
             reading.state,
             reading.samples_since_change,
             readout.dropped,
-            reading.load_changes
+            reading.load_changes,
+            readout.calibration.label()
         ),
     }
 }

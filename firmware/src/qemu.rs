@@ -1,15 +1,15 @@
 //! The QEMU board: the simulated load cell behind a converter "data register", the scene
 //! it plays (chosen on QEMU's command line; the scenes themselves are
-//! `host_sim::qemu_scenes`, which the host tests replay), the RAM-backed calibration store,
+//! `host_sim::qemu_scenes`, which the host tests replay), the calibration store (the core's
+//! flash store over a NOR flash in RAM),
 //! and the exits that tell CI how a run ended. A panic or fault must never exit with
 //! status 0.
 
-use core::convert::Infallible;
 use core::mem::MaybeUninit;
 
 use estimator_core::sensor::{AdcError, AdcSource};
-use estimator_core::weighing::{self, CalibrationStore};
-use estimator_core::weighing::{Calibration, CalibrationSource, RECORD_LEN};
+use estimator_core::weighing::{self, FlashStore, RamFlash};
+use estimator_core::weighing::{Calibration, CalibrationLimits, CalibrationSource};
 use host_sim::qemu_scenes;
 
 use crate::pipeline::{self, SampleMessage};
@@ -77,36 +77,35 @@ impl<M: AdcSource> AdcSource for SimulatedConverter<M> {
     }
 }
 
-/// The calibration store of the QEMU board: a record in RAM, written at "the factory"
-/// (boot) and by the operator's calibration, and read back through the same decoder as
-/// flash on the hardware.
-pub struct RamCalibrationStore {
-    record: [u8; RECORD_LEN],
+/// The QEMU board's flash, which it does not have: two 1 KiB pages of NOR flash in RAM
+/// (the core's `RamFlash`, byte-programmable like the STM32F4's).
+pub type QemuFlash = RamFlash<2, 1024>;
+
+/// The calibration store of the QEMU board: the core's power-fail-safe `FlashStore` over
+/// [`QemuFlash`], the very code the STM32 board runs over its flash sectors. The record is
+/// written at "the factory" (boot) and by the operator's calibration, and read back through
+/// the same decoder.
+pub type QemuCalibrationStore = FlashStore<QemuFlash>;
+
+/// An empty store over an erased [`QemuFlash`].
+pub fn calibration_store() -> QemuCalibrationStore {
+    match FlashStore::new(QemuFlash::new(), 0..QemuFlash::CAPACITY) {
+        Ok(store) => store,
+        // Unreachable: two whole pages.
+        Err(error) => {
+            defmt::error!("calibration store refused its flash: {}", error);
+            exit(false)
+        }
+    }
 }
 
-impl RamCalibrationStore {
-    /// A store holding `record` (possibly corrupted, to exercise the fallback).
-    pub fn with_record(record: [u8; RECORD_LEN]) -> Self {
-        Self { record }
-    }
-
-    /// The calibration to use at boot: the stored one if valid, else `defaults` + reason.
-    pub fn load(&self, defaults: Calibration) -> (Calibration, CalibrationSource) {
-        weighing::load_calibration(self, defaults)
-    }
-}
-
-impl CalibrationStore for RamCalibrationStore {
-    type Error = Infallible;
-
-    fn write_record(&mut self, record: &[u8; RECORD_LEN]) -> Result<(), Infallible> {
-        self.record = *record;
-        Ok(())
-    }
-
-    fn read_record(&self) -> Option<[u8; RECORD_LEN]> {
-        Some(self.record)
-    }
+/// The calibration to use at boot: the stored one if valid and within `limits`, else the
+/// nominal values + reason.
+pub fn load_calibration(
+    store: &mut QemuCalibrationStore,
+    limits: &CalibrationLimits,
+) -> (Calibration, CalibrationSource) {
+    weighing::load_calibration(store, limits)
 }
 
 /// The semihosting command line names no scene this firmware knows.

@@ -1,12 +1,18 @@
 //! The STM32F411 board: its analogue front end, the KEY button's timing, the reference mass
-//! of a calibration, the calibration record in flash sector 7, and what a panic or fault
-//! does (halt, so probe-rs reports it and exits non-zero).
+//! of a calibration, the calibration store in flash sectors 6–7 (the core's power-fail-safe
+//! `FlashStore` over the HAL's flash), and what a panic or fault does (halt, so probe-rs
+//! reports it and exits non-zero).
 //!
 //! None of this has run on hardware yet: CI builds it and checks its size, nothing more.
 
-use estimator_core::weighing::{self, CalibrationStore};
-use estimator_core::weighing::{Calibration, CalibrationSource, FrontEnd, RECORD_LEN};
-use stm32f4xx_hal::flash::{self, FlashExt};
+use core::ops::Range;
+
+use embedded_storage::nor_flash::NorFlash as BlockingNorFlash;
+use embedded_storage_async::nor_flash::{
+    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
+};
+use estimator_core::weighing::{self, Calibration, CalibrationSource, FlashStore, FrontEnd};
+use stm32f4xx_hal::flash::{self, FlashExt, UnlockedFlash};
 use stm32f4xx_hal::pac::FLASH;
 
 /// The INA114 front end as wired in `firmware/README.md`: a 600 g, 2 mV/V cell excited
@@ -35,20 +41,19 @@ pub const KEY_LONG_PRESS_MS: u32 = 2_000;
 /// Core clock: `init` freezes the clocks at this (the DWT cycle counter counts it).
 pub const SYSCLK_HZ: u32 = 84_000_000;
 
-/// Start of the flash sector reserved for the calibration record (see `memory.x`).
-pub const CALIBRATION_RECORD_ADDRESS: usize = 0x0806_0000;
-/// The sector's number and size in the STM32F411's map (sectors 5–7 are 128 KiB).
-const CALIBRATION_SECTOR: u8 = 7;
-const CALIBRATION_SECTOR_BYTES: usize = 128 * 1024;
+/// The flash reserved for the calibration store (see `memory.x`): sectors 6 and 7, two
+/// 128 KiB erase pages, as offsets from the start of flash (`0x0804_0000..0x0808_0000`).
+pub const CALIBRATION_FLASH: Range<u32> = 0x4_0000..0x8_0000;
 
 /// Samples per DMA buffer: the DMA fills one buffer while the hand-off drains the other.
 pub const DMA_BLOCK: usize = 8;
 
-/// Why the calibration record could not be written.
+/// Why the flash refused an operation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
 pub enum FlashError {
-    /// The chip's flash (its size register) has no sector 7: not an STM32F411CE.
-    NoRecordSector,
+    /// The chip's flash (its size register) does not reach the store's sectors: not an
+    /// STM32F411CE.
+    NoRecordSectors,
     /// The flash controller's error flags, as the HAL reports them.
     ProgrammingSequence,
     /// See [`FlashError::ProgrammingSequence`].
@@ -73,42 +78,96 @@ impl From<flash::Error> for FlashError {
     }
 }
 
-/// The calibration record in flash sector 7, through the HAL's flash API: a write erases
-/// the sector and programs the 20 bytes; a read is the memory-mapped bytes.
+impl NorFlashError for FlashError {
+    fn kind(&self) -> NorFlashErrorKind {
+        match self {
+            Self::NoRecordSectors => NorFlashErrorKind::OutOfBounds,
+            Self::ProgrammingAlignment => NorFlashErrorKind::NotAligned,
+            _ => NorFlashErrorKind::Other,
+        }
+    }
+}
+
+// The store's range is whole erase pages, at least two (what `FlashStore::new` checks at
+// run time), so `calibration_store` cannot fail.
+const _: () = {
+    let page = <Stm32Flash as NorFlash>::ERASE_SIZE as u32;
+    assert!(
+        CALIBRATION_FLASH.start.is_multiple_of(page)
+            && CALIBRATION_FLASH.end.is_multiple_of(page)
+            && CALIBRATION_FLASH.end - CALIBRATION_FLASH.start >= 2 * page,
+        "CALIBRATION_FLASH must be two or more whole 128 KiB sectors"
+    );
+};
+
+/// The calibration store of the board: the record in sectors 6–7, power-fail safe.
+pub type CalibrationFlashStore = FlashStore<Stm32Flash>;
+
+/// The calibration store over the flash controller (the only user of `FLASH` after the
+/// clocks are set up).
+pub fn calibration_store(flash: FLASH) -> CalibrationFlashStore {
+    match FlashStore::new(Stm32Flash { flash }, CALIBRATION_FLASH) {
+        Ok(store) => store,
+        // Unreachable: the range is checked at compile time above.
+        Err(error) => defmt::panic!("calibration flash range refused: {}", error),
+    }
+}
+
+/// The calibration to use at boot: the flash record if valid and within the front end's
+/// limits, else the front end's nominal values with the reason (erased flash reads
+/// `Missing`).
+pub fn load_calibration(store: &mut CalibrationFlashStore) -> (Calibration, CalibrationSource) {
+    weighing::load_calibration(store, &FRONT_END.calibration_limits())
+}
+
+/// The STM32F411's flash as the store's `NorFlash`, through the HAL's (`UnlockedFlash`,
+/// whose `ERASE_SIZE` is the 128 KiB of sectors 5–7): unlocked for each erase or write
+/// only, error flags of an earlier operation cleared first, the ART data cache flushed
+/// after. Blocking (the CPU stalls on flash fetches while the controller is busy), so each
+/// future is ready when polled, as `FlashStore` requires.
 ///
-/// Erasing a 128 KiB sector takes 2–4 s at the HAL's 8-bit parallelism (data sheet), and
-/// the CPU stalls on every flash fetch meanwhile, interrupts included: the sampling runs on
-/// (timer, ADC, DMA) but its hand-off does not, so those samples are lost. The board counts
-/// them ([`crate::pipeline::Pipeline::samples_lost`]); this happens only when the operator
-/// calibrates.
-pub struct FlashCalibrationStore {
+/// A calibration programs about 30 bytes (a few hundred µs); a sector is erased only when
+/// the two sectors fill up, once in about 4,500 calibrations (the core's power-cut tests
+/// measure it on this geometry). That erase takes 2–4 s at the HAL's 8-bit parallelism,
+/// and the samples the converter takes meanwhile are counted as dropped.
+pub struct Stm32Flash {
     flash: FLASH,
 }
 
-impl FlashCalibrationStore {
-    /// The store over the flash controller (the only user of `FLASH` after the clocks are
-    /// set up).
-    pub fn new(flash: FLASH) -> Self {
-        Self { flash }
+impl Stm32Flash {
+    /// Offsets must lie inside the chip's flash (an STM32F411CC has only 256 KiB).
+    fn check(&self, end: u32) -> Result<(), FlashError> {
+        if end as usize <= self.flash.len() {
+            Ok(())
+        } else {
+            Err(FlashError::NoRecordSectors)
+        }
     }
 
-    /// Offset of the record from the start of flash.
-    fn offset() -> usize {
-        CALIBRATION_RECORD_ADDRESS - 0x0800_0000
+    /// Run one erase or program with the flash unlocked, its stale error flags (W1C)
+    /// cleared before and the data cache flushed after.
+    fn unlocked<T>(
+        &mut self,
+        operation: impl FnOnce(&mut UnlockedFlash<'_>) -> Result<T, flash::Error>,
+    ) -> Result<T, FlashError> {
+        self.flash.sr().write(|w| {
+            w.operr().clear();
+            w.wrperr().clear();
+            w.pgaerr().clear();
+            w.pgperr().clear();
+            w.pgserr().clear()
+        });
+        let result = {
+            // Locked again when dropped at the end of this block.
+            let mut unlocked = self.flash.unlocked();
+            operation(&mut unlocked)
+        };
+        self.reset_data_cache();
+        result.map_err(FlashError::from)
     }
 
-    fn has_record_sector(&self) -> bool {
-        self.flash.len() >= Self::offset() + CALIBRATION_SECTOR_BYTES
-    }
-
-    /// The calibration to use at boot: the flash record if valid, else the front end's
-    /// nominal values with the reason (erased flash reads `Missing`).
-    pub fn load(&self) -> (Calibration, CalibrationSource) {
-        weighing::load_calibration(self, FRONT_END.nominal_calibration())
-    }
-
-    /// Flush the ART data cache, which may still hold the sector as it was before the
-    /// write (RM0383, "Flash memory": reset it with the cache disabled).
+    /// Flush the ART data cache, which may still hold a sector as it was before an erase
+    /// or a write (RM0383, "Flash memory": reset it with the cache disabled).
     fn reset_data_cache(&mut self) {
         let acr = self.flash.acr();
         let enabled = acr.read().dcen().bit_is_set();
@@ -121,41 +180,42 @@ impl FlashCalibrationStore {
     }
 }
 
-impl CalibrationStore for FlashCalibrationStore {
+impl ErrorType for Stm32Flash {
     type Error = FlashError;
+}
 
-    fn write_record(&mut self, record: &[u8; RECORD_LEN]) -> Result<(), FlashError> {
-        if !self.has_record_sector() {
-            return Err(FlashError::NoRecordSector);
-        }
-        // Error flags left by an earlier operation would fail this one: clear them (W1C).
-        self.flash.sr().write(|w| {
-            w.operr().clear();
-            w.wrperr().clear();
-            w.pgaerr().clear();
-            w.pgperr().clear();
-            w.pgserr().clear()
-        });
-        let result = {
-            // Unlocked until dropped at the end of this block.
-            let mut unlocked = self.flash.unlocked();
-            unlocked
-                .erase(CALIBRATION_SECTOR)
-                .and_then(|()| unlocked.program(Self::offset(), record.iter()))
-        };
-        self.reset_data_cache();
-        result.map_err(FlashError::from)
+impl ReadNorFlash for Stm32Flash {
+    const READ_SIZE: usize = 1;
+
+    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
+        let end = offset.saturating_add(bytes.len() as u32);
+        self.check(end)?;
+        let stored = self
+            .flash
+            .read()
+            .get(offset as usize..end as usize)
+            .ok_or(FlashError::NoRecordSectors)?;
+        bytes.copy_from_slice(stored);
+        Ok(())
     }
 
-    fn read_record(&self) -> Option<[u8; RECORD_LEN]> {
-        if !self.has_record_sector() {
-            return None;
-        }
-        let offset = Self::offset();
-        let bytes = self.flash.read().get(offset..offset + RECORD_LEN)?;
-        let mut record = [0u8; RECORD_LEN];
-        record.copy_from_slice(bytes);
-        Some(record)
+    fn capacity(&self) -> usize {
+        self.flash.len()
+    }
+}
+
+impl NorFlash for Stm32Flash {
+    const WRITE_SIZE: usize = <UnlockedFlash<'static> as BlockingNorFlash>::WRITE_SIZE;
+    const ERASE_SIZE: usize = <UnlockedFlash<'static> as BlockingNorFlash>::ERASE_SIZE;
+
+    async fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
+        self.check(to)?;
+        self.unlocked(|flash| BlockingNorFlash::erase(flash, from, to))
+    }
+
+    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
+        self.check(offset.saturating_add(bytes.len() as u32))?;
+        self.unlocked(|flash| BlockingNorFlash::write(flash, offset, bytes))
     }
 }
 

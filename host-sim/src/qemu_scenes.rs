@@ -10,7 +10,7 @@
 use crate::simulated::{REFERENCE_SNR_DB, REFERENCE_STEP_G, SNR_WINDOW_SAMPLES};
 use crate::{white_noise_for_snr, Disturbances, LoadEvent, Script, SensorChain, SimulatedAdc};
 use estimator_core::sensor::AdcSource;
-use estimator_core::weighing::{Calibration, CalibrationError};
+use estimator_core::weighing::{Calibration, CalibrationError, CalibrationLimits, FrontEnd};
 
 /// The simulated cell with room for sixteen scripted load changes (the command scene
 /// pours a load on in portions).
@@ -135,6 +135,22 @@ pub fn nominal_calibration() -> Calibration {
     Calibration {
         counts_per_gram: chain.counts_per_gram() as f32,
         zero_counts: chain.zero_code() as f32,
+    }
+}
+
+/// The window a calibration of the QEMU board must fall in: the chain's nominal values with
+/// the hardware front end's tolerances ([`FrontEnd::GAIN_TOLERANCE`],
+/// [`FrontEnd::ZERO_TOLERANCE_OF_SPAN`] of the cell's capacity), the converter's rails.
+pub fn calibration_limits() -> CalibrationLimits {
+    let chain = SensorChain::reference();
+    let nominal = nominal_calibration();
+    CalibrationLimits {
+        nominal,
+        gain_tolerance: FrontEnd::GAIN_TOLERANCE,
+        zero_tolerance_counts: FrontEnd::ZERO_TOLERANCE_OF_SPAN
+            * nominal.counts_per_gram
+            * chain.cell.capacity_g as f32,
+        max_code: chain.adc.max_code(),
     }
 }
 

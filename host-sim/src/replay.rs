@@ -81,7 +81,7 @@ pub fn replay<E: ScaleEstimator>(
     for (index, sample) in samples.into_iter().enumerate() {
         let reading = scale.push(sample);
         let taken = index as u64 + 1;
-        if taken % u64::from(READOUT_SAMPLES) == 0 {
+        if taken.is_multiple_of(u64::from(READOUT_SAMPLES)) {
             rows.push(ReplayRow {
                 sample: u32::try_from(taken).unwrap_or(u32::MAX),
                 reading,

@@ -20,9 +20,10 @@
 
 use std::fmt::Write as _;
 
-use estimator_core::weighing::{self, CalibrationStore};
+use estimator_core::weighing::{self, CalibrationStore, FlashStore, RamFlash};
 use estimator_core::weighing::{
-    Calibration, CalibrationFailure, Command, CommandConfig, Commands, ScaleEstimator,
+    Calibration, CalibrationFailure, CalibrationSource, Command, CommandConfig, Commands,
+    ScaleEstimator,
 };
 
 use crate::e2e::{self, ReadoutLine, RunLog, Scene, READOUT_HZ, SAMPLE_RATE_HZ};
@@ -90,7 +91,8 @@ impl Timeline {
 
 /// The calibration settling time of the firmware's command configuration, in samples.
 fn settle_samples() -> u32 {
-    CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32).calibration_settle_samples
+    CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32, qemu_scenes::calibration_limits())
+        .calibration_settle_samples
 }
 
 /// The harness's side of the scene: which byte to type after which readout line. Each
@@ -577,22 +579,9 @@ impl Judge<'_> {
     }
 }
 
-/// The QEMU board's RAM store, on the host.
-struct RamStore([u8; estimator_core::weighing::RECORD_LEN]);
-
-impl CalibrationStore for RamStore {
-    type Error = std::convert::Infallible;
-    fn write_record(
-        &mut self,
-        record: &[u8; estimator_core::weighing::RECORD_LEN],
-    ) -> Result<(), Self::Error> {
-        self.0 = *record;
-        Ok(())
-    }
-    fn read_record(&self) -> Option<[u8; estimator_core::weighing::RECORD_LEN]> {
-        Some(self.0)
-    }
-}
+/// The QEMU board's calibration store (`firmware::qemu::QemuCalibrationStore`), on the host:
+/// the core's flash store over two 1 KiB pages of NOR flash in RAM.
+type QemuCalibrationStore = FlashStore<RamFlash<2, 1024>>;
 
 /// The command scene on the host with noise `seed`: the firmware's boot (factory record,
 /// read back), the same core calls as its tasks (`Scale::push` per sample; at each readout
@@ -602,17 +591,22 @@ impl CalibrationStore for RamStore {
 pub fn host_replay(seed: u64) -> RunLog {
     let timeline = Timeline::new();
     let mut lines = Vec::new();
-    let defaults = qemu_scenes::nominal_calibration();
+    let limits = qemu_scenes::calibration_limits();
     let factory = qemu_scenes::factory_calibration().expect("the factory calibration runs");
-    let mut store = RamStore(factory.encode());
-    let (calibration, source) = weighing::load_calibration(&store, defaults);
+    let mut store = QemuCalibrationStore::new(RamFlash::new(), 0..RamFlash::<2, 1024>::CAPACITY)
+        .expect("two whole pages");
+    store
+        .write_record(&factory.encode())
+        .expect("the factory record is stored");
+    let (calibration, mut source) = weighing::load_calibration(&mut store, &limits);
     lines.push(firmware_log::boot_calibration(&calibration, &source));
     let weighing = e2e::firmware_weighing_config().expect("firmware/weighing.toml");
     let mut scale = e2e::configured_scale(&weighing, calibration.counts_scale())
         .expect("the firmware's configuration");
-    let mut commands = Commands::new(
-        CommandConfig::weighing_default(SAMPLE_RATE_HZ as f32).with_nominal(&defaults),
-    );
+    let mut commands = Commands::new(CommandConfig::weighing_default(
+        SAMPLE_RATE_HZ as f32,
+        limits,
+    ));
     let mut script = CommandScript::new();
     let mut adc = qemu_scenes::command_scene_with_seed(seed);
     let samples = Timeline::sample(timeline.end_s);
@@ -629,11 +623,17 @@ pub fn host_replay(seed: u64) -> RunLog {
         if done % step != 0 {
             continue;
         }
-        let line = firmware_log::readout(done, &reading, 0);
+        let line = firmware_log::readout(done, &reading, 0, &source);
         let parsed = ReadoutLine::parse(&line).expect("the readout format");
         lines.push(line);
         if let Some(result) = commands.poll(&mut scale, done) {
-            lines.push(finish_calibration(done, result, &mut store, &mut scale));
+            lines.push(finish_calibration(
+                done,
+                result,
+                &mut store,
+                &mut scale,
+                &mut source,
+            ));
         }
         typed = script.respond(&parsed);
     }
@@ -644,13 +644,14 @@ pub fn host_replay(seed: u64) -> RunLog {
     }
 }
 
-/// The firmware's `pipeline::finish_calibration` on the host: store, read back, apply, and
-/// the line it logs.
+/// The firmware's `pipeline::finish_calibration` on the host: store, read back, apply (the
+/// readout then says `cal=stored`), and the line it logs.
 fn finish_calibration(
     sample: u32,
     result: Result<Calibration, CalibrationFailure>,
-    store: &mut RamStore,
+    store: &mut QemuCalibrationStore,
     scale: &mut estimator_core::weighing::Scale<impl ScaleEstimator>,
+    source: &mut CalibrationSource,
 ) -> String {
     let measured = match result {
         Ok(measured) => measured,
@@ -659,6 +660,7 @@ fn finish_calibration(
     match weighing::store_calibration(store, &measured) {
         Ok(stored) => {
             scale.recalibrate(stored.counts_scale());
+            *source = CalibrationSource::Stored;
             firmware_log::calibration_done(sample, &stored)
         }
         Err(failure) => firmware_log::store_failed(sample, &failure),
@@ -873,7 +875,7 @@ mod tests {
     fn the_script_sends_each_command_once_in_order() {
         let line = |sample: u32, state: &str, since: u32| {
             ReadoutLine::parse(&format!(
-                "readout sample={sample} mass_g=1 state={state} since={since} dropped=0 changes=1"
+                "readout sample={sample} mass_g=1 state={state} since={since} dropped=0 changes=1 cal=stored"
             ))
             .unwrap()
         };

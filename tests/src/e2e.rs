@@ -17,6 +17,7 @@ use std::fmt::Write as _;
 use anyhow::{anyhow, Context, Result};
 
 use crate::firmware_log;
+use estimator_core::weighing::CalibrationSource;
 
 /// Raw sample rate of the firmware.
 pub const SAMPLE_RATE_HZ: f64 = 4000.0;
@@ -90,6 +91,8 @@ pub struct ReadoutLine {
     pub since_change: u32,
     /// Samples dropped since boot.
     pub dropped: u32,
+    /// Where the calibration in use came from: `stored`, or `nominal` (no valid record).
+    pub calibration: String,
 }
 
 impl ReadoutLine {
@@ -106,6 +109,7 @@ impl ReadoutLine {
         let mut state = None;
         let mut since = None;
         let mut dropped = None;
+        let mut calibration = None;
         for field in rest.split_whitespace() {
             let (key, value) = field.split_once('=')?;
             match key {
@@ -120,6 +124,7 @@ impl ReadoutLine {
                 "state" => state = Some(value.to_string()),
                 "since" => since = value.parse().ok(),
                 "dropped" => dropped = value.parse().ok(),
+                "cal" => calibration = Some(value.to_string()),
                 _ => {}
             }
         }
@@ -129,6 +134,7 @@ impl ReadoutLine {
             state: state?,
             since_change: since?,
             dropped: dropped?,
+            calibration: calibration?,
         })
     }
 }
@@ -279,6 +285,17 @@ pub fn check_run_health(scene: &Scene, run: &RunLog, failures: &mut Vec<String>)
         .unwrap_or(0);
     if dropped != 0 {
         failures.push(format!("{dropped} samples dropped (must be 0)"));
+    }
+    // The QEMU board boots on its factory record: a line on the nominal values means the
+    // record was lost or refused.
+    let nominal = readouts
+        .iter()
+        .filter(|line| line.calibration != "stored")
+        .count();
+    if nominal != 0 {
+        failures.push(format!(
+            "{nominal} readout lines not on the stored calibration (cal=nominal: the factory record was not used)"
+        ));
     }
     dropped
 }
@@ -465,7 +482,7 @@ mod tests {
                 truth * (1.0 + 2e-4 * if index % 2 == 0 { 1.0 } else { -1.0 }) + 0.01
             };
             lines.push(format!(
-                "readout sample={sample} mass_g={mass} state=Stable since={since} dropped=0 changes=1"
+                "readout sample={sample} mass_g={mass} state=Stable since={since} dropped=0 changes=1 cal=stored"
             ));
         }
         lines.push("end samples=16000 dropped=0".into());
@@ -508,18 +525,24 @@ mod tests {
     #[test]
     fn parses_the_firmware_format() {
         let line = ReadoutLine::parse(
-            "readout sample=1400 mass_g=138.3181 state=Stable since=200 dropped=0 changes=1",
+            "readout sample=1400 mass_g=138.3181 state=Stable since=200 dropped=0 changes=1 cal=stored",
         )
         .unwrap();
         assert_eq!(line.sample, 1400);
         assert_eq!(line.mass_g, Some(138.3181));
         assert_eq!(line.state, "Stable");
         let none = ReadoutLine::parse(
-            "readout sample=200 mass_g=none state=Invalid(Estimator(IllConditioned)) since=5 dropped=0 changes=0",
+            "readout sample=200 mass_g=none state=Invalid(Estimator(IllConditioned)) since=5 dropped=0 changes=0 cal=stored",
         )
         .unwrap();
         assert_eq!(none.mass_g, None);
+        assert_eq!(line.calibration, "stored");
         assert!(ReadoutLine::parse("readout sample=x").is_none());
+        // A line without the calibration's source is not the firmware's.
+        assert!(ReadoutLine::parse(
+            "readout sample=1400 mass_g=138.3181 state=Stable since=200 dropped=0 changes=1"
+        )
+        .is_none());
     }
 
     #[test]
@@ -527,7 +550,7 @@ mod tests {
         // 138.32 g at 0.3 s: the line at 0.40 s (sample 1600) is still 0.2 % off.
         assert_edit_fails(
             1600,
-            "readout sample=1600 mass_g=138.6 state=Estimating since=400 dropped=0 changes=1",
+            "readout sample=1600 mass_g=138.6 state=Estimating since=400 dropped=0 changes=1 cal=stored",
             "150 ms",
         );
     }
@@ -537,7 +560,7 @@ mod tests {
         // Still 138.32 g at 1.5 s, but the reading wanders 0.15 % off.
         assert_edit_fails(
             6000,
-            "readout sample=6000 mass_g=138.53 state=Stable since=4800 dropped=0 changes=1",
+            "readout sample=6000 mass_g=138.53 state=Stable since=4800 dropped=0 changes=1 cal=stored",
             "138.32 g dropped",
         );
     }
@@ -548,7 +571,7 @@ mod tests {
         edit(
             &mut run,
             12000,
-            "readout sample=12000 mass_g=none state=Invalid(Saturated) since=2000 dropped=0 changes=3",
+            "readout sample=12000 mass_g=none state=Invalid(Saturated) since=2000 dropped=0 changes=3 cal=stored",
         );
         assert!(!check(&Scene::demo(), &run).passed());
     }
@@ -558,7 +581,7 @@ mod tests {
         // Empty after the removal at 2.0 s; 2.25 s is past the 100 ms allowance.
         assert_edit_fails(
             9000,
-            "readout sample=9000 mass_g=0.06 state=Empty since=1000 dropped=0 changes=2",
+            "readout sample=9000 mass_g=0.06 state=Empty since=1000 dropped=0 changes=2 cal=stored",
             "empty pan",
         );
     }
@@ -567,8 +590,17 @@ mod tests {
     fn fails_on_a_dropped_sample() {
         assert_edit_fails(
             4000,
-            "readout sample=4000 mass_g=138.32 state=Stable since=2800 dropped=1 changes=1",
+            "readout sample=4000 mass_g=138.32 state=Stable since=2800 dropped=1 changes=1 cal=stored",
             "dropped",
+        );
+    }
+
+    #[test]
+    fn fails_when_a_line_reads_on_the_nominal_calibration() {
+        assert_edit_fails(
+            4000,
+            "readout sample=4000 mass_g=138.32 state=Stable since=2800 dropped=0 changes=1 cal=nominal",
+            "cal=nominal",
         );
     }
 
@@ -646,7 +678,13 @@ pub fn host_replay<E: estimator_core::weighing::ScaleEstimator>(
     for index in 0..samples {
         let reading = scale.push(estimator_core::weighing::RawSample::read(adc));
         if (index + 1) % step == 0 {
-            lines.push(firmware_log::readout(index + 1, &reading, 0));
+            // As the QEMU board, which boots on its factory record.
+            lines.push(firmware_log::readout(
+                index + 1,
+                &reading,
+                0,
+                &CalibrationSource::Stored,
+            ));
         }
     }
     lines.push(firmware_log::end(samples, 0));
@@ -1190,7 +1228,7 @@ mod host_replay_tests {
                         {
                             let since = k as u32 + 1;
                             let reading = estimator.push((code - zero) as f32);
-                            if since % per_update != 0 || since < arm {
+                            if !since.is_multiple_of(per_update) || since < arm {
                                 continue;
                             }
                             let Some(r) = reading.residual else { continue };
@@ -1219,7 +1257,8 @@ mod host_replay_tests {
                         .enumerate()
                     {
                         let reading = estimator.push((code - zero) as f32);
-                        if start + (k as u32) < change || (k as u32 + 1) % per_update != 0 {
+                        if start + (k as u32) < change || !(k as u32 + 1).is_multiple_of(per_update)
+                        {
                             continue;
                         }
                         residuals.push(reading.residual.map_or(0.0, |r| r as f64 * grams));

@@ -19,10 +19,10 @@ use estimator_core::weighing::{
 
 /// `pipeline::log_readout` with a mass.
 pub const READOUT: &str =
-    "readout sample={=u32} mass_g={=f32} state={} since={=u32} dropped={=u32} changes={=u32}";
+    "readout sample={=u32} mass_g={=f32} state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}";
 /// `pipeline::log_readout` without one.
 pub const READOUT_NO_MASS: &str =
-    "readout sample={=u32} mass_g=none state={} since={=u32} dropped={=u32} changes={=u32}";
+    "readout sample={=u32} mass_g=none state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}";
 /// `pipeline::log_command`, a tare taken.
 pub const TARED: &str = "command sample={=u32} tare=ok tare_g={=f32}";
 /// `pipeline::log_command`, the tare cleared.
@@ -100,13 +100,19 @@ pub fn render(format: &str, args: &[Arg]) -> String {
     line
 }
 
-/// `pipeline::log_readout`: one readout line.
-pub fn readout(sample: u32, reading: &ScaleReading, dropped: u32) -> String {
+/// `pipeline::log_readout`: one readout line, converted with the calibration from `source`.
+pub fn readout(
+    sample: u32,
+    reading: &ScaleReading,
+    dropped: u32,
+    source: &CalibrationSource,
+) -> String {
     let tail = [
         Arg::Format(format!("{:?}", reading.state)),
         Arg::U32(reading.samples_since_change),
         Arg::U32(dropped),
         Arg::U32(reading.load_changes),
+        Arg::Str(source.label()),
     ];
     match reading.mass_g {
         Some(mass_g) => {
@@ -239,5 +245,23 @@ mod tests {
             ),
             "command sample=5 tare=refused (Invalid(Saturated))"
         );
+    }
+
+    /// A board without a valid record says so on every readout line, not only at boot.
+    #[test]
+    fn a_readout_on_the_nominal_calibration_says_so() {
+        use estimator_core::weighing::{CalibrationError, CountsScale, StepScale};
+        let calibration = CountsScale {
+            counts_per_gram: 50.0,
+            zero_counts: 30_000.0,
+        };
+        let reading = StepScale::<8>::step_default(4000.0, calibration)
+            .expect("the default scale")
+            .reading();
+        let nominal = CalibrationSource::Defaults(CalibrationError::BadCrc);
+        let line = readout(2000, &reading, 0, &nominal);
+        assert!(line.ends_with(" cal=nominal"), "{line}");
+        let line = readout(2000, &reading, 0, &CalibrationSource::Stored);
+        assert!(line.ends_with(" cal=stored"), "{line}");
     }
 }

@@ -1,9 +1,10 @@
 //! The weighing application on top of the estimators: the [`Scale`] that finds load
 //! changes, tares, tracks the zero and runs the configured method; the operator's
 //! [`Commands`] (tare, calibration with a known mass) and the KEY button's
-//! [`KeyDebouncer`]; the [`Calibration`] record (gain and zero, CRC-protected) and the
-//! [`CalibrationStore`] the board keeps it in; and the configured method ([`WeighingConfig`],
-//! what tuning chose and the firmware builds).
+//! [`KeyDebouncer`]; the [`Calibration`] record (gain and zero, CRC-protected), the
+//! [`CalibrationLimits`] it must fall in and the [`CalibrationStore`] the board keeps it
+//! in; and the configured method ([`WeighingConfig`], what tuning chose and the firmware
+//! builds).
 //!
 //! This layer never imports the method search ([`crate::tuning`]): the firmware runs it
 //! without the search.
@@ -17,9 +18,11 @@ mod scale;
 
 pub use calibration::{
     load_calibration, load_or_default, store_calibration, Calibration, CalibrationError,
-    CalibrationSource, CalibrationStore, FrontEnd, StoreFailure, GAIN_TOLERANCE, RECORD_LEN,
+    CalibrationLimits, CalibrationSource, CalibrationStore, FrontEnd, StoreFailure, RECORD_LEN,
     RECORD_VERSION,
 };
+#[cfg(feature = "flash-store")]
+pub use calibration::{FlashStore, FlashStoreError, RamFlash, RamFlashError};
 pub use command::{
     CalibrationFailure, Command, CommandConfig, CommandOutcome, CommandRefusal, Commands,
 };

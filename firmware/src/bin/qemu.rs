@@ -11,12 +11,13 @@ use defmt_semihosting as _;
 
 #[rtic::app(device = firmware::mps2_an386, peripherals = false)]
 mod app {
+    use estimator_core::weighing::CalibrationStore;
     use estimator_core::weighing::Command;
     use firmware::mps2_an386::{CmsdkTimer, CmsdkUart, Interrupt, SYSTEM_CLOCK_HZ};
     use firmware::pipeline::{
         self, EstimatorStorage, Pipeline, Readout, SampleMessage, SampleQueue, SAMPLE_RATE_HZ,
     };
-    use firmware::qemu::{self, RamCalibrationStore, Scene, SimulatedConverter};
+    use firmware::qemu::{self, QemuCalibrationStore, Scene, SimulatedConverter};
     use heapless::spsc::{Consumer, Producer};
     use host_sim::qemu_scenes;
 
@@ -51,7 +52,7 @@ mod app {
         consumer: Consumer<'static, SampleMessage>,
         sequence: u32,
         uart: CmsdkUart,
-        store: RamCalibrationStore,
+        store: QemuCalibrationStore,
         scene_samples: u32,
     }
 
@@ -61,20 +62,22 @@ mod app {
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         // The factory calibration (known mass, empty pan) on the simulated chain, stored as
-        // a record and read back through the same CRC-checked decoder as flash on hardware.
+        // a record in the flash store and read back through the same CRC-checked decoder and
+        // limits as flash on hardware.
         #[cfg(feature = "bench")]
         bench::paint_stack();
         defmt::println!("factory calibration: 6 s of the simulated cell, empty then 200 g...");
-        let defaults = qemu_scenes::nominal_calibration();
-        let record = match qemu_scenes::factory_calibration() {
-            Ok(factory) => factory.encode(),
-            Err(error) => {
-                defmt::error!("factory calibration failed: {}", error);
-                [0xFF; estimator_core::weighing::RECORD_LEN]
+        let limits = qemu_scenes::calibration_limits();
+        let mut store = qemu::calibration_store();
+        match qemu_scenes::factory_calibration() {
+            Ok(factory) => {
+                if let Err(error) = store.write_record(&factory.encode()) {
+                    defmt::error!("factory calibration not stored: {}", error);
+                }
             }
-        };
-        let store = RamCalibrationStore::with_record(record);
-        let (calibration, source) = store.load(defaults);
+            Err(error) => defmt::error!("factory calibration failed: {}", error),
+        }
+        let (calibration, source) = qemu::load_calibration(&mut store, &limits);
         pipeline::log_calibration(&calibration, &source);
 
         let scale = match pipeline::scale(calibration.counts_scale(), cx.local.estimator) {
@@ -85,7 +88,7 @@ mod app {
             }
         };
         pipeline::log_config();
-        let pipeline = Pipeline::new(scale, &defaults);
+        let pipeline = Pipeline::new(scale, limits, source);
 
         // The benchmarks replay a scene through the application's own pipeline and then
         // restart it: a second one would need a second estimator (20 KB for a model bank).

@@ -3,7 +3,7 @@
 //! the estimator task runs the weighing core, and the readout goes out over RTT (defmt).
 //! The KEY button (PA0) gives the operator's commands: a short press tares, a long press
 //! (2 s or more) calibrates with the reference mass, a short press during a calibration
-//! cancels it; the record goes to flash sector 7.
+//! cancels it; the record goes to flash sectors 6–7 (power-fail safe).
 #![no_std]
 #![no_main]
 
@@ -18,8 +18,8 @@ mod app {
         SAMPLE_RATE_HZ,
     };
     use firmware::stm32f411::{
-        FlashCalibrationStore, DMA_BLOCK, FRONT_END, KEY_DEBOUNCE_MS, KEY_LONG_PRESS_MS,
-        KEY_POLL_HZ, REFERENCE_MASS_G, SYSCLK_HZ,
+        self as board, CalibrationFlashStore, DMA_BLOCK, FRONT_END, KEY_DEBOUNCE_MS,
+        KEY_LONG_PRESS_MS, KEY_POLL_HZ, REFERENCE_MASS_G, SYSCLK_HZ,
     };
     use heapless::spsc::{Consumer, Producer};
     use stm32f4xx_hal::{
@@ -108,7 +108,7 @@ mod app {
         producer: Producer<'static, SampleMessage>,
         consumer: Consumer<'static, SampleMessage>,
         sequence: u32,
-        store: FlashCalibrationStore,
+        store: CalibrationFlashStore,
         _trigger: CounterHz<pac::TIM2>,
     }
 
@@ -129,8 +129,8 @@ mod app {
         core.DCB.enable_trace();
         core.DWT.enable_cycle_counter();
 
-        let store = FlashCalibrationStore::new(device.FLASH);
-        let (calibration, source) = store.load();
+        let mut store = board::calibration_store(device.FLASH);
+        let (calibration, source) = board::load_calibration(&mut store);
         pipeline::log_calibration(&calibration, &source);
         let scale = match pipeline::scale(calibration.counts_scale(), cx.local.estimator) {
             Ok(scale) => scale,
@@ -185,7 +185,7 @@ mod app {
         (
             Shared {
                 latest: None,
-                pipeline: Pipeline::new(scale, &FRONT_END.nominal_calibration()),
+                pipeline: Pipeline::new(scale, FRONT_END.calibration_limits(), source),
                 key,
             },
             Local {
@@ -245,8 +245,9 @@ mod app {
 
     /// The readout task: 20 lines a second over RTT; after each, the commands' regular
     /// work (a fresh tare refined, a calibration in progress carried on). A finished
-    /// calibration is written to flash, read back and applied; the erase stalls the CPU for
-    /// seconds, and the samples the converter took meanwhile are counted as dropped.
+    /// calibration is appended to the flash store (about 30 bytes), read back and applied;
+    /// once in thousands of calibrations the store erases a sector, which stalls the CPU
+    /// for seconds, and the samples the converter took meanwhile are counted as dropped.
     #[task(binds = EXTI2, priority = 1, local = [store], shared = [latest, pipeline])]
     fn readout(mut cx: readout::Context) {
         if let Some(readout) = cx.shared.latest.lock(|latest| latest.take()) {

@@ -2,8 +2,8 @@
 //! state machine (estimator-core, unchanged) read it, and every readout line is judged.
 
 use estimator_core::weighing::{
-    Command, CommandConfig, Commands, CountsScale, RawSample, ScaleReading, ScaleState,
-    WeighingConfig,
+    Calibration, CalibrationLimits, Command, CommandConfig, Commands, CountsScale, FrontEnd,
+    RawSample, ScaleReading, ScaleState, WeighingConfig,
 };
 
 use super::judge::{Limits, Line, Tallies, Truth};
@@ -50,14 +50,24 @@ pub fn run_plan(
     };
     let mut scale = Box::new(ConfiguredScale::configured(weighing, calibration)?);
     let rate_hz = 1.0 / chain.conversion_period_s();
-    // The board checks every calibration against its front end's nominal gain: here the
-    // chain's own, the design the simulated cell is built to.
-    let nominal = estimator_core::weighing::Calibration {
+    // The board checks every calibration against its front end's nominal values: here
+    // the chain's own, the design the simulated cell is built to.
+    let nominal = Calibration {
         counts_per_gram: calibration.counts_per_gram,
         zero_counts: calibration.zero_counts,
     };
-    let mut commands =
-        Commands::new(CommandConfig::weighing_default(rate_hz as f32).with_nominal(&nominal));
+    let calibration_limits = CalibrationLimits {
+        nominal,
+        gain_tolerance: FrontEnd::GAIN_TOLERANCE,
+        zero_tolerance_counts: FrontEnd::ZERO_TOLERANCE_OF_SPAN
+            * nominal.counts_per_gram
+            * chain.cell.capacity_g as f32,
+        max_code: chain.adc.max_code(),
+    };
+    let mut commands = Commands::new(CommandConfig::weighing_default(
+        rate_hz as f32,
+        calibration_limits,
+    ));
     let mut next_command = 0;
     let mut pending: Option<(u64, PlannedCommand)> = None;
     let mut next_loss = 0;

@@ -36,7 +36,9 @@ impl<E: ScaleEstimator> Scale<E> {
     /// The residual test, once per decimated update and once the fit is determined enough:
     /// true when it alarms.
     pub(super) fn residual_alarm(&mut self, residual_counts: Option<f32>) -> bool {
-        let new_update = self.samples_since_change % u64::from(self.samples_per_update) == 0;
+        let new_update = self
+            .samples_since_change
+            .is_multiple_of(u64::from(self.samples_per_update));
         let armed = self.samples_since_change >= u64::from(self.config.residual_arm_samples);
         if !(new_update && armed) {
             return false;

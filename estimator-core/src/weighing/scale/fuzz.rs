@@ -10,7 +10,7 @@ use std::vec::Vec;
 
 use proptest::prelude::*;
 
-use super::test_scene::{calibration, CPG, ZERO};
+use super::test_scene::{calibration, CPG, LIMITS, ZERO};
 use super::{RawSample, Scale, ScaleConfig, ScaleReading, ScaleState, StepScale};
 use crate::weighing::command::{Command, CommandConfig, Commands};
 
@@ -82,7 +82,7 @@ proptest! {
         seed in any::<u64>(),
     ) {
         let mut scale = StepScale::<8>::step_default(4000.0, calibration()).unwrap();
-        let mut commands = Commands::new(CommandConfig::weighing_default(4000.0));
+        let mut commands = Commands::new(CommandConfig::weighing_default(4000.0, LIMITS));
         let mut state = seed;
         let mut previous = scale.reading();
         let mut now = 0u32;

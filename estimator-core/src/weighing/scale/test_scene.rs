@@ -18,6 +18,18 @@ pub(crate) fn calibration() -> CountsScale {
     }
 }
 
+/// The test cell's board: nominal gain and zero those of [`calibration`], the front
+/// end's default tolerances on a 600 g cell, a 16-bit converter.
+pub(crate) const LIMITS: crate::weighing::CalibrationLimits = crate::weighing::CalibrationLimits {
+    nominal: crate::weighing::Calibration {
+        counts_per_gram: CPG,
+        zero_counts: ZERO,
+    },
+    gain_tolerance: 0.15,
+    zero_tolerance_counts: 0.4 * CPG * 600.0,
+    max_code: 65_535,
+};
+
 /// A second-order cell (25 Hz, ζ = 0.03 loaded) with deterministic pseudo-noise: the
 /// decisions are tested on a scene with known truth, not on constants.
 pub(crate) struct Cell {
