@@ -87,6 +87,10 @@ pub struct Reading<T> {
     /// The a-priori residual of the latest regression row, in the estimate's unit; `Some`
     /// only when the previous update was already determined.
     pub residual: Option<T>,
+    /// The estimate's standard uncertainty (GUM), in its unit, stated so that ±2u is a
+    /// 95 % interval; `Some` only with an estimate, and only from estimators that can state
+    /// it (the step estimator with its lag sums; see `estimators::step_uncertainty`).
+    pub uncertainty: Option<T>,
 }
 
 impl<T: Copy> Reading<T> {

@@ -328,9 +328,20 @@ pub fn log_calibration(calibration: &Calibration, source: &CalibrationSource) {
 /// `cargo xtask test` checks against this image's defmt table).
 pub fn log_readout(readout: &Readout) {
     let reading = &readout.reading;
-    match reading.mass_g {
-        Some(mass_g) => defmt::println!(
-            "readout sample={=u32} mass_g={=f32} state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}",
+    match (reading.mass_g, reading.uncertainty_g) {
+        (Some(mass_g), Some(u_g)) => defmt::println!(
+            "readout sample={=u32} mass_g={=f32} u_g={=f32} state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}",
+            readout.sample,
+            mass_g,
+            u_g,
+            reading.state,
+            reading.samples_since_change,
+            readout.dropped,
+            reading.load_changes,
+            readout.calibration.label()
+        ),
+        (Some(mass_g), None) => defmt::println!(
+            "readout sample={=u32} mass_g={=f32} u_g=none state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}",
             readout.sample,
             mass_g,
             reading.state,
@@ -339,8 +350,8 @@ pub fn log_readout(readout: &Readout) {
             reading.load_changes,
             readout.calibration.label()
         ),
-        None => defmt::println!(
-            "readout sample={=u32} mass_g=none state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}",
+        (None, _) => defmt::println!(
+            "readout sample={=u32} mass_g=none u_g=none state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}",
             readout.sample,
             reading.state,
             reading.samples_since_change,

@@ -27,7 +27,7 @@ pub fn state_name(state: State) -> &'static str {
     }
 }
 
-/// Read `input` (named `name` in errors), write `k,estimate,state`. `zero` is subtracted
+/// Read `input` (named `name` in errors), write `k,estimate,u,state`. `zero` is subtracted
 /// from every sample (in f64, before any conversion to f32). An empty `y` is a lost sample
 /// (the reading says so); a `y` that is not a number is an error naming the line.
 pub fn estimate_csv(
@@ -52,7 +52,7 @@ pub fn estimate_with(
     let rows = y_fields(input, name, |header| {
         format!("{name}: line 1: expected a column `y` in the header `{header}`")
     })?;
-    writeln!(out, "k,estimate,state")?;
+    writeln!(out, "k,estimate,u,state")?;
     for (k, row) in rows.enumerate() {
         let (line_number, field) = row?;
         let reading = if field.is_empty() {
@@ -65,9 +65,11 @@ pub fn estimate_with(
             })?;
             estimator.push(value - zero)
         };
-        match reading.estimate {
-            Some(value) => writeln!(out, "{k},{value},{}", state_name(reading.state))?,
-            None => writeln!(out, "{k},,{}", state_name(reading.state))?,
+        let state = state_name(reading.state);
+        match (reading.estimate, reading.uncertainty) {
+            (Some(value), Some(u)) => writeln!(out, "{k},{value},{u},{state}")?,
+            (Some(value), None) => writeln!(out, "{k},{value},,{state}")?,
+            (None, _) => writeln!(out, "{k},,,{state}")?,
         }
     }
     Ok(())

@@ -54,6 +54,8 @@ pub mod calibrate;
 #[cfg(feature = "std")]
 pub mod chart;
 #[cfg(feature = "std")]
+pub mod coverage;
+#[cfg(feature = "std")]
 pub mod crlb;
 #[cfg(feature = "std")]
 pub mod estimate;

@@ -59,6 +59,7 @@ use std::str::FromStr;
 
 use anyhow::{anyhow, bail, Result};
 use estimator_core::sensor::LoadCellModel;
+use estimator_core::weighing::UNCERTAINTY_ORDERS;
 use estimator_core::{
     max_instrument_delay, Baseline, BaselineConfig, BaselineMode, BiasCompensatedConfig,
     BiasCompensatedStepEstimator, CovarianceStepEstimator, Estimator, InitialState, IvConfig,
@@ -362,9 +363,10 @@ impl Method {
             |setup: &Setup, gain: T| referenced(ranged(step_config(setup, gain), context), context);
         let reference = context.noise_reference::<T>();
         Ok(match self {
-            Method::Step(setup) => {
-                Box::new(StepEstimator::<T, CAPACITY>::new(step_config(setup, gain)).map_err(core)?)
-            }
+            Method::Step(setup) => Box::new(
+                StepEstimator::<T, CAPACITY, UNCERTAINTY_ORDERS>::new(step_config(setup, gain))
+                    .map_err(core)?,
+            ),
             Method::Covariance {
                 setup,
                 prior_information,
@@ -633,6 +635,7 @@ pub(crate) fn widen(reading: Reading<f32>) -> Reading<f64> {
         samples: reading.samples,
         state: reading.state,
         residual: reading.residual.map(f64::from),
+        uncertainty: reading.uncertainty.map(f64::from),
     }
 }
 

@@ -53,9 +53,12 @@ impl ReplayRow {
             .reading
             .mass_g
             .map_or(String::new(), |mass| format!("{mass}"));
-        // The standard uncertainty and the final flag follow the scale's reading once it
-        // carries them; until then a row has none and is never final.
-        let u = String::new();
+        let u = self
+            .reading
+            .uncertainty_g
+            .map_or(String::new(), |u| format!("{u}"));
+        // The final flag follows the scale's reading once it carries one; until then a row
+        // is never final.
         let final_flag = 0;
         format!(
             "{t_s},{mass},{u},{},{final_flag}",

@@ -181,6 +181,7 @@ impl<E: Estimator<f32>> Estimator<f64> for Widened<E> {
             samples: r.samples,
             state: r.state,
             residual: r.residual.map(f64::from),
+            uncertainty: r.uncertainty.map(f64::from),
         }
     }
     fn push_missing(&mut self) -> estimator_core::Reading<f64> {
@@ -190,6 +191,7 @@ impl<E: Estimator<f32>> Estimator<f64> for Widened<E> {
             samples: r.samples,
             state: r.state,
             residual: r.residual.map(f64::from),
+            uncertainty: r.uncertainty.map(f64::from),
         }
     }
     fn reset(&mut self) {
@@ -1132,13 +1134,16 @@ fn the_command_end_to_end_and_estimate_config_equals_the_core() {
     )))
     .unwrap();
     estimator_core::Estimator::reset(&mut core);
-    let mut expected = vec!["k,estimate,state".to_string()];
+    let mut expected = vec!["k,estimate,u,state".to_string()];
     for (k, sample) in samples.iter().enumerate() {
         let reading = core.push((sample - config.zero_counts) as f32);
         let state = host_sim::estimate::state_name(reading.state);
+        let u = reading
+            .uncertainty
+            .map_or(String::new(), |u| format!("{}", f64::from(u)));
         expected.push(match reading.estimate {
-            Some(value) => format!("{k},{},{state}", f64::from(value)),
-            None => format!("{k},,{state}"),
+            Some(value) => format!("{k},{},{u},{state}", f64::from(value)),
+            None => format!("{k},,,{state}"),
         });
     }
     let got: Vec<&str> = stdout.lines().collect();

@@ -57,22 +57,27 @@ fn estimate_on_a_simulated_csv_equals_the_core() {
                 ])
                 .arg(&csv),
         );
-        let mut expected = vec!["k,estimate,state".to_string()];
+        let mut expected = vec!["k,estimate,u,state".to_string()];
         let config64 = StepConfig::new(order, gain).with_decimation(decimation as u16);
-        let mut core64 = StepEstimator::<f64, 40>::new(config64).unwrap();
+        let mut core64 = StepEstimator::<f64, 40, 8>::new(config64).unwrap();
         let config32 = StepConfig::new(order, gain as f32).with_decimation(decimation as u16);
-        let mut core32 = StepEstimator::<f32, 40>::new(config32).unwrap();
+        let mut core32 = StepEstimator::<f32, 40, 8>::new(config32).unwrap();
         for (k, sample) in samples.iter().enumerate() {
-            let (estimate, state) = if precision == "f64" {
+            let (estimate, u, state) = if precision == "f64" {
                 let r = core64.push(sample - zero);
-                (r.estimate, r.state)
+                (r.estimate, r.uncertainty, r.state)
             } else {
                 let r = core32.push((sample - zero) as f32);
-                (r.estimate.map(f64::from), r.state)
+                (
+                    r.estimate.map(f64::from),
+                    r.uncertainty.map(f64::from),
+                    r.state,
+                )
             };
+            let u = u.map_or(String::new(), |u| format!("{u}"));
             expected.push(match estimate {
-                Some(value) => format!("{k},{value},{}", state_name(state)),
-                None => format!("{k},,{}", state_name(state)),
+                Some(value) => format!("{k},{value},{u},{}", state_name(state)),
+                None => format!("{k},,,{}", state_name(state)),
             });
         }
         let got: Vec<&str> = stdout.lines().collect();
@@ -211,11 +216,12 @@ fn simulated_reference(name: &str) -> (PathBuf, Vec<f64>, f64, f64) {
 
 /// The CSV lines `estimate` must print for these readings.
 fn expected_lines(readings: impl Iterator<Item = Reading<f64>>) -> Vec<String> {
-    let mut lines = vec!["k,estimate,state".to_string()];
+    let mut lines = vec!["k,estimate,u,state".to_string()];
     for (k, r) in readings.enumerate() {
+        let u = r.uncertainty.map_or(String::new(), |u| format!("{u}"));
         lines.push(match r.estimate {
-            Some(value) => format!("{k},{value},{}", state_name(r.state)),
-            None => format!("{k},,{}", state_name(r.state)),
+            Some(value) => format!("{k},{value},{u},{}", state_name(r.state)),
+            None => format!("{k},,,{}", state_name(r.state)),
         });
     }
     lines
@@ -227,6 +233,7 @@ fn widen(r: Reading<f32>) -> Reading<f64> {
         samples: r.samples,
         state: r.state,
         residual: r.residual.map(f64::from),
+        uncertainty: r.uncertainty.map(f64::from),
     }
 }
 
@@ -301,14 +308,14 @@ fn estimate_with_every_method_equals_the_core() {
         (
             "step:n=7,D=16,precision=f32",
             all_f32(
-                &mut StepEstimator::<f32, 40>::new(StepConfig::new(7, g32).with_decimation(16))
+                &mut StepEstimator::<f32, 40, 8>::new(StepConfig::new(7, g32).with_decimation(16))
                     .unwrap(),
             ),
         ),
         (
             "step:n=5,D=8,lambda=0.999",
             all_f64(
-                &mut StepEstimator::<f64, 40>::new(
+                &mut StepEstimator::<f64, 40, 8>::new(
                     StepConfig::new(5, gain)
                         .with_decimation(8)
                         .with_forgetting(0.999),

@@ -875,7 +875,7 @@ mod tests {
     fn the_script_sends_each_command_once_in_order() {
         let line = |sample: u32, state: &str, since: u32| {
             ReadoutLine::parse(&format!(
-                "readout sample={sample} mass_g=1 state={state} since={since} dropped=0 changes=1 cal=stored"
+                "readout sample={sample} mass_g=1 u_g=0.01 state={state} since={since} dropped=0 changes=1 cal=stored"
             ))
             .unwrap()
         };

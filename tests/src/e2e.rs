@@ -85,6 +85,8 @@ pub struct ReadoutLine {
     pub sample: u32,
     /// The mass shown, `None` when the display shows none (warming up, invalid).
     pub mass_g: Option<f64>,
+    /// The mass's standard uncertainty, `None` when the line gives none.
+    pub u_g: Option<f64>,
     /// The state as printed (`Empty`, `Estimating`, `Stable`, `Invalid(…)`).
     pub state: String,
     /// Samples since the last detected load change.
@@ -101,11 +103,12 @@ impl ReadoutLine {
         self.sample as f64 / SAMPLE_RATE_HZ
     }
 
-    /// Parse `readout sample=… mass_g=… state=… since=… dropped=… changes=…`.
+    /// Parse `readout sample=… mass_g=… u_g=… state=… since=… dropped=… changes=… cal=…`.
     pub fn parse(line: &str) -> Option<Self> {
         let rest = line.trim().strip_prefix("readout ")?;
         let mut sample = None;
         let mut mass = None;
+        let mut uncertainty = None;
         let mut state = None;
         let mut since = None;
         let mut dropped = None;
@@ -121,6 +124,13 @@ impl ReadoutLine {
                         Some(value.parse::<f64>().ok()?)
                     })
                 }
+                "u_g" => {
+                    uncertainty = Some(if value == "none" {
+                        None
+                    } else {
+                        Some(value.parse::<f64>().ok()?)
+                    })
+                }
                 "state" => state = Some(value.to_string()),
                 "since" => since = value.parse().ok(),
                 "dropped" => dropped = value.parse().ok(),
@@ -131,6 +141,7 @@ impl ReadoutLine {
         Some(Self {
             sample: sample?,
             mass_g: mass?,
+            u_g: uncertainty?,
             state: state?,
             since_change: since?,
             dropped: dropped?,
@@ -482,7 +493,7 @@ mod tests {
                 truth * (1.0 + 2e-4 * if index % 2 == 0 { 1.0 } else { -1.0 }) + 0.01
             };
             lines.push(format!(
-                "readout sample={sample} mass_g={mass} state=Stable since={since} dropped=0 changes=1 cal=stored"
+                "readout sample={sample} mass_g={mass} u_g=0.01 state=Stable since={since} dropped=0 changes=1 cal=stored"
             ));
         }
         lines.push("end samples=16000 dropped=0".into());
@@ -525,14 +536,14 @@ mod tests {
     #[test]
     fn parses_the_firmware_format() {
         let line = ReadoutLine::parse(
-            "readout sample=1400 mass_g=138.3181 state=Stable since=200 dropped=0 changes=1 cal=stored",
+            "readout sample=1400 mass_g=138.3181 u_g=0.01 state=Stable since=200 dropped=0 changes=1 cal=stored",
         )
         .unwrap();
         assert_eq!(line.sample, 1400);
         assert_eq!(line.mass_g, Some(138.3181));
         assert_eq!(line.state, "Stable");
         let none = ReadoutLine::parse(
-            "readout sample=200 mass_g=none state=Invalid(Estimator(IllConditioned)) since=5 dropped=0 changes=0 cal=stored",
+            "readout sample=200 mass_g=none u_g=none state=Invalid(Estimator(IllConditioned)) since=5 dropped=0 changes=0 cal=stored",
         )
         .unwrap();
         assert_eq!(none.mass_g, None);
@@ -540,7 +551,7 @@ mod tests {
         assert!(ReadoutLine::parse("readout sample=x").is_none());
         // A line without the calibration's source is not the firmware's.
         assert!(ReadoutLine::parse(
-            "readout sample=1400 mass_g=138.3181 state=Stable since=200 dropped=0 changes=1"
+            "readout sample=1400 mass_g=138.3181 u_g=0.01 state=Stable since=200 dropped=0 changes=1"
         )
         .is_none());
     }
@@ -550,7 +561,7 @@ mod tests {
         // 138.32 g at 0.3 s: the line at 0.40 s (sample 1600) is still 0.2 % off.
         assert_edit_fails(
             1600,
-            "readout sample=1600 mass_g=138.6 state=Estimating since=400 dropped=0 changes=1 cal=stored",
+            "readout sample=1600 mass_g=138.6 u_g=0.01 state=Estimating since=400 dropped=0 changes=1 cal=stored",
             "150 ms",
         );
     }
@@ -560,7 +571,7 @@ mod tests {
         // Still 138.32 g at 1.5 s, but the reading wanders 0.15 % off.
         assert_edit_fails(
             6000,
-            "readout sample=6000 mass_g=138.53 state=Stable since=4800 dropped=0 changes=1 cal=stored",
+            "readout sample=6000 mass_g=138.53 u_g=0.01 state=Stable since=4800 dropped=0 changes=1 cal=stored",
             "138.32 g dropped",
         );
     }
@@ -571,7 +582,7 @@ mod tests {
         edit(
             &mut run,
             12000,
-            "readout sample=12000 mass_g=none state=Invalid(Saturated) since=2000 dropped=0 changes=3 cal=stored",
+            "readout sample=12000 mass_g=none u_g=none state=Invalid(Saturated) since=2000 dropped=0 changes=3 cal=stored",
         );
         assert!(!check(&Scene::demo(), &run).passed());
     }
@@ -581,7 +592,7 @@ mod tests {
         // Empty after the removal at 2.0 s; 2.25 s is past the 100 ms allowance.
         assert_edit_fails(
             9000,
-            "readout sample=9000 mass_g=0.06 state=Empty since=1000 dropped=0 changes=2 cal=stored",
+            "readout sample=9000 mass_g=0.06 u_g=0.01 state=Empty since=1000 dropped=0 changes=2 cal=stored",
             "empty pan",
         );
     }
@@ -590,7 +601,7 @@ mod tests {
     fn fails_on_a_dropped_sample() {
         assert_edit_fails(
             4000,
-            "readout sample=4000 mass_g=138.32 state=Stable since=2800 dropped=1 changes=1 cal=stored",
+            "readout sample=4000 mass_g=138.32 u_g=0.01 state=Stable since=2800 dropped=1 changes=1 cal=stored",
             "dropped",
         );
     }
@@ -599,7 +610,7 @@ mod tests {
     fn fails_when_a_line_reads_on_the_nominal_calibration() {
         assert_edit_fails(
             4000,
-            "readout sample=4000 mass_g=138.32 state=Stable since=2800 dropped=0 changes=1 cal=nominal",
+            "readout sample=4000 mass_g=138.32 u_g=0.01 state=Stable since=2800 dropped=0 changes=1 cal=nominal",
             "cal=nominal",
         );
     }

@@ -17,12 +17,15 @@ use estimator_core::weighing::{
     ScaleReading,
 };
 
-/// `pipeline::log_readout` with a mass.
+/// `pipeline::log_readout` with a mass and its standard uncertainty.
 pub const READOUT: &str =
-    "readout sample={=u32} mass_g={=f32} state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}";
-/// `pipeline::log_readout` without one.
+    "readout sample={=u32} mass_g={=f32} u_g={=f32} state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}";
+/// `pipeline::log_readout` with a mass whose method states no uncertainty.
+pub const READOUT_NO_UNCERTAINTY: &str =
+    "readout sample={=u32} mass_g={=f32} u_g=none state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}";
+/// `pipeline::log_readout` without a mass.
 pub const READOUT_NO_MASS: &str =
-    "readout sample={=u32} mass_g=none state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}";
+    "readout sample={=u32} mass_g=none u_g=none state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}";
 /// `pipeline::log_command`, a tare taken.
 pub const TARED: &str = "command sample={=u32} tare=ok tare_g={=f32}";
 /// `pipeline::log_command`, the tare cleared.
@@ -46,8 +49,9 @@ pub const BOOT_CALIBRATION: &str =
 pub const END: &str = "end samples={=u32} dropped={=u32}";
 
 /// Every format string above.
-pub const ALL: [&str; 12] = [
+pub const ALL: [&str; 13] = [
     READOUT,
+    READOUT_NO_UNCERTAINTY,
     READOUT_NO_MASS,
     TARED,
     TARE_CLEARED,
@@ -114,13 +118,18 @@ pub fn readout(
         Arg::U32(reading.load_changes),
         Arg::Str(source.label()),
     ];
-    match reading.mass_g {
-        Some(mass_g) => {
-            let mut args = vec![Arg::U32(sample), Arg::F32(mass_g)];
+    match (reading.mass_g, reading.uncertainty_g) {
+        (Some(mass_g), Some(u_g)) => {
+            let mut args = vec![Arg::U32(sample), Arg::F32(mass_g), Arg::F32(u_g)];
             args.extend(tail);
             render(READOUT, &args)
         }
-        None => {
+        (Some(mass_g), None) => {
+            let mut args = vec![Arg::U32(sample), Arg::F32(mass_g)];
+            args.extend(tail);
+            render(READOUT_NO_UNCERTAINTY, &args)
+        }
+        (None, _) => {
             let mut args = vec![Arg::U32(sample)];
             args.extend(tail);
             render(READOUT_NO_MASS, &args)

@@ -28,6 +28,7 @@ pub(crate) struct Intake<T> {
     state: State,
     estimate: Option<T>,
     residual: Option<T>,
+    uncertainty: Option<T>,
 }
 
 impl<T: Real> Intake<T> {
@@ -43,6 +44,7 @@ impl<T: Real> Intake<T> {
             state: State::WarmingUp,
             estimate: None,
             residual: None,
+            uncertainty: None,
         }
     }
 
@@ -83,6 +85,14 @@ impl<T: Real> Intake<T> {
         self.state = State::Estimating;
         self.estimate = Some(estimate);
         self.residual = residual;
+        self.uncertainty = None;
+    }
+
+    /// State the standard uncertainty of the estimate just set by [`Self::estimating`].
+    pub(crate) fn state_uncertainty(&mut self, uncertainty: Option<T>) {
+        if self.estimate.is_some() {
+            self.uncertainty = uncertainty;
+        }
     }
 
     /// No estimate yet: back to warming up (a baseline that is not stable).
@@ -90,6 +100,7 @@ impl<T: Real> Intake<T> {
         self.state = State::WarmingUp;
         self.estimate = None;
         self.residual = None;
+        self.uncertainty = None;
     }
 
     /// Mark the current reading invalid; a later valid update may clear it.
@@ -97,6 +108,7 @@ impl<T: Real> Intake<T> {
         self.state = State::Invalid(reason);
         self.estimate = None;
         self.residual = None;
+        self.uncertainty = None;
     }
 
     /// Invalidate and stay invalid until the reset: the data stream or the state is broken.
@@ -112,6 +124,7 @@ impl<T: Real> Intake<T> {
             samples: self.samples,
             state: self.state,
             residual: self.residual,
+            uncertainty: self.uncertainty,
         }
     }
 }

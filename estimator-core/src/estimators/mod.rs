@@ -28,3 +28,4 @@ pub(crate) mod model;
 pub(crate) mod noise_meter;
 pub(crate) mod ramp;
 pub(crate) mod step;
+pub(crate) mod step_uncertainty;

@@ -468,6 +468,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
                     estimate: None,
                     state: State::Invalid(InvalidReason::OutsideModelRange),
                     residual: None,
+                    uncertainty: None,
                     ..centre
                 };
             }
@@ -520,6 +521,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
         Reading {
             estimate: Some(estimate),
             residual,
+            uncertainty: None,
             ..centre
         }
     }
@@ -533,6 +535,7 @@ impl<T: Real, const S: usize, const K: usize> Estimator<T> for ModelBank<T, S, K
             samples: self.samples,
             state: State::WarmingUp,
             residual: None,
+            uncertainty: None,
         }; K];
         for (model, reading) in self.models.iter_mut().zip(readings.iter_mut()) {
             *reading = model.push(sample);
@@ -551,6 +554,7 @@ impl<T: Real, const S: usize, const K: usize> Estimator<T> for ModelBank<T, S, K
             samples: self.samples,
             state: State::Invalid(InvalidReason::MissingSample),
             residual: None,
+            uncertainty: None,
         })
     }
 

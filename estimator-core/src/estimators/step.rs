@@ -40,6 +40,7 @@
 use crate::estimators::consistency::{NoiseReference, ResidualCheck};
 use crate::estimators::input::{Decimator, DifferenceWindow};
 use crate::estimators::intake::{estimator_via_intake, intake_config_builders, Intake};
+use crate::estimators::step_uncertainty::LagSums;
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
 use crate::reading::{ConfigError, InvalidReason};
@@ -161,11 +162,14 @@ impl<T: Real> StepConfig<T> {
     }
 }
 
-/// The data-driven step-input estimator with capacity for orders up to `N`.
+/// The data-driven step-input estimator with capacity for orders up to `N`, stating the
+/// standard uncertainty of its level for orders up to `L` (the default 0 states none and
+/// keeps the bare estimator's size: the lag sums take `L³ + 3L² + L` numbers, see
+/// `crate::estimators::step_uncertainty`).
 ///
 /// Fixed size, no allocation, never panics on data. See the module docs for the method.
 #[derive(Clone, Debug)]
-pub struct StepEstimator<T: Real, const N: usize> {
+pub struct StepEstimator<T: Real, const N: usize, const L: usize = 0> {
     config: StepConfig<T>,
     intake: Intake<T>,
     differences: DifferenceWindow<T, N, 1>,
@@ -183,9 +187,11 @@ pub struct StepEstimator<T: Real, const N: usize> {
     check: Option<ResidualCheck<T>>,
     /// `Σc²` of the latest solution: the next residual's noise in block-mean variances.
     noise_gain: T,
+    /// The rows' lagged cross-products and residual sum of squares, for the uncertainty.
+    lags: LagSums<T, N, L>,
 }
 
-impl<T: Real, const N: usize> StepEstimator<T, N> {
+impl<T: Real, const N: usize, const L: usize> StepEstimator<T, N, L> {
     /// A new estimator, or the reason the configuration is impossible.
     pub fn new(config: StepConfig<T>) -> Result<Self, ConfigError> {
         config.validate(N)?;
@@ -199,6 +205,7 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
             offset: T::ZERO,
             check: config.residual_check(),
             noise_gain: T::ONE,
+            lags: LagSums::new(),
         })
     }
 
@@ -264,9 +271,9 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         self.effective_rows = self.effective_rows * lambda + T::ONE;
         let had_estimate = self.intake.estimate().is_some();
         let determined_before = self.rows as usize > n;
-        let folded = self
-            .factor
-            .fold(n, self.differences.window(), [T::ONE], x - self.offset);
+        let window = self.differences.window();
+        self.lags.push_row(&window, n);
+        let folded = self.factor.fold(n, window, [T::ONE], x - self.offset);
         self.rows = self.rows.saturating_add(1);
         let [deviation] = self.factor.tail_solution();
         let step = self.offset + deviation;
@@ -277,6 +284,10 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         }
         if (self.rows as usize) < n + 1 {
             return;
+        }
+        if determined_before {
+            self.lags
+                .push_residual(folded.row_weight * folded.residual * folded.residual);
         }
         let mismatch = match self.check.as_mut() {
             Some(check) => {
@@ -308,6 +319,19 @@ impl<T: Real, const N: usize> StepEstimator<T, N> {
         }
         self.intake
             .estimating(step, had_estimate.then_some(folded.residual));
+        self.intake.state_uncertainty(self.uncertainty());
+    }
+
+    /// The standard uncertainty of the current level (`crate::estimators::step_uncertainty`):
+    /// `None` for `L < n`, with forgetting, or with too few rows. O(n³).
+    fn uncertainty(&self) -> Option<T> {
+        let n = self.config.order;
+        if L < n || self.config.forgetting < T::ONE {
+            return None;
+        }
+        let (z, [z_level]) = self.factor.last_unknown_influence(n)?;
+        let (lead, _) = self.factor.solution(n);
+        self.lags.uncertainty(n, &z, z_level, &lead)
     }
 }
 
@@ -331,4 +355,4 @@ pub(crate) fn recentre<T: Real, const N: usize, const E: usize>(
     origin
 }
 
-estimator_via_intake!(StepEstimator<T, const N>);
+estimator_via_intake!(StepEstimator<T, const N, const L>);

@@ -176,6 +176,39 @@ impl<T: Real, const N: usize, const E: usize> Factor<T, N, E> {
         self.lead_weight
     }
 
+    /// The last trailing unknown's row of `P = (ΦᵀWΦ)⁻¹`, leading entries then trailing:
+    /// the weights `z` with which the rows' equation errors reach that unknown
+    /// (`δθ_last = zᵀ·Φᵀ·W·ε`). `P = U⁻¹·D⁻¹·U⁻ᵀ`, and `U⁻ᵀ` leaves the last unit vector
+    /// as it is (`U` is unit upper triangular), so `z = U⁻¹·e_last / D_last`: one back
+    /// substitution, O((n+E)²). `None` while the last column has no weight.
+    pub(crate) fn last_unknown_influence(&self, active: usize) -> Option<([T; N], [T; E])> {
+        let d = self.tail_weight[E - 1];
+        if !(d > T::ZERO) {
+            return None;
+        }
+        let mut tail = [T::ZERO; E];
+        tail[E - 1] = T::ONE / d;
+        for e in (0..E - 1).rev() {
+            let mut value = T::ZERO;
+            for f in (e + 1)..E {
+                value -= self.tail_coupling[e][f] * tail[f];
+            }
+            tail[e] = value;
+        }
+        let mut lead = [T::ZERO; N];
+        for i in (0..active).rev() {
+            let mut value = T::ZERO;
+            for j in (i + 1)..active {
+                value -= self.lead_coupling[i][j] * lead[j];
+            }
+            for e in 0..E {
+                value -= self.cross_coupling[i][e] * tail[e];
+            }
+            lead[i] = value;
+        }
+        Some((lead, tail))
+    }
+
     /// All unknowns, leading then trailing (full back substitution, O((n+E)²)).
     pub(crate) fn solution(&self, active: usize) -> ([T; N], [T; E]) {
         let tail = self.tail_solution();

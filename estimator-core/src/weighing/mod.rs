@@ -32,7 +32,7 @@ pub(crate) use method::readout_samples;
 pub use method::{
     BankCandidate, LoadCoverage, LoadScene, LoadScore, OnsetConfig, Prediction, RegionError,
     WeighingConfig, WeighingEstimator, WeighingMethod, MAX_LOADS, MAX_NYQUIST_OVER_BANDWIDTH,
-    MAX_SCENES, MIN_DATA_DRIVEN_ORDER, MIN_REFERENCE_SAMPLES,
+    MAX_SCENES, MIN_DATA_DRIVEN_ORDER, MIN_REFERENCE_SAMPLES, UNCERTAINTY_ORDERS,
 };
 pub use scale::{
     CountsScale, RawSample, Scale, ScaleConfig, ScaleEstimator, ScaleFault, ScaleReading,

@@ -33,7 +33,7 @@ enum Command {
     /// Simulate a scene: CSV `t,y,truth` (t in s, y the ADC code, truth the load in g).
     Simulate(SimulateArgs),
     /// Run one of the core's estimators over a CSV with a header and a column `y`; writes
-    /// `k,estimate,state` to stdout (estimate empty while not valid). Give `--method SPEC`
+    /// `k,estimate,u,state` to stdout (estimate empty while not valid). Give `--method SPEC`
     /// (e.g. `model:D=8`, `settled`, `step:n=7,D=16,precision=f32`), or the step estimator's
     /// shorthand `--order N [--decimation D --forgetting L --precision P]`.
     Estimate(EstimateArgs),
@@ -353,7 +353,8 @@ struct ChartArgs {
 #[derive(Args)]
 #[command(allow_negative_numbers = true)]
 struct StudyArgs {
-    /// `speed` (speed against accuracy), `stability` (the stability map) or `ramp`
+    /// `speed` (speed against accuracy), `stability` (the stability map), `coverage` (the
+    /// stated uncertainty against the errors) or `ramp`
     /// (conveyor weighing, the `conveyor-ramp` scene: its SNRs default to 30,40,50 dB;
     /// `--method ramp:n=..,D=..` replaces its setups).
     which: StudyKind,
@@ -404,6 +405,9 @@ enum StudyKind {
     Ramp,
     /// The stability map of every estimator.
     Stability,
+    /// Whether the stated uncertainty holds: the share of runs within ±2u, per SNR and
+    /// readout time, for the firmware's method (or each `--method`).
+    Coverage,
 }
 
 fn create(path: &PathBuf) -> Result<BufWriter<File>> {
@@ -729,7 +733,43 @@ fn study_command(args: StudyArgs) -> Result<()> {
         StudyKind::Speed => study_speed(args),
         StudyKind::Stability => study_stability(args),
         StudyKind::Ramp => study_ramp(args),
+        StudyKind::Coverage => study_coverage(args),
     }
+}
+
+/// `study coverage`: the stated uncertainty against the errors, on the reference drop.
+fn study_coverage(args: StudyArgs) -> Result<()> {
+    let snr_db = if args.snr_db.is_empty() {
+        host_sim::coverage::SNRS_DB.to_vec()
+    } else {
+        args.snr_db
+    };
+    let methods = if args.methods.is_empty() {
+        vec![study::firmware_default()?.0]
+    } else {
+        args.methods
+    };
+    let runs = args.runs.unwrap_or(1000);
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let path = args.out.join("coverage.md");
+    let mut file = create(&path)?;
+    let stdout = std::io::stdout();
+    for method in &methods {
+        let rows =
+            host_sim::coverage::study("reference-step", method, runs as u64, args.seed, &snr_db)?;
+        let header = format!(
+            "`{method}` on the reference drop (onset and tare known), {runs} runs per SNR, seed {}:",
+            args.seed
+        );
+        host_sim::coverage::write_markdown(&rows, &header, &mut stdout.lock())?;
+        host_sim::coverage::write_markdown(&rows, &header, &mut file)?;
+        println!();
+        writeln!(file)?;
+    }
+    file.flush()?;
+    println!("wrote {}", path.display());
+    Ok(())
 }
 
 /// `study speed`: every method's speed against its accuracy.

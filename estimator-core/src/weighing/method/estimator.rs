@@ -10,6 +10,11 @@ use crate::reading::{ConfigError, Estimator, Reading};
 
 use super::{WeighingConfig, WeighingMethod};
 
+/// The configured step method states its uncertainty up to this order (the lag sums
+/// take `L³ + 3L² + L` numbers: 2.8 KB in f32 at 8); tuning's orders above it read with
+/// no `u`.
+pub const UNCERTAINTY_ORDERS: usize = 8;
+
 /// The configured method as one estimator over samples with the zero removed, answering in
 /// grams. Capacity `N` for the data-driven methods, `S` states and `K` candidates for the
 /// bank (`K` must equal the configured candidate count).
@@ -18,7 +23,7 @@ use super::{WeighingConfig, WeighingMethod};
 #[allow(clippy::large_enum_variant)]
 pub enum WeighingEstimator<T: Real, const N: usize, const S: usize, const K: usize> {
     /// [`WeighingMethod::Step`].
-    Step(StepEstimator<T, N>),
+    Step(StepEstimator<T, N, UNCERTAINTY_ORDERS>),
     /// [`WeighingMethod::BiasCompensated`].
     BiasCompensated(BiasCompensatedStepEstimator<T, N>),
     /// [`WeighingMethod::InstrumentalVariable`].

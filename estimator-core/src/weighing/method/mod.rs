@@ -37,7 +37,7 @@ mod kind;
 mod onset;
 
 pub use coverage::{LoadCoverage, LoadScene, LoadScore, MAX_LOADS, MAX_SCENES};
-pub use estimator::WeighingEstimator;
+pub use estimator::{WeighingEstimator, UNCERTAINTY_ORDERS};
 pub use kind::{BankCandidate, WeighingMethod};
 pub use onset::{OnsetConfig, MIN_REFERENCE_SAMPLES};
 

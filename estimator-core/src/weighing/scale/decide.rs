@@ -42,6 +42,7 @@ impl<E: ScaleEstimator> Scale<E> {
         // The tracked zero may have moved since the run started.
         let zero_shift_g = (self.zero_counts - self.run_zero_counts as f32) * self.grams_per_count;
         let estimate_g = estimate_counts * self.grams_per_count - zero_shift_g;
+        self.gross_u_g = reading.uncertainty.map(|u| u * self.grams_per_count.abs());
         if estimate_g > self.overload_limit_g() {
             return self.overloaded();
         }
@@ -290,7 +291,7 @@ mod tests {
     /// The step estimator, its readings flagged `IllConditioned` (not latched) from the
     /// `from`-th to before the `to`-th sample of each run, as IV can be on a fresh drop.
     struct FlaggedWindow {
-        inner: StepEstimator<f32, 8>,
+        inner: StepEstimator<f32, 8, 8>,
         from: u32,
         to: u32,
     }

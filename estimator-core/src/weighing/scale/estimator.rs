@@ -66,7 +66,7 @@ macro_rules! scale_estimator {
 }
 
 scale_estimator! {
-    [const N: usize] StepEstimator<f32, N> => |e| e.config().decimation;
+    [const N: usize, const L: usize] StepEstimator<f32, N, L> => |e| e.config().decimation;
     [const N: usize] BiasCompensatedStepEstimator<f32, N> => |e| e.config().step.decimation;
     [const N: usize] IvStepEstimator<f32, N> => |e| e.config().step.decimation;
     [const S: usize, const K: usize] ModelBank<f32, S, K> => |e| e.decimation();

@@ -116,6 +116,8 @@ pub struct Scale<E> {
     restart_pending: bool,
     fault: Option<ScaleFault>,
     gross_g: Option<f32>,
+    /// The standard uncertainty of `gross_g` (grams), when the estimator states one.
+    gross_u_g: Option<f32>,
     state: ScaleState,
     /// The empty pan's noise, for the consistency check.
     noise: NoiseMetering,
@@ -125,7 +127,7 @@ pub struct Scale<E> {
 
 /// The scale around the step estimator of capacity `N` (the firmware's method before the
 /// configuration was read at build time; the tests' reference).
-pub type StepScale<const N: usize> = Scale<StepEstimator<f32, N>>;
+pub type StepScale<const N: usize> = Scale<StepEstimator<f32, N, N>>;
 
 impl<E: ScaleEstimator> Scale<E> {
     /// A scale running `estimator` (built in counts, see [`ScaleEstimator`]) with the
@@ -165,6 +167,7 @@ impl<E: ScaleEstimator> Scale<E> {
             restart_pending: false,
             fault: None,
             gross_g: None,
+            gross_u_g: None,
             state: ScaleState::Estimating,
             noise: NoiseMetering::new(samples_per_update, config.noise_window_samples),
             noise_metered: false,
@@ -220,6 +223,10 @@ impl<E: ScaleEstimator> Scale<E> {
             mass_g: match self.state {
                 ScaleState::Invalid(_) => None,
                 _ => self.gross_g.map(|gross| gross - self.tare_g),
+            },
+            uncertainty_g: match self.state {
+                ScaleState::Invalid(_) => None,
+                _ => self.gross_g.and(self.gross_u_g),
             },
             state: self.state,
             samples_since_change: u32::try_from(self.samples_since_change).unwrap_or(u32::MAX),

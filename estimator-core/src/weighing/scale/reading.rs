@@ -70,6 +70,10 @@ pub enum ScaleState {
 pub struct ScaleReading {
     /// Net mass in grams (gross minus tare); `None` while warming up or invalid.
     pub mass_g: Option<f32>,
+    /// The standard uncertainty of `mass_g` in grams (GUM; ±2u is a 95 % interval): the
+    /// estimator's, converted with the gain. `None` without a mass, or when the configured
+    /// method states none. The tare's own uncertainty is not included.
+    pub uncertainty_g: Option<f32>,
     /// What the pan holds.
     pub state: ScaleState,
     /// Raw samples since the last detected load change (or restart), shown saturating at

@@ -1,0 +1,188 @@
+//! `host-sim study coverage`: does the stated standard uncertainty hold? For each SNR and
+//! readout time, the fraction of Monte Carlo runs whose error lies within ±2u, over the
+//! runs that state an estimate with its `u` at that time (a run with no `u` yet, or a
+//! flagged reading, is counted apart: it claims nothing).
+//!
+//! The scene is the reference drop (onset known, tare known) at each SNR; the method is
+//! whatever the caller gives (by default the firmware's, in f32). A cell's Monte Carlo
+//! band: with `m` readings and a true coverage of 95 %, the observed fraction lies within
+//! `±1.96·sqrt(0.95·0.05/m)` of it 95 % of the time (±1.4 % at 1,000 runs).
+
+use std::io::Write;
+
+use anyhow::Result;
+use estimator_core::sensor::AdcSource;
+use rayon::prelude::*;
+
+use crate::method::{BuildContext, Method};
+use crate::scene::Scene;
+use crate::simulated::run_seed;
+
+/// Readout times of the table, milliseconds after the onset.
+pub const TIMES_MS: [u32; 7] = [25, 50, 75, 100, 150, 200, 400];
+/// SNRs of the table, dB.
+pub const SNRS_DB: [f64; 6] = [30.0, 40.0, 50.0, 60.0, 70.0, 80.0];
+
+/// One SNR and readout time.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Cell {
+    /// Runs that gave an estimate with its `u` at this time.
+    pub stated: u32,
+    /// Of those, runs whose error is within ±2u.
+    pub covered: u32,
+    /// Runs with an estimate but no `u`.
+    pub without_u: u32,
+    /// Sum of (error/u)² over the stated runs (an RMS z of 1 is a calibrated `u`).
+    pub z_square_sum: f64,
+}
+
+impl Cell {
+    /// The covered fraction, `None` without stated runs.
+    pub fn coverage(&self) -> Option<f64> {
+        (self.stated > 0).then(|| f64::from(self.covered) / f64::from(self.stated))
+    }
+
+    /// The half-width of the 95 % Monte Carlo band around a true 95 % coverage.
+    pub fn band(&self) -> Option<f64> {
+        (self.stated > 0).then(|| 1.96 * (0.95 * 0.05 / f64::from(self.stated)).sqrt())
+    }
+
+    fn merge(&mut self, other: &Cell) {
+        self.stated += other.stated;
+        self.covered += other.covered;
+        self.without_u += other.without_u;
+        self.z_square_sum += other.z_square_sum;
+    }
+}
+
+/// The cells of one SNR, in [`TIMES_MS`] order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SnrRow {
+    /// Signal-to-noise ratio of the scene, dB.
+    pub snr_db: f64,
+    /// One per readout time.
+    pub cells: Vec<Cell>,
+}
+
+/// Run `runs` drops of the `scene` at each SNR through `method`; the result does not depend
+/// on the thread count (each run's seed is `run_seed(seed, run)`, sums are exact counts and
+/// f64 sums merged in run order).
+pub fn study(
+    scene: &str,
+    method: &Method,
+    runs: u64,
+    seed: u64,
+    snrs_db: &[f64],
+) -> Result<Vec<SnrRow>> {
+    let base = Scene::load(scene)?;
+    let (_, mass_g, _) = base.studied_step();
+    snrs_db
+        .iter()
+        .map(|&snr_db| {
+            let scene = base.with_snr_db(snr_db);
+            let context = BuildContext::new(scene.chain, scene.chain.counts_per_gram());
+            method.build(&context)?;
+            let per_run: Vec<Result<Vec<Cell>>> = (0..runs)
+                .into_par_iter()
+                .map(|run| one_run(&scene, method, &context, run_seed(seed, run), mass_g))
+                .collect();
+            let mut cells = vec![Cell::default(); TIMES_MS.len()];
+            for run in per_run {
+                for (cell, one) in cells.iter_mut().zip(run?) {
+                    cell.merge(&one);
+                }
+            }
+            Ok(SnrRow { snr_db, cells })
+        })
+        .collect()
+}
+
+fn one_run(
+    scene: &Scene,
+    method: &Method,
+    context: &BuildContext,
+    seed: u64,
+    mass_g: f64,
+) -> Result<Vec<Cell>> {
+    let mut estimator = method.build(context)?;
+    let mut adc = scene.adc(seed);
+    // The estimate starts at the onset, as a scale that found the landing starts it.
+    let (onset, _, _) = scene.studied_step();
+    for _ in 0..onset {
+        let _ = adc.read();
+    }
+    let zero = scene.chain.zero_code();
+    let rate_hz = 1.0 / scene.chain.conversion_period_s();
+    let last = samples_at(*TIMES_MS.last().unwrap(), rate_hz);
+    let mut cells = vec![Cell::default(); TIMES_MS.len()];
+    for k in 1..=last {
+        let reading = match adc.read() {
+            Ok(code) => estimator.push(f64::from(code) - zero),
+            Err(_) => estimator.push_missing(),
+        };
+        if let Some(i) = TIMES_MS.iter().position(|&t| samples_at(t, rate_hz) == k) {
+            let cell = &mut cells[i];
+            match (reading.estimate, reading.uncertainty) {
+                (Some(estimate), Some(u)) => {
+                    let z = (estimate - mass_g) / u;
+                    cell.stated += 1;
+                    cell.covered += u32::from(z.abs() <= 2.0);
+                    cell.z_square_sum += z * z;
+                }
+                (Some(_), None) => cell.without_u += 1,
+                (None, _) => {}
+            }
+        }
+    }
+    Ok(cells)
+}
+
+/// The sample index (1-based) of a readout `ms` after the onset.
+fn samples_at(ms: u32, rate_hz: f64) -> u64 {
+    (f64::from(ms) * 1e-3 * rate_hz).round() as u64
+}
+
+/// The table: coverage in % with the stated runs, RMS z, per SNR and time.
+pub fn write_markdown(rows: &[SnrRow], header: &str, out: &mut impl Write) -> Result<()> {
+    writeln!(out, "{header}")?;
+    writeln!(out)?;
+    write!(out, "| SNR |")?;
+    for t in TIMES_MS {
+        write!(out, " {t} ms |")?;
+    }
+    writeln!(out)?;
+    write!(out, "|---|")?;
+    for _ in TIMES_MS {
+        write!(out, "---|")?;
+    }
+    writeln!(out)?;
+    for row in rows {
+        write!(out, "| {} dB |", row.snr_db)?;
+        for cell in &row.cells {
+            match cell.coverage() {
+                Some(coverage) => write!(
+                    out,
+                    " {:.1} % (rms z {:.2}, {}) |",
+                    100.0 * coverage,
+                    (cell.z_square_sum / f64::from(cell.stated)).sqrt(),
+                    cell.stated
+                )?,
+                None if cell.without_u > 0 => write!(out, " no u ({}) |", cell.without_u)?,
+                None => write!(out, " no estimate |")?,
+            }
+        }
+        writeln!(out)?;
+    }
+    let band = rows
+        .iter()
+        .flat_map(|row| row.cells.iter())
+        .filter_map(Cell::band)
+        .fold(0.0, f64::max);
+    writeln!(out)?;
+    writeln!(
+        out,
+        "Each cell: the share of runs whose error is within ±2u (goal 95 %; a true 95 % is observed within ±{:.1} % with these runs, 95 % of the time), the RMS of error/u (1 for a calibrated u) and the runs that stated u. No estimate: the method is still warming up.",
+        100.0 * band
+    )?;
+    Ok(())
+}

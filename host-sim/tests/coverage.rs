@@ -1,0 +1,74 @@
+//! The stated uncertainty holds: ±2u covers about 95 % of the errors of the firmware's
+//! method on the reference drop, and f32 states the same `u` as f64 on the same data.
+//!
+//! Before the sandwich form (`estimator_core::estimators::step_uncertainty`), the
+//! white-noise least-squares `u` of the same method covered 60–74 % (RMS error/u 2.0–2.8)
+//! at 30–70 dB: over-confident by a factor of two.
+
+use estimator_core::sensor::AdcSource;
+use estimator_core::{Estimator, StepConfig, StepEstimator};
+use host_sim::coverage::{study, TIMES_MS};
+use host_sim::scene::Scene;
+use host_sim::study::firmware_default;
+
+#[test]
+fn two_u_covers_95_percent_of_the_firmware_methods_errors() {
+    let (method, _) = firmware_default().unwrap();
+    let rows = study("reference-step", &method, 600, 7, &[30.0, 50.0, 70.0]).unwrap();
+    for row in &rows {
+        for (t, cell) in TIMES_MS.iter().zip(&row.cells) {
+            if *t < 100 {
+                // Warming up, or too few rows for u: nothing is stated, so nothing can be
+                // over-confident.
+                assert_eq!(cell.stated, 0, "{} dB {t} ms", row.snr_db);
+                continue;
+            }
+            let coverage = cell.coverage().unwrap();
+            let rms_z = (cell.z_square_sum / f64::from(cell.stated)).sqrt();
+            assert!(cell.stated >= 590, "{} dB {t} ms: {cell:?}", row.snr_db);
+            // The goal is 95 % ± 3 %; `study coverage --runs 1000 --seed 1` measures
+            // 92.0-95.6 % (RMS error/u 0.98-1.15: u is still slightly small). This test
+            // is the floor against over-confidence, with the Monte Carlo band at 600 runs
+            // (±1.7 %) below the goal's edge: the white-noise u it replaced covered 60-74 %.
+            assert!(
+                (0.90..=0.99).contains(&coverage) && rms_z < 1.25,
+                "{} dB {t} ms: {:.1} % (rms z {rms_z:.2})",
+                row.snr_db,
+                100.0 * coverage
+            );
+        }
+    }
+}
+
+/// f32 on the target states the f64 `u` of the same data within 10 % from the first
+/// readout (100 ms) at 30 and 50 dB. At 70 dB the first readings after 100 ms differ by up
+/// to 12 % (the f32 influence row `z` on a Hankel matrix that ill-conditioned) and 1 % from
+/// 200 ms: checked from there.
+#[test]
+fn f32_states_the_f64_uncertainty() {
+    for (snr_db, from_sample) in [(30.0, 400), (50.0, 400), (70.0, 800)] {
+        let scene = Scene::load("reference-step").unwrap().with_snr_db(snr_db);
+        let gain = scene.chain.counts_per_gram();
+        let zero = scene.chain.zero_code();
+        let mut worst = 0.0f64;
+        for seed in 1..=40 {
+            let mut adc = scene.adc(seed);
+            let mut e64 =
+                StepEstimator::<f64, 5, 5>::new(StepConfig::new(5, gain).with_decimation(24))
+                    .unwrap();
+            let mut e32 = StepEstimator::<f32, 5, 5>::new(
+                StepConfig::new(5, gain as f32).with_decimation(24),
+            )
+            .unwrap();
+            for k in 1..=4000 {
+                let centred = f64::from(adc.read().unwrap()) - zero;
+                let (a, b) = (e64.push(centred), e32.push(centred as f32));
+                if k >= from_sample {
+                    let (u64_, u32_) = (a.uncertainty.unwrap(), b.uncertainty.unwrap());
+                    worst = worst.max((f64::from(u32_) / u64_ - 1.0).abs());
+                }
+            }
+        }
+        assert!(worst < 0.1, "{snr_db} dB: f32 u off by {worst}");
+    }
+}
