@@ -577,6 +577,8 @@ fn weighing_config(method: WeighingMethod) -> WeighingConfig {
         recorded_worst_error_g: 0.0,
         capacity_g: estimator_core::weighing::WeighingConfig::REFERENCE_CAPACITY_G,
         scale_interval_g: estimator_core::weighing::WeighingConfig::REFERENCE_SCALE_INTERVAL_G,
+        final_target_g: estimator_core::weighing::WeighingConfig::FINAL_TARGET_E
+            * estimator_core::weighing::WeighingConfig::REFERENCE_SCALE_INTERVAL_G,
         loads: LoadCoverage::calibration_mass_only(MASS_G, prediction),
     }
 }

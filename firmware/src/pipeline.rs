@@ -102,7 +102,7 @@ pub fn read_sample<A: AdcSource>(adc: &mut A) -> RawSample {
 /// costs nothing; it must never log or wait.
 pub fn estimate<I: InterruptNumber>(
     pipeline: &mut impl Mutex<T = Pipeline>,
-    latest: &mut impl Mutex<T = Option<Readout>>,
+    latest: &mut impl Mutex<T = Lines>,
     consumer: &mut heapless::spsc::Consumer<'_, SampleMessage>,
     readout_task: I,
 ) {
@@ -111,12 +111,54 @@ pub fn estimate<I: InterruptNumber>(
             let Some(message) = consumer.dequeue() else {
                 break;
             };
-            if let Some(readout) = pipeline.accept(message) {
-                latest.lock(|latest| *latest = Some(readout));
+            let lines = pipeline.accept(message);
+            if !lines.is_empty() {
+                latest.lock(|latest| latest.merge(lines));
                 rtic::pend(readout_task);
             }
         }
     });
+}
+
+/// What the readout task has to print: the latest 20 Hz readout, and a final reading the
+/// moment a run reached one (not at the next tick; kept until printed even if a readout
+/// follows before the task runs).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Lines {
+    /// The latest readout tick.
+    pub readout: Option<Readout>,
+    /// The run's first final reading, when it has just been reached.
+    pub final_reading: Option<Readout>,
+}
+
+impl Lines {
+    /// Nothing to print.
+    pub fn is_empty(&self) -> bool {
+        self.readout.is_none() && self.final_reading.is_none()
+    }
+
+    /// Take in newer lines: a newer readout replaces an unprinted one (the display shows
+    /// the latest); a final reading is kept until printed.
+    pub fn merge(&mut self, newer: Lines) {
+        if newer.readout.is_some() {
+            self.readout = newer.readout;
+        }
+        if newer.final_reading.is_some() {
+            self.final_reading = newer.final_reading;
+        }
+    }
+
+    /// Print them (the final reading first: it was reached at or before the tick) and
+    /// return the readout, for the task's regular work after a tick.
+    pub fn log(&self) -> Option<Readout> {
+        if let Some(final_reading) = &self.final_reading {
+            log_final(final_reading);
+        }
+        if let Some(readout) = &self.readout {
+            log_readout(readout);
+        }
+        self.readout
+    }
 }
 
 /// One readout line's content.
@@ -143,6 +185,8 @@ pub struct Pipeline {
     commands: Commands,
     next_sequence: u32,
     dropped: u32,
+    /// The run (its load-change count) whose final reading was printed.
+    final_run: Option<u32>,
 }
 
 impl Pipeline {
@@ -160,6 +204,7 @@ impl Pipeline {
             commands: Commands::new(command_config(limits)),
             next_sequence: 0,
             dropped: 0,
+            final_run: None,
         }
     }
 
@@ -173,6 +218,7 @@ impl Pipeline {
         self.commands = Commands::new(command_config(self.limits));
         self.next_sequence = 0;
         self.dropped = 0;
+        self.final_run = None;
     }
 
     /// Whether the runs from the next load change on are checked against a metered noise
@@ -224,10 +270,11 @@ impl Pipeline {
         }
     }
 
-    /// Process one queued sample; returns a readout every `SAMPLES_PER_READOUT` samples.
-    /// A gap in the sequence numbers (a full queue) counts every missing sample as dropped
-    /// and tells the scale once, which restarts its estimate after the gap.
-    pub fn accept(&mut self, message: SampleMessage) -> Option<Readout> {
+    /// Process one queued sample; returns a readout every `SAMPLES_PER_READOUT` samples,
+    /// and the run's final reading on the sample that first reached it (once per load
+    /// change). A gap in the sequence numbers (a full queue) counts every missing sample as
+    /// dropped and tells the scale once, which restarts its estimate after the gap.
+    pub fn accept(&mut self, message: SampleMessage) -> Lines {
         let gap = message.sequence.wrapping_sub(self.next_sequence);
         if gap != 0 && gap < u32::MAX / 2 {
             self.dropped = self.dropped.saturating_add(gap);
@@ -239,15 +286,21 @@ impl Pipeline {
         }
         let reading = self.scale.push(message.sample);
         let samples_done = message.sequence.wrapping_add(1);
-        if samples_done.is_multiple_of(SAMPLES_PER_READOUT) {
-            Some(Readout {
-                sample: samples_done,
-                reading,
-                dropped: self.dropped,
-                calibration: self.calibration_source,
-            })
-        } else {
-            None
+        let line = Readout {
+            sample: samples_done,
+            reading,
+            dropped: self.dropped,
+            calibration: self.calibration_source,
+        };
+        let first_final = reading.is_final && self.final_run != Some(reading.load_changes);
+        if first_final {
+            self.final_run = Some(reading.load_changes);
+        }
+        Lines {
+            readout: samples_done
+                .is_multiple_of(SAMPLES_PER_READOUT)
+                .then_some(line),
+            final_reading: first_final.then_some(line),
         }
     }
 }
@@ -330,7 +383,7 @@ pub fn log_readout(readout: &Readout) {
     let reading = &readout.reading;
     match (reading.mass_g, reading.uncertainty_g) {
         (Some(mass_g), Some(u_g)) => defmt::println!(
-            "readout sample={=u32} mass_g={=f32} u_g={=f32} state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}",
+            "readout sample={=u32} mass_g={=f32} u_g={=f32} state={} since={=u32} dropped={=u32} changes={=u32} cal={=str} final={=u8}",
             readout.sample,
             mass_g,
             u_g,
@@ -338,10 +391,11 @@ pub fn log_readout(readout: &Readout) {
             reading.samples_since_change,
             readout.dropped,
             reading.load_changes,
-            readout.calibration.label()
+            readout.calibration.label(),
+            u8::from(reading.is_final)
         ),
         (Some(mass_g), None) => defmt::println!(
-            "readout sample={=u32} mass_g={=f32} u_g=none state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}",
+            "readout sample={=u32} mass_g={=f32} u_g=none state={} since={=u32} dropped={=u32} changes={=u32} cal={=str} final=0",
             readout.sample,
             mass_g,
             reading.state,
@@ -351,7 +405,7 @@ pub fn log_readout(readout: &Readout) {
             readout.calibration.label()
         ),
         (None, _) => defmt::println!(
-            "readout sample={=u32} mass_g=none u_g=none state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}",
+            "readout sample={=u32} mass_g=none u_g=none state={} since={=u32} dropped={=u32} changes={=u32} cal={=str} final=0",
             readout.sample,
             reading.state,
             reading.samples_since_change,
@@ -359,6 +413,24 @@ pub fn log_readout(readout: &Readout) {
             reading.load_changes,
             readout.calibration.label()
         ),
+    }
+}
+
+/// Emit a run's final reading as its own line, the moment it is reached (`final sample=…
+/// mass_g=… u_g=… …`; `tests::e2e` parses exactly this format).
+pub fn log_final(line: &Readout) {
+    let reading = &line.reading;
+    if let (Some(mass_g), Some(u_g)) = (reading.mass_g, reading.uncertainty_g) {
+        defmt::println!(
+            "final sample={=u32} mass_g={=f32} u_g={=f32} state={} since={=u32} changes={=u32} cal={=str}",
+            line.sample,
+            mass_g,
+            u_g,
+            reading.state,
+            reading.samples_since_change,
+            reading.load_changes,
+            line.calibration.label()
+        );
     }
 }
 

@@ -43,6 +43,7 @@ pub const WEIGHING: WeighingConfig = WeighingConfig {
     },
     capacity_g: 600.0,
     scale_interval_g: 0.1,
+    final_target_g: 0.05,
 };
 /// Largest model order the estimator holds: the configured order (1 for the bank).
 pub const ORDER_CAPACITY: usize = 5;

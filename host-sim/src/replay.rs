@@ -57,9 +57,7 @@ impl ReplayRow {
             .reading
             .uncertainty_g
             .map_or(String::new(), |u| format!("{u}"));
-        // The final flag follows the scale's reading once it carries one; until then a row
-        // is never final.
-        let final_flag = 0;
+        let final_flag = u8::from(self.reading.is_final);
         format!(
             "{t_s},{mass},{u},{},{final_flag}",
             state_word(&self.reading.state)

@@ -784,6 +784,8 @@ fn config_with(method: WeighingMethod) -> WeighingConfig {
         recorded_worst_error_g: 0.085_5,
         capacity_g: estimator_core::weighing::WeighingConfig::REFERENCE_CAPACITY_G,
         scale_interval_g: estimator_core::weighing::WeighingConfig::REFERENCE_SCALE_INTERVAL_G,
+        final_target_g: estimator_core::weighing::WeighingConfig::FINAL_TARGET_E
+            * estimator_core::weighing::WeighingConfig::REFERENCE_SCALE_INTERVAL_G,
         loads: coverage(None),
     }
 }

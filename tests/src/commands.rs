@@ -612,6 +612,7 @@ pub fn host_replay(seed: u64) -> RunLog {
     let samples = Timeline::sample(timeline.end_s);
     let step = (SAMPLE_RATE_HZ / READOUT_HZ) as u32;
     let mut typed: Option<u8> = None;
+    let mut finals = e2e::FinalTracker::default();
     for index in 0..samples {
         if let Some(byte) = typed.take() {
             let command = Command::from_byte(byte, REFERENCE_MASS_G as f32).expect("a command");
@@ -620,6 +621,7 @@ pub fn host_replay(seed: u64) -> RunLog {
         }
         let reading = scale.push(weighing::RawSample::read(&mut adc));
         let done = index + 1;
+        lines.extend(finals.line(done, &reading, &source));
         if done % step != 0 {
             continue;
         }
@@ -875,7 +877,7 @@ mod tests {
     fn the_script_sends_each_command_once_in_order() {
         let line = |sample: u32, state: &str, since: u32| {
             ReadoutLine::parse(&format!(
-                "readout sample={sample} mass_g=1 u_g=0.01 state={state} since={since} dropped=0 changes=1 cal=stored"
+                "readout sample={sample} mass_g=1 u_g=0.01 state={state} since={since} dropped=0 changes=1 cal=stored final=0"
             ))
             .unwrap()
         };

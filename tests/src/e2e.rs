@@ -34,6 +34,23 @@ pub mod criteria {
     pub const EMPTY_TOLERANCE_G: f64 = 0.05;
     /// The same 100 ms a drop gets, for the empty pan after power-up and after a removal.
     pub const EMPTY_SETTLE_S: f64 = 0.100;
+    /// The scale interval e of the shipped configuration (`firmware/weighing.toml`).
+    pub const SCALE_INTERVAL_G: f64 = 0.1;
+
+    /// OIML R 76 class III maximum permissible error at verification for a load of
+    /// `mass_g`: 0.5 e up to 500 e, 1 e up to 2000 e, 1.5 e above. A final reading must be
+    /// within it.
+    pub fn mpe_g(mass_g: f64) -> f64 {
+        let e = SCALE_INTERVAL_G;
+        let intervals = mass_g.abs() / e;
+        e * if intervals <= 500.0 {
+            0.5
+        } else if intervals <= 2000.0 {
+            1.0
+        } else {
+            1.5
+        }
+    }
 }
 
 /// A scene: the load on the pan from each time on, and when it ends.
@@ -95,6 +112,8 @@ pub struct ReadoutLine {
     pub dropped: u32,
     /// Where the calibration in use came from: `stored`, or `nominal` (no valid record).
     pub calibration: String,
+    /// The reading is final (`final=1`).
+    pub is_final: bool,
 }
 
 impl ReadoutLine {
@@ -113,6 +132,7 @@ impl ReadoutLine {
         let mut since = None;
         let mut dropped = None;
         let mut calibration = None;
+        let mut is_final = None;
         for field in rest.split_whitespace() {
             let (key, value) = field.split_once('=')?;
             match key {
@@ -135,6 +155,7 @@ impl ReadoutLine {
                 "since" => since = value.parse().ok(),
                 "dropped" => dropped = value.parse().ok(),
                 "cal" => calibration = Some(value.to_string()),
+                "final" => is_final = Some(value == "1"),
                 _ => {}
             }
         }
@@ -146,6 +167,48 @@ impl ReadoutLine {
             since_change: since?,
             dropped: dropped?,
             calibration: calibration?,
+            is_final: is_final?,
+        })
+    }
+}
+
+/// One `final sample=… mass_g=… u_g=… …` line: a run's final reading, printed the moment it
+/// was reached.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FinalLine {
+    /// Samples taken when the reading became final.
+    pub sample: u32,
+    /// The final mass.
+    pub mass_g: f64,
+    /// Its standard uncertainty.
+    pub u_g: f64,
+}
+
+impl FinalLine {
+    /// Time of the line in seconds.
+    pub fn time_s(&self) -> f64 {
+        self.sample as f64 / SAMPLE_RATE_HZ
+    }
+
+    /// Parse a `final …` line.
+    pub fn parse(line: &str) -> Option<Self> {
+        let rest = line.trim().strip_prefix("final ")?;
+        let mut sample = None;
+        let mut mass = None;
+        let mut u = None;
+        for field in rest.split_whitespace() {
+            let (key, value) = field.split_once('=')?;
+            match key {
+                "sample" => sample = value.parse().ok(),
+                "mass_g" => mass = value.parse().ok(),
+                "u_g" => u = value.parse().ok(),
+                _ => {}
+            }
+        }
+        Some(Self {
+            sample: sample?,
+            mass_g: mass?,
+            u_g: u?,
         })
     }
 }
@@ -165,6 +228,14 @@ impl RunLog {
         self.lines
             .iter()
             .filter_map(|line| ReadoutLine::parse(line))
+            .collect()
+    }
+
+    /// The final-reading lines.
+    pub fn finals(&self) -> Vec<FinalLine> {
+        self.lines
+            .iter()
+            .filter_map(|line| FinalLine::parse(line))
             .collect()
     }
 
@@ -201,6 +272,10 @@ pub struct SegmentReport {
     pub largest_error_g: Option<f64>,
     /// Readout lines in the segment.
     pub lines: usize,
+    /// Loaded: time from the change to the final line (`None`: no final reading).
+    pub time_to_final_s: Option<f64>,
+    /// Loaded: the final reading's error, g, and its stated standard uncertainty.
+    pub final_error_g: Option<(f64, f64)>,
 }
 
 /// The checker's result: per-segment figures and every failed criterion.
@@ -225,8 +300,13 @@ impl Report {
         let mut text = String::new();
         let _ = writeln!(
             text,
-            "{:>8} {:>10} {:>22} {:>22}",
-            "at (s)", "truth (g)", "time to 0.1% (ms)", "largest error (g)"
+            "{:>8} {:>10} {:>18} {:>18} {:>15} {:>22}",
+            "at (s)",
+            "truth (g)",
+            "time to 0.1% (ms)",
+            "largest error (g)",
+            "final at (ms)",
+            "final error ± u (g)"
         );
         for segment in &self.segments {
             let time = match (segment.mass_g > 0.0, segment.time_to_tolerance_s) {
@@ -237,10 +317,18 @@ impl Report {
             let error = segment
                 .largest_error_g
                 .map_or("-".to_string(), |error| format!("{error:.4}"));
+            let final_time = match (segment.mass_g > 0.0, segment.time_to_final_s) {
+                (false, _) => "-".to_string(),
+                (true, Some(time)) => format!("{:.1}", time * 1e3),
+                (true, None) => "never".to_string(),
+            };
+            let final_error = segment.final_error_g.map_or("-".to_string(), |(error, u)| {
+                format!("{error:+.4} ± {u:.4}")
+            });
             let _ = writeln!(
                 text,
-                "{:>8.2} {:>10.2} {:>22} {:>22}",
-                segment.start_s, segment.mass_g, time, error
+                "{:>8.2} {:>10.2} {:>18} {:>18} {:>15} {:>22}",
+                segment.start_s, segment.mass_g, time, error, final_time, final_error
             );
         }
         let _ = writeln!(text, "dropped samples: {}", self.dropped);
@@ -315,6 +403,7 @@ pub fn check_run_health(scene: &Scene, run: &RunLog, failures: &mut Vec<String>)
 pub fn check(scene: &Scene, run: &RunLog) -> Report {
     let mut report = Report::default();
     let readouts = run.readouts();
+    let finals = run.finals();
     report.dropped = check_run_health(scene, run, &mut report.failures);
     let scene_samples = Scene::change_sample(scene.end_s);
 
@@ -329,7 +418,13 @@ pub fn check(scene: &Scene, run: &RunLog) -> Report {
             .filter(|line| line.sample > first && line.sample <= last)
             .collect();
         let segment = if mass_g > 0.0 {
-            check_loaded(start_s, mass_g, &lines, &mut report.failures)
+            let finals: Vec<&FinalLine> = finals
+                .iter()
+                .filter(|line| line.sample > first && line.sample <= last)
+                .collect();
+            let mut segment = check_loaded(start_s, mass_g, &lines, &mut report.failures);
+            check_final(&mut segment, &finals, &mut report.failures);
+            segment
         } else {
             check_empty(start_s, &lines, &mut report.failures)
         };
@@ -381,7 +476,38 @@ fn check_loaded(
         time_to_tolerance_s,
         largest_error_g,
         lines: lines.len(),
+        time_to_final_s: None,
+        final_error_g: None,
     }
+}
+
+/// A loaded segment's final reading: there is exactly one, within the class III MPE of the
+/// truth (a reading the instrument vouches for must be), its time from the drop recorded.
+fn check_final(segment: &mut SegmentReport, finals: &[&FinalLine], failures: &mut Vec<String>) {
+    let (start_s, mass_g) = (segment.start_s, segment.mass_g);
+    let Some(first) = finals.first() else {
+        failures.push(format!(
+            "{mass_g} g dropped at {start_s} s: no final reading before the next change"
+        ));
+        return;
+    };
+    if finals.len() > 1 {
+        failures.push(format!(
+            "{mass_g} g dropped at {start_s} s: {} final lines (one per load)",
+            finals.len()
+        ));
+    }
+    let error = first.mass_g - mass_g;
+    if error.abs() > criteria::mpe_g(mass_g) {
+        failures.push(format!(
+            "{mass_g} g dropped at {start_s} s: final reading {} g (u {} g) is off by {error:+.4} g, beyond the MPE {} g",
+            first.mass_g,
+            first.u_g,
+            criteria::mpe_g(mass_g)
+        ));
+    }
+    segment.time_to_final_s = Some(first.time_s() - start_s);
+    segment.final_error_g = Some((error, first.u_g));
 }
 
 fn check_empty(start_s: f64, lines: &[&ReadoutLine], failures: &mut Vec<String>) -> SegmentReport {
@@ -420,6 +546,8 @@ fn check_empty(start_s: f64, lines: &[&ReadoutLine], failures: &mut Vec<String>)
         time_to_tolerance_s: None,
         largest_error_g,
         lines: lines.len(),
+        time_to_final_s: None,
+        final_error_g: None,
     }
 }
 
@@ -492,8 +620,16 @@ mod tests {
             } else {
                 truth * (1.0 + 2e-4 * if index % 2 == 0 { 1.0 } else { -1.0 }) + 0.01
             };
+            // A load's final reading 80 ms after its drop, 0.02 g off with u = 0.02 g.
+            if truth > 0.0 && since == 400 {
+                lines.push(format!(
+                    "final sample={} mass_g={} u_g=0.02 state=Estimating since=320 changes=1 cal=stored",
+                    sample - 80,
+                    truth + 0.02
+                ));
+            }
             lines.push(format!(
-                "readout sample={sample} mass_g={mass} u_g=0.01 state=Stable since={since} dropped=0 changes=1 cal=stored"
+                "readout sample={sample} mass_g={mass} u_g=0.01 state=Stable since={since} dropped=0 changes=1 cal=stored final=0"
             ));
         }
         lines.push("end samples=16000 dropped=0".into());
@@ -522,6 +658,31 @@ mod tests {
         assert_mentions(&report.failures, needle);
     }
 
+    /// A load without a final line, or whose final reading is beyond the class III MPE
+    /// (0.1 g at 138.32 g), fails; the good run's final lines give the time to final.
+    #[test]
+    fn a_final_reading_must_come_and_be_within_the_mpe() {
+        let report = check(&Scene::demo(), &good_run());
+        let first_drop = &report.segments[1];
+        assert!((first_drop.time_to_final_s.unwrap() - 0.08).abs() < 1e-9);
+        assert!((first_drop.final_error_g.unwrap().0 - 0.02).abs() < 1e-9);
+        let mut missing = good_run();
+        missing
+            .lines
+            .retain(|line| !line.starts_with("final sample=1520 "));
+        assert_mentions(
+            &check(&Scene::demo(), &missing).failures,
+            "no final reading",
+        );
+        let mut far = good_run();
+        for line in far.lines.iter_mut() {
+            if line.starts_with("final sample=1520 ") {
+                *line = line.replace("mass_g=138.34", "mass_g=138.45");
+            }
+        }
+        assert_mentions(&check(&Scene::demo(), &far).failures, "beyond the MPE");
+    }
+
     #[test]
     fn a_good_run_passes_with_its_figures() {
         let report = check(&Scene::demo(), &good_run());
@@ -536,14 +697,14 @@ mod tests {
     #[test]
     fn parses_the_firmware_format() {
         let line = ReadoutLine::parse(
-            "readout sample=1400 mass_g=138.3181 u_g=0.01 state=Stable since=200 dropped=0 changes=1 cal=stored",
+            "readout sample=1400 mass_g=138.3181 u_g=0.01 state=Stable since=200 dropped=0 changes=1 cal=stored final=0",
         )
         .unwrap();
         assert_eq!(line.sample, 1400);
         assert_eq!(line.mass_g, Some(138.3181));
         assert_eq!(line.state, "Stable");
         let none = ReadoutLine::parse(
-            "readout sample=200 mass_g=none u_g=none state=Invalid(Estimator(IllConditioned)) since=5 dropped=0 changes=0 cal=stored",
+            "readout sample=200 mass_g=none u_g=none state=Invalid(Estimator(IllConditioned)) since=5 dropped=0 changes=0 cal=stored final=0",
         )
         .unwrap();
         assert_eq!(none.mass_g, None);
@@ -561,7 +722,7 @@ mod tests {
         // 138.32 g at 0.3 s: the line at 0.40 s (sample 1600) is still 0.2 % off.
         assert_edit_fails(
             1600,
-            "readout sample=1600 mass_g=138.6 u_g=0.01 state=Estimating since=400 dropped=0 changes=1 cal=stored",
+            "readout sample=1600 mass_g=138.6 u_g=0.01 state=Estimating since=400 dropped=0 changes=1 cal=stored final=0",
             "150 ms",
         );
     }
@@ -571,7 +732,7 @@ mod tests {
         // Still 138.32 g at 1.5 s, but the reading wanders 0.15 % off.
         assert_edit_fails(
             6000,
-            "readout sample=6000 mass_g=138.53 u_g=0.01 state=Stable since=4800 dropped=0 changes=1 cal=stored",
+            "readout sample=6000 mass_g=138.53 u_g=0.01 state=Stable since=4800 dropped=0 changes=1 cal=stored final=0",
             "138.32 g dropped",
         );
     }
@@ -582,7 +743,7 @@ mod tests {
         edit(
             &mut run,
             12000,
-            "readout sample=12000 mass_g=none u_g=none state=Invalid(Saturated) since=2000 dropped=0 changes=3 cal=stored",
+            "readout sample=12000 mass_g=none u_g=none state=Invalid(Saturated) since=2000 dropped=0 changes=3 cal=stored final=0",
         );
         assert!(!check(&Scene::demo(), &run).passed());
     }
@@ -592,7 +753,7 @@ mod tests {
         // Empty after the removal at 2.0 s; 2.25 s is past the 100 ms allowance.
         assert_edit_fails(
             9000,
-            "readout sample=9000 mass_g=0.06 u_g=0.01 state=Empty since=1000 dropped=0 changes=2 cal=stored",
+            "readout sample=9000 mass_g=0.06 u_g=0.01 state=Empty since=1000 dropped=0 changes=2 cal=stored final=0",
             "empty pan",
         );
     }
@@ -601,7 +762,7 @@ mod tests {
     fn fails_on_a_dropped_sample() {
         assert_edit_fails(
             4000,
-            "readout sample=4000 mass_g=138.32 u_g=0.01 state=Stable since=2800 dropped=1 changes=1 cal=stored",
+            "readout sample=4000 mass_g=138.32 u_g=0.01 state=Stable since=2800 dropped=1 changes=1 cal=stored final=0",
             "dropped",
         );
     }
@@ -610,7 +771,7 @@ mod tests {
     fn fails_when_a_line_reads_on_the_nominal_calibration() {
         assert_edit_fails(
             4000,
-            "readout sample=4000 mass_g=138.32 u_g=0.01 state=Stable since=2800 dropped=0 changes=1 cal=nominal",
+            "readout sample=4000 mass_g=138.32 u_g=0.01 state=Stable since=2800 dropped=0 changes=1 cal=nominal final=0",
             "cal=nominal",
         );
     }
@@ -675,6 +836,29 @@ pub fn configured_scale(
     estimator_core::weighing::Scale::configured(weighing, calibration)
 }
 
+/// The firmware pipeline's final-line rule on the host: a run's first final reading, once
+/// per load change (`firmware::pipeline::Pipeline::accept`).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct FinalTracker {
+    run: Option<u32>,
+}
+
+impl FinalTracker {
+    /// The `final …` line the firmware prints after `sample` samples, if it prints one.
+    pub fn line(
+        &mut self,
+        sample: u32,
+        reading: &estimator_core::weighing::ScaleReading,
+        source: &CalibrationSource,
+    ) -> Option<String> {
+        if !reading.is_final || self.run == Some(reading.load_changes) {
+            return None;
+        }
+        self.run = Some(reading.load_changes);
+        firmware_log::final_line(sample, reading, source)
+    }
+}
+
 /// Run the weighing core (`estimator_core::weighing::Scale`, the code the firmware's estimator task
 /// runs, in `f32`) on the host over `samples` conversions of `adc`, and log readout lines
 /// in the firmware's format. Predicts the QEMU run without QEMU (same core, same model);
@@ -686,8 +870,10 @@ pub fn host_replay<E: estimator_core::weighing::ScaleEstimator>(
 ) -> RunLog {
     let mut lines = Vec::new();
     let step = (SAMPLE_RATE_HZ / READOUT_HZ) as u32;
+    let mut finals = FinalTracker::default();
     for index in 0..samples {
         let reading = scale.push(estimator_core::weighing::RawSample::read(adc));
+        lines.extend(finals.line(index + 1, &reading, &CalibrationSource::Stored));
         if (index + 1) % step == 0 {
             // As the QEMU board, which boots on its factory record.
             lines.push(firmware_log::readout(

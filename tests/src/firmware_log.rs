@@ -19,13 +19,16 @@ use estimator_core::weighing::{
 
 /// `pipeline::log_readout` with a mass and its standard uncertainty.
 pub const READOUT: &str =
-    "readout sample={=u32} mass_g={=f32} u_g={=f32} state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}";
+    "readout sample={=u32} mass_g={=f32} u_g={=f32} state={} since={=u32} dropped={=u32} changes={=u32} cal={=str} final={=u8}";
 /// `pipeline::log_readout` with a mass whose method states no uncertainty.
 pub const READOUT_NO_UNCERTAINTY: &str =
-    "readout sample={=u32} mass_g={=f32} u_g=none state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}";
+    "readout sample={=u32} mass_g={=f32} u_g=none state={} since={=u32} dropped={=u32} changes={=u32} cal={=str} final=0";
 /// `pipeline::log_readout` without a mass.
 pub const READOUT_NO_MASS: &str =
-    "readout sample={=u32} mass_g=none u_g=none state={} since={=u32} dropped={=u32} changes={=u32} cal={=str}";
+    "readout sample={=u32} mass_g=none u_g=none state={} since={=u32} dropped={=u32} changes={=u32} cal={=str} final=0";
+/// `pipeline::log_final`: a run's final reading, the moment it is reached.
+pub const FINAL: &str =
+    "final sample={=u32} mass_g={=f32} u_g={=f32} state={} since={=u32} changes={=u32} cal={=str}";
 /// `pipeline::log_command`, a tare taken.
 pub const TARED: &str = "command sample={=u32} tare=ok tare_g={=f32}";
 /// `pipeline::log_command`, the tare cleared.
@@ -49,8 +52,9 @@ pub const BOOT_CALIBRATION: &str =
 pub const END: &str = "end samples={=u32} dropped={=u32}";
 
 /// Every format string above.
-pub const ALL: [&str; 13] = [
+pub const ALL: [&str; 14] = [
     READOUT,
+    FINAL,
     READOUT_NO_UNCERTAINTY,
     READOUT_NO_MASS,
     TARED,
@@ -72,6 +76,8 @@ pub enum Arg {
     U32(u32),
     /// `{=f32}`.
     F32(f32),
+    /// `{=u8}`.
+    U8(u8),
     /// `{=str}`.
     Str(&'static str),
     /// `{}`: a value the firmware logs through its `defmt::Format`, which for these enums
@@ -95,6 +101,7 @@ pub fn render(format: &str, args: &[Arg]) -> String {
                 let _ = match &args[parameter.index] {
                     Arg::U32(value) => write!(line, "{value}"),
                     Arg::F32(value) => write!(line, "{value}"),
+                    Arg::U8(value) => write!(line, "{value}"),
                     Arg::Str(text) => write!(line, "{text}"),
                     Arg::Format(text) => write!(line, "{text}"),
                 };
@@ -122,6 +129,7 @@ pub fn readout(
         (Some(mass_g), Some(u_g)) => {
             let mut args = vec![Arg::U32(sample), Arg::F32(mass_g), Arg::F32(u_g)];
             args.extend(tail);
+            args.push(Arg::U8(u8::from(reading.is_final)));
             render(READOUT, &args)
         }
         (Some(mass_g), None) => {
@@ -135,6 +143,28 @@ pub fn readout(
             render(READOUT_NO_MASS, &args)
         }
     }
+}
+
+/// `pipeline::log_final`: a run's final reading (`None` when it has no mass or `u`, as the
+/// firmware then prints nothing).
+pub fn final_line(
+    sample: u32,
+    reading: &ScaleReading,
+    source: &CalibrationSource,
+) -> Option<String> {
+    let (mass_g, u_g) = (reading.mass_g?, reading.uncertainty_g?);
+    Some(render(
+        FINAL,
+        &[
+            Arg::U32(sample),
+            Arg::F32(mass_g),
+            Arg::F32(u_g),
+            Arg::Format(format!("{:?}", reading.state)),
+            Arg::U32(reading.samples_since_change),
+            Arg::U32(reading.load_changes),
+            Arg::Str(source.label()),
+        ],
+    ))
 }
 
 /// `pipeline::log_command`: one command's outcome.
@@ -269,8 +299,8 @@ mod tests {
             .reading();
         let nominal = CalibrationSource::Defaults(CalibrationError::BadCrc);
         let line = readout(2000, &reading, 0, &nominal);
-        assert!(line.ends_with(" cal=nominal"), "{line}");
+        assert!(line.contains(" cal=nominal "), "{line}");
         let line = readout(2000, &reading, 0, &CalibrationSource::Stored);
-        assert!(line.ends_with(" cal=stored"), "{line}");
+        assert!(line.contains(" cal=stored "), "{line}");
     }
 }

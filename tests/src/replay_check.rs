@@ -42,11 +42,29 @@ pub fn differences(rows: &[ReplayRow], run: &RunLog) -> Vec<String> {
             (None, None) => true,
             _ => false,
         };
+        let u = row.reading.uncertainty_g.map(f64::from);
+        let same_u = match (u, line.u_g) {
+            (Some(a), Some(b)) => a as f32 == b as f32,
+            (None, None) => true,
+            _ => false,
+        };
         let state = format!("{:?}", row.reading.state);
-        if row.sample != line.sample || !same_mass || state != line.state {
+        if row.sample != line.sample
+            || !same_mass
+            || !same_u
+            || state != line.state
+            || row.reading.is_final != line.is_final
+        {
             failures.push(format!(
-                "sample {}: replay mass {:?} state {state}; firmware sample {} mass {:?} state {}",
-                row.sample, mass, line.sample, line.mass_g, line.state
+                "sample {}: replay mass {:?} u {u:?} state {state} final {}; firmware sample {} mass {:?} u {:?} state {} final {}",
+                row.sample,
+                mass,
+                row.reading.is_final,
+                line.sample,
+                line.mass_g,
+                line.u_g,
+                line.state,
+                line.is_final
             ));
         }
     }

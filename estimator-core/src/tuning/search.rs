@@ -351,6 +351,8 @@ fn base_config(
         recorded_worst_error_g: f64::INFINITY,
         capacity_g: crate::weighing::WeighingConfig::REFERENCE_CAPACITY_G,
         scale_interval_g: crate::weighing::WeighingConfig::REFERENCE_SCALE_INTERVAL_G,
+        final_target_g: crate::weighing::WeighingConfig::FINAL_TARGET_E
+            * crate::weighing::WeighingConfig::REFERENCE_SCALE_INTERVAL_G,
         loads: LoadCoverage {
             min_g: loads.min_g,
             max_g: loads.max_g,

@@ -15,7 +15,7 @@ mod app {
     use estimator_core::weighing::Command;
     use firmware::mps2_an386::{CmsdkTimer, CmsdkUart, Interrupt, SYSTEM_CLOCK_HZ};
     use firmware::pipeline::{
-        self, EstimatorStorage, Pipeline, Readout, SampleMessage, SampleQueue, SAMPLE_RATE_HZ,
+        self, EstimatorStorage, Lines, Pipeline, SampleMessage, SampleQueue, SAMPLE_RATE_HZ,
     };
     use firmware::qemu::{self, QemuCalibrationStore, Scene, SimulatedConverter};
     use heapless::spsc::{Consumer, Producer};
@@ -40,7 +40,7 @@ mod app {
 
     #[shared]
     struct Shared {
-        latest: Option<Readout>,
+        latest: Lines,
         pipeline: Pipeline,
     }
 
@@ -128,7 +128,7 @@ mod app {
 
         (
             Shared {
-                latest: None,
+                latest: Lines::default(),
                 pipeline,
             },
             Local {
@@ -198,10 +198,10 @@ mod app {
     /// once the known mass has settled); the end-of-scene summary and exit.
     #[task(binds = Uart1Rx, priority = 1, local = [store, scene_samples, noise_told: bool = false], shared = [latest, pipeline])]
     fn readout(mut cx: readout::Context) {
-        let Some(readout) = cx.shared.latest.lock(|latest| latest.take()) else {
+        let lines = cx.shared.latest.lock(core::mem::take);
+        let Some(readout) = lines.log() else {
             return;
         };
-        pipeline::log_readout(&readout);
         // Once: from here on every new run is checked against the metered empty pan.
         if !*cx.local.noise_told && cx.shared.pipeline.lock(|pipeline| pipeline.noise_checked()) {
             defmt::println!("noise metered sample={=u32}", readout.sample);

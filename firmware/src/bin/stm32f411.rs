@@ -14,7 +14,7 @@ mod app {
     use cortex_m::peripheral::DWT;
     use estimator_core::weighing::{Command, KeyDebouncer, KeyPress, RawSample};
     use firmware::pipeline::{
-        self, EstimatorStorage, Pipeline, Readout, SampleMessage, SampleQueue, QUEUE_CAPACITY,
+        self, EstimatorStorage, Lines, Pipeline, SampleMessage, SampleQueue, QUEUE_CAPACITY,
         SAMPLE_RATE_HZ,
     };
     use firmware::stm32f411::{
@@ -96,7 +96,7 @@ mod app {
 
     #[shared]
     struct Shared {
-        latest: Option<Readout>,
+        latest: Lines,
         pipeline: Pipeline,
         key: Key,
     }
@@ -184,7 +184,7 @@ mod app {
         let (producer, consumer) = cx.local.queue.split();
         (
             Shared {
-                latest: None,
+                latest: Lines::default(),
                 pipeline: Pipeline::new(scale, FRONT_END.calibration_limits(), source),
                 key,
             },
@@ -250,9 +250,8 @@ mod app {
     /// for seconds, and the samples the converter took meanwhile are counted as dropped.
     #[task(binds = EXTI2, priority = 1, local = [store], shared = [latest, pipeline])]
     fn readout(mut cx: readout::Context) {
-        if let Some(readout) = cx.shared.latest.lock(|latest| latest.take()) {
-            pipeline::log_readout(&readout);
-        }
+        let lines = cx.shared.latest.lock(core::mem::take);
+        lines.log();
         let Some(result) = cx.shared.pipeline.lock(|pipeline| pipeline.poll_commands()) else {
             return;
         };

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use anyhow::{anyhow, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use estimator_core::sensor::LoadCellModel;
 use estimator_core::weighing::{
     LoadCoverage, LoadScene, LoadScore, OnsetConfig, Prediction, RegionError, WeighingConfig,
@@ -70,6 +70,10 @@ struct ScaleFile {
     /// Scale interval e, g; files written before it was a key load the reference cell's.
     #[serde(default = "default_scale_interval_g")]
     scale_interval_g: f64,
+    /// A reading is final once 2u is at or below this, g; or in scale intervals with
+    /// `final_target_e`; files with neither read 0.5 e.
+    final_target_g: Option<f64>,
+    final_target_e: Option<f64>,
 }
 
 fn default_capacity_g() -> f64 {
@@ -78,6 +82,26 @@ fn default_capacity_g() -> f64 {
 
 fn default_scale_interval_g() -> f64 {
     estimator_core::weighing::WeighingConfig::REFERENCE_SCALE_INTERVAL_G
+}
+
+/// `[scale] final_target_g`, or `final_target_e` times e, or 0.5 e; positive either way.
+fn final_target_g(path: &Path, scale: &ScaleFile) -> Result<f64> {
+    let target = match (scale.final_target_g, scale.final_target_e) {
+        (Some(_), Some(_)) => bail!(
+            "{}: [scale]: give final_target_g or final_target_e, not both",
+            path.display()
+        ),
+        (Some(grams), None) => grams,
+        (None, Some(intervals)) => intervals * scale.scale_interval_g,
+        (None, None) => WeighingConfig::FINAL_TARGET_E * scale.scale_interval_g,
+    };
+    if !(target.is_finite() && target > 0.0) {
+        bail!(
+            "{}: [scale]: the final target must be a positive number of grams (or e), found {target}",
+            path.display()
+        );
+    }
+    Ok(target)
 }
 
 #[derive(Debug, Deserialize)]
@@ -210,6 +234,7 @@ pub fn parse_config(path: &Path, text: &str) -> Result<(WeighingConfig, Precisio
         loads: file.coverage(path, prediction)?,
         capacity_g: scale.capacity_g,
         scale_interval_g: scale.scale_interval_g,
+        final_target_g: final_target_g(path, scale)?,
     };
     check_method(path, &file.method, &config, precision)?;
     Ok((config, precision))

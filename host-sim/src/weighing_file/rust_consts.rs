@@ -112,6 +112,7 @@ pub fn rust_const(config: &WeighingConfig) -> String {
         ("loads", coverage(&config.loads)),
         ("capacity_g", float(config.capacity_g)),
         ("scale_interval_g", float(config.scale_interval_g)),
+        ("final_target_g", float(config.final_target_g)),
     ];
     let mut out = String::from("pub const WEIGHING: WeighingConfig = WeighingConfig {\n");
     for (field, value) in fields {

@@ -118,6 +118,9 @@ pub struct WeighingConfig {
     /// Scale interval e, g (OIML R 76: the display's resolution, the MPE's unit; see
     /// [`crate::weighing::ScaleConfig::SCALE_INTERVAL_G`] for the reference cell's).
     pub scale_interval_g: f64,
+    /// A reading is final once 2u is at or below this, g
+    /// ([`crate::weighing::ScaleConfig::final_target_g`]; files without it read 0.5 e).
+    pub final_target_g: f64,
 }
 
 impl WeighingConfig {
@@ -127,6 +130,9 @@ impl WeighingConfig {
     /// The reference cell's scale interval e, g
     /// ([`crate::weighing::ScaleConfig::SCALE_INTERVAL_G`], argued there).
     pub const REFERENCE_SCALE_INTERVAL_G: f64 = 0.1;
+    /// The final target a file without one reads: 0.5 e (OIML R 76's smallest maximum
+    /// permissible error at verification, class III).
+    pub const FINAL_TARGET_E: f64 = 0.5;
 }
 
 /// A data-driven method's decimated Nyquist frequency may be at most this many times the
@@ -364,6 +370,8 @@ mod tests {
             recorded_worst_error_g: 0.0,
             capacity_g: crate::weighing::WeighingConfig::REFERENCE_CAPACITY_G,
             scale_interval_g: crate::weighing::WeighingConfig::REFERENCE_SCALE_INTERVAL_G,
+            final_target_g: crate::weighing::WeighingConfig::FINAL_TARGET_E
+                * crate::weighing::WeighingConfig::REFERENCE_SCALE_INTERVAL_G,
             loads: LoadCoverage::calibration_mass_only(138.32, Prediction::default()),
         }
     }

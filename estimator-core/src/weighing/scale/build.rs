@@ -80,7 +80,8 @@ fn decisions_for(weighing: &WeighingConfig) -> Result<ScaleConfig, ConfigError> 
         return Err(ConfigError::Model);
     }
     Ok(ScaleConfig::for_method(&weighing.method, sample_rate_hz)
-        .with_scale(weighing.capacity_g as f32, weighing.scale_interval_g as f32))
+        .with_scale(weighing.capacity_g as f32, weighing.scale_interval_g as f32)
+        .with_final_target(weighing.final_target_g as f32))
 }
 
 #[cfg(test)]
@@ -117,6 +118,8 @@ mod tests {
             recorded_worst_error_g: 0.0,
             capacity_g: crate::weighing::WeighingConfig::REFERENCE_CAPACITY_G,
             scale_interval_g: crate::weighing::WeighingConfig::REFERENCE_SCALE_INTERVAL_G,
+            final_target_g: crate::weighing::WeighingConfig::FINAL_TARGET_E
+                * crate::weighing::WeighingConfig::REFERENCE_SCALE_INTERVAL_G,
             loads: LoadCoverage::calibration_mass_only(138.32, prediction),
         }
     }
@@ -202,6 +205,7 @@ mod tests {
         let config = WeighingConfig {
             capacity_g: 300.0,
             scale_interval_g: 0.05,
+            final_target_g: 0.04,
             ..weighing(ScaleConfig::DEFAULT_METHOD)
         };
         let mut scale =
@@ -209,6 +213,7 @@ mod tests {
         let decisions = *scale.config();
         assert_eq!(decisions.capacity_g, 300.0);
         assert_eq!(decisions.scale_interval_g, 0.05);
+        assert_eq!(decisions.final_target_g, 0.04);
         let default = ScaleConfig::weighing_default(FS);
         assert_eq!(
             decisions.zero_tracking_range_g,

@@ -54,6 +54,11 @@ pub struct ScaleConfig {
     /// Scale interval e (verification scale interval, OIML R 76): the displayed resolution
     /// and the unit of the maximum permissible errors.
     pub scale_interval_g: f32,
+    /// A reading is final once twice its standard uncertainty (a 95 % interval) is at or
+    /// below this: the instrument vouches for it ([`super::ScaleReading::is_final`]).
+    /// `+∞`: every reading with a `u` is final; the default is 0.5 e, OIML R 76's maximum
+    /// permissible error on the smallest loads at verification (class III, up to 500 e).
+    pub final_target_g: f32,
     /// Zero tracking runs only while empty, stable, and within ±this of zero.
     pub zero_tracking_band_g: f32,
     /// The largest rate the zero may move at while tracking (OIML R 76: at most 0.5 e per
@@ -151,6 +156,7 @@ impl ScaleConfig {
             flag_restart_samples: (0.025 * sample_rate_hz) as u32,
             capacity_g: Self::CAPACITY_G,
             scale_interval_g: Self::SCALE_INTERVAL_G,
+            final_target_g: 0.5 * Self::SCALE_INTERVAL_G,
             zero_tracking_band_g: 0.5 * Self::SCALE_INTERVAL_G,
             zero_tracking_rate_g_per_s: 0.1 * Self::SCALE_INTERVAL_G,
             zero_tracking_range_g: 0.5 * Self::SCALE_INTERVAL_G,
@@ -181,6 +187,7 @@ impl ScaleConfig {
                 "scale_interval_g",
                 self.scale_interval_g.is_finite() && self.scale_interval_g > 0.0,
             ),
+            ("final_target_g", threshold(self.final_target_g)),
             ("empty_band_g", finite_non_negative(self.empty_band_g)),
             ("stable_band_g", finite_non_negative(self.stable_band_g)),
             (
@@ -226,11 +233,20 @@ impl ScaleConfig {
         Self {
             capacity_g,
             scale_interval_g,
+            final_target_g: self.final_target_g * per_e,
             zero_tracking_band_g: self.zero_tracking_band_g * per_e,
             zero_tracking_rate_g_per_s: self.zero_tracking_rate_g_per_s * per_e,
             zero_tracking_range_g: self.zero_tracking_range_g * per_e,
             block_drift_g: self.block_drift_g * per_e,
             block_threshold_g: self.block_threshold_g * per_e,
+            ..self
+        }
+    }
+
+    /// These decisions with readings final once `2u ≤ final_target_g`.
+    pub fn with_final_target(self, final_target_g: f32) -> Self {
+        Self {
+            final_target_g,
             ..self
         }
     }

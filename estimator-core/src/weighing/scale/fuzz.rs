@@ -61,6 +61,16 @@ fn check(previous: &ScaleReading, reading: &ScaleReading) -> Result<(), TestCase
             prop_assert!(reading.mass_g.is_none_or(f32::is_finite), "{:?}", reading)
         }
     }
+    // A final reading is a mass with a finite uncertainty; u never comes without a mass.
+    if reading.is_final {
+        prop_assert!(reading.mass_g.is_some_and(f32::is_finite), "{:?}", reading);
+        prop_assert!(
+            reading.uncertainty_g.is_some_and(f32::is_finite),
+            "{:?}",
+            reading
+        );
+    }
+    prop_assert!(reading.mass_g.is_some() || reading.uncertainty_g.is_none());
     prop_assert!(reading.load_changes >= previous.load_changes);
     if reading.load_changes == previous.load_changes {
         prop_assert!(
@@ -118,7 +128,7 @@ proptest! {
     fn an_arbitrary_configuration_builds_or_is_refused(
         values in proptest::collection::vec(
             prop_oneof![any::<f32>(), -10.0f32..1000.0, Just(f32::NAN), Just(0.0)],
-            15,
+            16,
         ),
         counts in proptest::collection::vec(any::<u32>(), 7),
         codes in proptest::collection::vec(any::<i32>(), 0..500),
@@ -139,6 +149,7 @@ proptest! {
             zero_tracking_range_g: values[12],
             block_drift_g: values[13],
             block_threshold_g: values[14],
+            final_target_g: values[15],
             block_samples: counts[6] % 10_000,
             stable_hold_samples: counts[0],
             residual_arm_samples: counts[1],

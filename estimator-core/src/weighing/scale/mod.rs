@@ -219,15 +219,18 @@ impl<E: ScaleEstimator> Scale<E> {
 
     /// The current reading, without pushing a sample.
     pub fn reading(&self) -> ScaleReading {
+        let shown = !matches!(self.state, ScaleState::Invalid(_));
+        let mass_g = self
+            .gross_g
+            .filter(|_| shown)
+            .map(|gross| gross - self.tare_g);
+        let uncertainty_g = mass_g.and(self.gross_u_g);
+        let is_final = matches!(self.state, ScaleState::Estimating | ScaleState::Stable)
+            && uncertainty_g.is_some_and(|u| 2.0 * u <= self.config.final_target_g);
         ScaleReading {
-            mass_g: match self.state {
-                ScaleState::Invalid(_) => None,
-                _ => self.gross_g.map(|gross| gross - self.tare_g),
-            },
-            uncertainty_g: match self.state {
-                ScaleState::Invalid(_) => None,
-                _ => self.gross_g.and(self.gross_u_g),
-            },
+            mass_g,
+            uncertainty_g,
+            is_final,
             state: self.state,
             samples_since_change: u32::try_from(self.samples_since_change).unwrap_or(u32::MAX),
             load_changes: self.load_changes,

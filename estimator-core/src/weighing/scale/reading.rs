@@ -74,6 +74,9 @@ pub struct ScaleReading {
     /// estimator's, converted with the gain. `None` without a mass, or when the configured
     /// method states none. The tare's own uncertainty is not included.
     pub uncertainty_g: Option<f32>,
+    /// The reading is final: a mass, estimating or stable, whose 95 % interval (±2u) is
+    /// within the configured target ([`super::ScaleConfig::final_target_g`]).
+    pub is_final: bool,
     /// What the pan holds.
     pub state: ScaleState,
     /// Raw samples since the last detected load change (or restart), shown saturating at
