@@ -67,25 +67,29 @@ pub fn firmware_default() -> Result<(Method, WeighingConfig)> {
 /// The thesis's plain configuration.
 pub const PLAIN_THESIS: &str = "step:n=7,D=1";
 
-/// The methods of the study, in table order; the first is the firmware default (from
-/// `firmware/weighing.toml`). A new estimator joins with one line here.
-pub fn default_entries() -> Result<Vec<Entry>> {
-    let (firmware, config) = firmware_default()?;
-    // The bank the firmware would run on the model calibration identified from the drops in
-    // `firmware/weighing.toml`: the core's physical bank over 0.68–1.3× the calibrated
-    // resonance (0.3×–3× the calibration mass of the reference cell), D = 8, K = 33.
-    let identified = Method::Model(ModelSpec {
+/// The bank the firmware would run on the model calibration identified from the drops in
+/// `config`: the core's physical bank over 0.68–1.3× the calibrated resonance (0.3×–3× the
+/// calibration mass of the reference cell), D = 8, K = 33.
+pub fn identified_bank(config: &WeighingConfig, precision: Precision) -> Method {
+    Method::Model(ModelSpec {
         decimation: 8,
         candidates: 33,
         span: (0.68, 1.3),
         calibration_g: config.calibration_mass_g,
-        precision: Precision::F64,
+        precision,
         identified: Some(IdentifiedModel {
             natural_frequency_hz: config.model.natural_frequency_hz,
             damping_ratio: config.model.damping_ratio,
             filter_cutoff_hz: config.model.filter_cutoff_hz,
         }),
-    });
+    })
+}
+
+/// The methods of the study, in table order; the first is the firmware default (from
+/// `firmware/weighing.toml`). A new estimator joins with one line here.
+pub fn default_entries() -> Result<Vec<Entry>> {
+    let (firmware, config) = firmware_default()?;
+    let identified = identified_bank(&config, Precision::F64);
     Ok(vec![
         Entry {
             name: "firmware default (firmware/weighing.toml)".to_string(),

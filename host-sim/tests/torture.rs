@@ -75,7 +75,7 @@ fn one_run_alone_gives_its_share_and_a_trace_of_truth_and_readings() {
     let mut lines = text.lines();
     assert_eq!(
         lines.next(),
-        Some("t_s,truth_low_g,truth_high_g,mass_g,state,act,tare_truth_g,event")
+        Some("t_s,truth_low_g,truth_high_g,mass_g,u_g,state,final,act,tare_truth_g,event")
     );
     let readouts: Vec<Vec<&str>> = lines
         .map(|l| l.split(',').collect::<Vec<_>>())
@@ -85,10 +85,11 @@ fn one_run_alone_gives_its_share_and_a_trace_of_truth_and_readings() {
     assert!(readouts.len() as u64 >= shown);
     assert_eq!(readouts[0][0], "0.050");
     assert_eq!(readouts[0][1], "0.0000");
-    assert_eq!(readouts[0][5], "boot");
+    assert_eq!(readouts[0][7], "boot");
+    // Shown as settled: stable, empty or final.
     let shown_settled = readouts
         .iter()
-        .filter(|f| matches!(f[4], "stable" | "empty") && !f[3].is_empty())
+        .filter(|f| (matches!(f[5], "stable" | "empty") || f[6] == "1") && !f[3].is_empty())
         .count() as u64;
     assert_eq!(shown_settled, shown);
 }

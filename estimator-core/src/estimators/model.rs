@@ -28,6 +28,7 @@ use crate::estimators::consistency::{NoiseReference, ResidualCheck};
 use crate::estimators::input::Decimator;
 use crate::estimators::intake::{estimator_via_intake, intake_config_builders, Intake};
 use crate::estimators::step::MAX_DECIMATION;
+use crate::estimators::step_uncertainty::{coverage_factor, MIN_DEGREES_OF_FREEDOM};
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
@@ -213,6 +214,8 @@ pub struct ModelEstimator<T: Real, const S: usize> {
     rows: u32,
     /// Weighted residual sum of squares (raw units²): how well this model fits the data.
     residual_sum: T,
+    /// The a-priori residuals summed into `residual_sum`: its degrees of freedom.
+    residual_terms: u32,
     /// The consistency check, when configured with a noise reference.
     check: Option<ResidualCheck<T>>,
     /// Whether a failed check flags this estimator's own reading (a bank judges its
@@ -253,6 +256,7 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
             factor: Factor::new(),
             rows: 0,
             residual_sum: T::ZERO,
+            residual_terms: 0,
             check: config.noise_reference.as_ref().map(|reference| {
                 // Raw units, no forgetting: the residual is a block mean's noise alone.
                 ResidualCheck::new(reference, T::ONE, config.decimation, T::ONE)
@@ -336,6 +340,7 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
         self.rows = self.rows.saturating_add(1);
         if had_estimate {
             self.residual_sum += folded.row_weight * folded.residual * folded.residual;
+            self.residual_terms = self.residual_terms.saturating_add(1);
         }
         if let (Some(check), true) = (self.check.as_mut(), determined_before) {
             // A block mean's noise alone: gain 1, independent rows.
@@ -367,6 +372,24 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
         }
         self.intake
             .estimating(u, had_estimate.then_some(folded.residual));
+        self.intake
+            .state_uncertainty(self.uncertainty_with(self.residual_sum, weight));
+    }
+
+    /// The least-squares standard uncertainty of `u`: with the model known the equation
+    /// error is the block means' own noise, white and independent of the regressors, so
+    /// `s²·P_uu` holds (`P_uu = 1/D_u`, the step column's weight in the factor, `s²` the
+    /// residual mean square), times GUM's t-factor for its degrees of freedom (as the step
+    /// estimator's, `crate::estimators::step_uncertainty`). `None` below
+    /// `MIN_DEGREES_OF_FREEDOM` residuals. A wrong model is not in it: that is what the
+    /// consistency check and the bank's edge flag are for.
+    fn uncertainty_with(&self, residual_sum: T, weight: T) -> Option<T> {
+        if self.residual_terms < MIN_DEGREES_OF_FREEDOM || !(weight > T::ZERO) {
+            return None;
+        }
+        let variance = residual_sum / T::from_u32(self.residual_terms) / weight;
+        let u = variance.sqrt() * T::from_f64(coverage_factor(self.residual_terms));
+        u.is_finite().then_some(u)
     }
 }
 
@@ -518,10 +541,30 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
             (Some(left), Some(mid), Some(right)) => Some(interpolate(left, mid, right)),
             _ => centre.residual,
         };
+        // The three estimates come from the same data and differ by a smooth function of
+        // the grid, so their statistical errors move together: the interpolated estimate's
+        // is the same interpolation of theirs (each from its own residuals). Stated only
+        // once the data single out the model: both neighbours' fits worse than the best's
+        // by more than 4 residual variances (a likelihood-ratio test at about 95 %, χ²₁ =
+        // 3.84). Before that the choice of model is itself uncertain by more than `u` says.
+        let terms = self.models[best].residual_terms;
+        let resolved = terms > 0 && {
+            let variance = r_mid / T::from_u32(terms);
+            let margin = T::from_f64(4.0) * variance;
+            r_left - r_mid > margin && r_right - r_mid > margin
+        };
+        let uncertainty = match (
+            readings[best - 1].uncertainty,
+            centre.uncertainty,
+            readings[best + 1].uncertainty,
+        ) {
+            (Some(left), Some(mid), Some(right)) if resolved => Some(interpolate(left, mid, right)),
+            _ => None,
+        };
         Reading {
             estimate: Some(estimate),
             residual,
-            uncertainty: None,
+            uncertainty,
             ..centre
         }
     }

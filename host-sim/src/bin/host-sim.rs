@@ -745,7 +745,8 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
         args.snr_db
     };
     let methods = if args.methods.is_empty() {
-        vec![study::firmware_default()?.0]
+        let (firmware, config) = study::firmware_default()?;
+        vec![firmware, study::identified_bank(&config, Precision::F32)]
     } else {
         args.methods
     };

@@ -40,7 +40,7 @@ pub fn run_plan(
     if let Some(out) = trace.as_mut() {
         let _ = writeln!(
             out,
-            "t_s,truth_low_g,truth_high_g,mass_g,state,act,tare_truth_g,event"
+            "t_s,truth_low_g,truth_high_g,mass_g,u_g,state,final,act,tare_truth_g,event"
         );
     }
     let mut adc = SimulatedAdc::<PLAN_EVENTS>::new(*chain, plan.script, plan.disturbances, seed);
@@ -106,17 +106,21 @@ pub fn run_plan(
         if let Some(out) = trace.as_mut() {
             let _ = writeln!(
                 out,
-                "{time_s:.3},{:.4},{:.4},{},{},{},{tare_truth_g:.4},",
+                "{time_s:.3},{:.4},{:.4},{},{},{},{},{},{tare_truth_g:.4},",
                 line.truth.low_g,
                 line.truth.high_g,
                 line.mass_g.map_or(String::new(), |m| format!("{m:.4}")),
+                reading
+                    .uncertainty_g
+                    .map_or(String::new(), |u| format!("{u:.4}")),
                 state_name(&reading.state),
+                u8::from(reading.is_final),
                 act.key()
             );
         }
         let polled = commands.poll(&mut scale, now);
         if let (Some(out), Some(result)) = (trace.as_mut(), polled.as_ref()) {
-            let _ = writeln!(out, ",,,,,,,\"calibration {result:?}\"");
+            let _ = writeln!(out, ",,,,,,,,,\"calibration {result:?}\"");
         }
         if let Some(Ok(calibration)) = polled {
             scale.recalibrate(calibration.counts_scale());
@@ -134,7 +138,7 @@ pub fn run_plan(
             };
             let outcome = commands.handle(command, &mut scale, now);
             if let Some(out) = trace.as_mut() {
-                let _ = writeln!(out, ",,,,,,,\"{command:?} -> {outcome:?}\"");
+                let _ = writeln!(out, ",,,,,,,,,\"{command:?} -> {outcome:?}\"");
             }
             match outcome {
                 Ok(_) => {
@@ -159,7 +163,8 @@ pub fn run_plan(
 /// The readout line as judged: the reading the sample gave (what the firmware prints), the
 /// truth of the period since the last line.
 fn line_of(reading: &ScaleReading, low_g: f64, high_g: f64, tare_g: f64) -> Line {
-    let settled = matches!(reading.state, ScaleState::Stable | ScaleState::Empty);
+    let settled =
+        matches!(reading.state, ScaleState::Stable | ScaleState::Empty) || reading.is_final;
     Line {
         mass_g: reading.mass_g.map(f64::from),
         settled,
