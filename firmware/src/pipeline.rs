@@ -286,20 +286,22 @@ impl Pipeline {
         }
         let reading = self.scale.push(message.sample);
         let samples_done = message.sequence.wrapping_add(1);
+        let tick = samples_done.is_multiple_of(SAMPLES_PER_READOUT);
+        let first_final = reading.is_final && self.final_run != Some(reading.load_changes);
+        if !(tick || first_final) {
+            return Lines::default();
+        }
+        if first_final {
+            self.final_run = Some(reading.load_changes);
+        }
         let line = Readout {
             sample: samples_done,
             reading,
             dropped: self.dropped,
             calibration: self.calibration_source,
         };
-        let first_final = reading.is_final && self.final_run != Some(reading.load_changes);
-        if first_final {
-            self.final_run = Some(reading.load_changes);
-        }
         Lines {
-            readout: samples_done
-                .is_multiple_of(SAMPLES_PER_READOUT)
-                .then_some(line),
+            readout: tick.then_some(line),
             final_reading: first_final.then_some(line),
         }
     }

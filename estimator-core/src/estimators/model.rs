@@ -221,6 +221,9 @@ pub struct ModelEstimator<T: Real, const S: usize> {
     /// Whether a failed check flags this estimator's own reading (a bank judges its
     /// interpolated fit instead, and needs every candidate's estimate).
     flags_mismatch: bool,
+    /// Whether each reading states its `u` (a bank asks the three candidates it combines
+    /// instead of all of them).
+    states_uncertainty: bool,
 }
 
 impl<T: Real, const S: usize> ModelEstimator<T, S> {
@@ -262,6 +265,7 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
                 ResidualCheck::new(reference, T::ONE, config.decimation, T::ONE)
             }),
             flags_mismatch: true,
+            states_uncertainty: true,
         })
     }
 
@@ -372,8 +376,18 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
         }
         self.intake
             .estimating(u, had_estimate.then_some(folded.residual));
+        if self.states_uncertainty {
+            self.intake
+                .state_uncertainty(self.uncertainty_with(self.residual_sum, weight));
+        }
+    }
+
+    /// The standard uncertainty of the current estimate (see [`Self::uncertainty_with`]).
+    fn uncertainty(&self) -> Option<T> {
+        let [weight] = self.factor.tail_weight();
         self.intake
-            .state_uncertainty(self.uncertainty_with(self.residual_sum, weight));
+            .estimate()
+            .and_then(|_| self.uncertainty_with(self.residual_sum, weight))
     }
 
     /// The least-squares standard uncertainty of `u`: with the model known the equation
@@ -388,7 +402,7 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
             return None;
         }
         let variance = residual_sum / T::from_u32(self.residual_terms) / weight;
-        let u = variance.sqrt() * T::from_f64(coverage_factor(self.residual_terms));
+        let u = variance.sqrt() * coverage_factor::<T>(self.residual_terms);
         u.is_finite().then_some(u)
     }
 }
@@ -436,6 +450,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
                 // A single candidate is checked as a `ModelEstimator` is; a grid is not (see
                 // the type's docs).
                 model.flags_mismatch = K == 1;
+                model.states_uncertainty = K == 1;
                 model
             }),
             samples: 0,
@@ -553,13 +568,17 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
             let margin = T::from_f64(4.0) * variance;
             r_left - r_mid > margin && r_right - r_mid > margin
         };
-        let uncertainty = match (
-            readings[best - 1].uncertainty,
-            centre.uncertainty,
-            readings[best + 1].uncertainty,
-        ) {
-            (Some(left), Some(mid), Some(right)) if resolved => Some(interpolate(left, mid, right)),
-            _ => None,
+        let uncertainty = if resolved {
+            match (
+                self.models[best - 1].uncertainty(),
+                self.models[best].uncertainty(),
+                self.models[best + 1].uncertainty(),
+            ) {
+                (Some(left), Some(mid), Some(right)) => Some(interpolate(left, mid, right)),
+                _ => None,
+            }
+        } else {
+            None
         };
         Reading {
             estimate: Some(estimate),

@@ -85,21 +85,26 @@ impl<T: Real, const N: usize, const L: usize> LagSums<T, N, L> {
         if !Self::covers(n) || L == 0 {
             return;
         }
+        let row = &row[..n];
         let held = (self.rows as usize).min(n);
         for lag in 1..=held {
-            let before = &self.history[(self.latest + L - (lag - 1)) % L];
-            let products = &mut self.products[lag - 1];
-            for i in 0..n {
-                for j in 0..n {
-                    products[i][j] += row[i] * before[j];
+            let before = &self.history[(self.latest + L - (lag - 1)) % L][..n];
+            let index = lag - 1;
+            for (products, &x) in self.products[index].iter_mut().zip(row) {
+                for (product, &y) in products[..n].iter_mut().zip(before) {
+                    *product += x * y;
                 }
-                self.newer[lag - 1][i] += row[i];
-                self.older[lag - 1][i] += before[i];
             }
-            self.pairs[lag - 1] += T::ONE;
+            for (sum, &x) in self.newer[index][..n].iter_mut().zip(row) {
+                *sum += x;
+            }
+            for (sum, &y) in self.older[index][..n].iter_mut().zip(before) {
+                *sum += y;
+            }
+            self.pairs[index] += T::ONE;
         }
         self.latest = (self.latest + 1) % L;
-        self.history[self.latest][..n].copy_from_slice(&row[..n]);
+        self.history[self.latest][..n].copy_from_slice(row);
         self.rows = self.rows.saturating_add(1);
     }
 
@@ -122,47 +127,56 @@ impl<T: Real, const N: usize, const L: usize> LagSums<T, N, L> {
             return None;
         }
         let mean_square = self.residual_sum / T::from_u32(degrees);
-        let h = |m: usize| moving_average(lead, n, m);
-        let mut power = T::ZERO;
-        for m in 0..=n {
-            power += h(m) * h(m);
+        // h_0..h_{n-1}, and h_n apart (n ≤ L, and L + 1 is no array length here).
+        let mut h = [T::ZERO; L];
+        for (m, value) in h[..n].iter_mut().enumerate() {
+            *value = moving_average(lead, n, m);
+        }
+        let h_last = moving_average(lead, n, n);
+        let h_at = |m: usize| if m < n { h[m] } else { h_last };
+        let mut power = h_last * h_last;
+        for &value in &h[..n] {
+            power += value * value;
         }
         if !(power > T::ZERO) {
             return None;
         }
         // e's variance (block means), and the level's variance term by term.
         let noise = mean_square / power;
+        let z = &z[..n];
         let mut variance = mean_square * z_level;
         for lag in 1..=n {
             let mut covariance = T::ZERO;
             for m in 0..=(n - lag) {
-                covariance += h(m) * h(m + lag);
+                covariance += h_at(m) * h_at(m + lag);
             }
-            let products = &self.products[lag - 1];
+            let index = lag - 1;
             let mut quadratic = T::ZERO;
-            for i in 0..n {
+            for (products, &zi) in self.products[index].iter().zip(z) {
                 let mut row = T::ZERO;
-                for j in 0..n {
-                    row += products[i][j] * z[j];
+                for (&product, &zj) in products[..n].iter().zip(z) {
+                    row += product * zj;
                 }
-                quadratic += z[i] * (row + z_level * self.newer[lag - 1][i]);
-                quadratic += z_level * self.older[lag - 1][i] * z[i];
+                quadratic += zi * row;
             }
-            quadratic += z_level * z_level * self.pairs[lag - 1];
+            let mut sides = T::ZERO;
+            for ((&newer, &older), &zi) in self.newer[index].iter().zip(&self.older[index]).zip(z) {
+                sides += (newer + older) * zi;
+            }
+            quadratic += z_level * (sides + z_level * self.pairs[index]);
             variance += T::from_f64(2.0) * noise * covariance * quadratic;
         }
         // The errors-in-variables bias: E[φ_k·ε_k] per row, times the rows.
         let mut bias = T::ZERO;
-        for i in 0..n {
-            bias += z[i] * (h(n - 1 - i) - h(n - i));
+        for (i, &zi) in z.iter().enumerate() {
+            bias += zi * (h_at(n - 1 - i) - h_at(n - i));
         }
         bias *= T::from_u32(self.rows) * noise;
         let total = variance + bias * bias;
         if !(total > T::ZERO && total.is_finite()) {
             return None;
         }
-        let factor = coverage_factor(degrees);
-        Some(total.sqrt() * T::from_f64(factor))
+        Some(total.sqrt() * coverage_factor::<T>(degrees))
     }
 }
 
@@ -182,18 +196,38 @@ fn moving_average<T: Real, const N: usize>(lead: &[T; N], n: usize, m: usize) ->
 
 /// `max(1, t_{0.975}(ν)/2)`: the factor that makes ±2u a 95 % interval when the noise
 /// level rests on ν degrees of freedom. The quantile by its Cornish–Fisher series in 1/ν
-/// (within 0.5 % of the tables from ν = 3; 3.18 at ν = 3 against 3.182).
-pub(crate) fn coverage_factor(degrees: u32) -> f64 {
-    let z = 1.959_964;
-    let v = f64::from(degrees.max(1));
-    let z3 = z * z * z;
-    let z5 = z3 * z * z;
-    let z7 = z5 * z * z;
-    let t = z
-        + (z3 + z) / (4.0 * v)
-        + (5.0 * z5 + 16.0 * z3 + 3.0 * z) / (96.0 * v * v)
-        + (3.0 * z7 + 19.0 * z5 + 17.0 * z3 - 15.0 * z) / (384.0 * v * v * v);
-    (t / 2.0).max(1.0)
+/// (within 0.5 % of the tables from ν = 3; 3.18 at ν = 3 against 3.182), evaluated at
+/// compile time into [`COVERAGE_FACTORS`]: the target has no double-precision FPU, and the
+/// series in soft `f64` cost more than the rest of the uncertainty.
+pub(crate) fn coverage_factor<T: Real>(degrees: u32) -> T {
+    let index = degrees.max(1) as usize;
+    T::from_f64(match COVERAGE_FACTORS.get(index) {
+        Some(&factor) => factor,
+        None => 1.0,
+    })
+}
+
+/// `t_{0.975}(ν)/2` for ν = 0..=60 (entry 0 unused), at least 1; beyond ν = 60 it is 1.
+const COVERAGE_FACTORS: [f64; 61] = coverage_factors();
+
+const fn coverage_factors() -> [f64; 61] {
+    let mut table = [1.0; 61];
+    let mut degrees = 1;
+    while degrees < 61 {
+        let z = 1.959_964;
+        let v = degrees as f64;
+        let z3 = z * z * z;
+        let z5 = z3 * z * z;
+        let z7 = z5 * z * z;
+        let t = z
+            + (z3 + z) / (4.0 * v)
+            + (5.0 * z5 + 16.0 * z3 + 3.0 * z) / (96.0 * v * v)
+            + (3.0 * z7 + 19.0 * z5 + 17.0 * z3 - 15.0 * z) / (384.0 * v * v * v);
+        let half = t / 2.0;
+        table[degrees] = if half > 1.0 { half } else { 1.0 };
+        degrees += 1;
+    }
+    table
 }
 
 #[cfg(test)]
@@ -204,10 +238,13 @@ mod tests {
     fn the_coverage_factor_follows_the_t_tables() {
         // t_{0.975}(ν) from the tables: 3.182 (3), 2.228 (10), 2.042 (30), 1.96 (∞).
         for (degrees, t) in [(3, 3.182), (5, 2.571), (10, 2.228), (30, 2.042)] {
-            let factor = coverage_factor(degrees);
+            let factor: f64 = coverage_factor(degrees);
             assert!((factor * 2.0 / t - 1.0).abs() < 0.01, "{degrees}: {factor}");
         }
-        assert_eq!(coverage_factor(10_000), 1.0);
+        // t_{0.975}(60) = 2.000: the table ends there, and beyond it the factor is 1.
+        assert!((coverage_factor::<f64>(60) - 1.0).abs() < 1e-3);
+        assert_eq!(coverage_factor::<f64>(61), 1.0);
+        assert_eq!(coverage_factor::<f64>(10_000), 1.0);
     }
 
     #[test]
