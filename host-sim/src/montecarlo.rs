@@ -670,6 +670,55 @@ pub struct BenchFigures {
     pub checksum: f64,
 }
 
+/// Estimator updates per second measured on each of `threads` thread counts, in one run:
+/// `records` recordings of `samples` samples are simulated first, then `runs` estimator
+/// passes over them (run `r` takes record `r % records`) are timed by the wall clock in a
+/// pool of exactly that many threads. Each figure is its own measurement, never one
+/// thread's scaled. Returns `(threads, updates per second)` in the order given.
+pub fn throughput(
+    scene: &Scene,
+    setup: &Setup,
+    runs: usize,
+    samples: usize,
+    seed: u64,
+    threads: &[usize],
+) -> Result<Vec<(usize, f64)>> {
+    let chain = scene.chain;
+    let gain = chain.counts_per_gram();
+    let zero = chain.zero_code();
+    CoreEstimator::new(setup, gain)?;
+    let records: Vec<Vec<f64>> = (0..64.min(runs.max(1)))
+        .map(|run| centred_record(&mut scene.adc(run_seed(seed, run as u64)), zero, samples))
+        .collect();
+    let mut figures = Vec::with_capacity(threads.len());
+    for &count in threads {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(count.max(1))
+            .build()
+            .map_err(|e| anyhow::anyhow!("cannot start {count} threads: {e}"))?;
+        let start = Instant::now();
+        let checksum: f64 = pool.install(|| {
+            (0..runs)
+                .into_par_iter()
+                .map(|run| {
+                    let mut estimator = CoreEstimator::new(setup, gain).expect("validated");
+                    let mut last = 0.0;
+                    for &sample in &records[run % records.len()] {
+                        if let (Some(estimate), _) = estimator.push(sample) {
+                            last = estimate;
+                        }
+                    }
+                    std::hint::black_box(last)
+                })
+                .sum()
+        });
+        let wall_s = start.elapsed().as_secs_f64();
+        std::hint::black_box(checksum);
+        figures.push((count.max(1), (runs * samples) as f64 / wall_s));
+    }
+    Ok(figures)
+}
+
 /// `runs` × `samples` updates of `setup` on the reference scene at its SNR.
 pub fn bench(
     scene: &Scene,

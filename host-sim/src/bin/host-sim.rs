@@ -615,19 +615,28 @@ fn bench(args: BenchArgs) -> Result<()> {
         precision,
     };
     let figures = montecarlo::bench(&scene, &setup, runs, samples, args.seed)?;
-    let per_thread = figures.updates as f64 / figures.estimator_cpu_s;
     println!(
         "host-sim bench: {runs} runs x {samples} samples, {setup}, {precision:?}, reference-step at {} dB, {} threads",
         scene.snr_db.unwrap_or(f64::INFINITY),
         figures.threads
     );
-    println!(
-        "  estimator: {:.3e} updates/s per thread ({:.1} ns/update), {:.3e} updates/s on {} threads",
-        per_thread,
-        1e9 / per_thread,
-        per_thread * figures.threads as f64,
-        figures.threads
-    );
+    // The estimator alone, on 1 and on 2 threads (or the machine's, if it has more), each
+    // timed by the wall clock in its own pass over the same records.
+    let counts: Vec<usize> = if figures.threads > 2 {
+        vec![1, 2, figures.threads]
+    } else {
+        vec![1, 2]
+    };
+    let measured = montecarlo::throughput(&scene, &setup, runs, samples, args.seed, &counts)?;
+    let single = measured[0].1;
+    for (threads, rate) in &measured {
+        println!(
+            "  estimator: {rate:.3e} updates/s on {threads} thread{} ({:.1} ns/update; {:.2}x one thread, measured)",
+            if *threads == 1 { "" } else { "s" },
+            1e9 / rate,
+            rate / single
+        );
+    }
     println!(
         "  whole Monte Carlo (simulation + estimator): {:.2} s wall, {:.3e} samples/s (checksum {:.3})",
         figures.wall_s,
