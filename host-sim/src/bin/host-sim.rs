@@ -180,7 +180,8 @@ struct TortureArgs {
 #[derive(Args)]
 #[command(allow_negative_numbers = true)]
 struct SimulateArgs {
-    /// A scene file, or the name of a shipped scene (host-sim/scenes/NAME.toml).
+    /// A scene file, or the name of a shipped scene (built into this binary, e.g.
+    /// reference-step, calibration-drop, placed-by-hand).
     scene: String,
     #[arg(long, default_value_t = 1)]
     seed: u64,
