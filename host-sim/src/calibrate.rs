@@ -1,6 +1,6 @@
-//! `host-sim calibrate`: recorded drops (CSVs with a column `y`, as `simulate` writes them)
-//! in, a weighing configuration out, through the core's [`estimator_core::tuning::tune`]
-//! (the same call the firmware can make); and [`configured_estimator`], which builds a
+//! `host-sim calibrate`: recorded drops (CSVs as [`crate::recording`] reads them) in, a
+//! weighing configuration out, through the core's [`estimator_core::tuning::tune`] (the same
+//! call the firmware can make); and [`configured_estimator`], which builds a
 //! configured method exactly as the firmware does ([`WeighingEstimator`]). The file itself
 //! ([`to_toml`] writes it, [`load_config`] reads it back into the core's [`WeighingConfig`],
 //! [`rust_const`] prints it as the firmware's constant) lives in `weighing_file`.
@@ -8,7 +8,7 @@
 //! What this module must never do: choose anything itself (the choice is the core's), or
 //! write a configuration the core did not return.
 
-use std::io::{BufReader, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -22,9 +22,9 @@ use estimator_core::weighing::{
 };
 use estimator_core::Real;
 
-use crate::estimate::y_fields;
 use crate::method::{BoxedEstimator, InF32, Method};
 use crate::montecarlo::{Precision, Setup, CAPACITY};
+use crate::recording::{self, Layout};
 use crate::sensor::STATES;
 
 // The weighing configuration file: written here, read by `estimate --config` and the
@@ -43,6 +43,8 @@ pub const BANK_CANDIDATES: usize = 33;
 pub struct Options {
     /// The recorded drops.
     pub drops: Vec<PathBuf>,
+    /// Where the drops' samples are (every drop alike).
+    pub layout: Layout,
     /// The known mass, g.
     pub mass_g: f64,
     /// Readout time after the landing, s.
@@ -80,11 +82,12 @@ pub struct Options {
 }
 
 impl Options {
-    /// Drops of `mass_g` on the reference chain: 100 ms, 0.1%, 4 kHz, 100 Hz, 16 bits, 400
+    /// Drops of `mass_g` (a column `y` under a header) on the reference chain: 100 ms, 0.1%, 4 kHz, 100 Hz, 16 bits, 400
     /// runs, seed 1, f32, orders up to 8.
     pub fn new(drops: Vec<PathBuf>, mass_g: f64) -> Self {
         Self {
             drops,
+            layout: Layout::default(),
             mass_g,
             readout_s: 0.1,
             target_relative: 0.001,
@@ -201,24 +204,10 @@ pub fn platform_mass_from_drops(
     })
 }
 
-/// The `y` column of a recorded drop. Calibration needs every sample: an empty or
-/// non-numeric `y` is an error naming the line.
-pub fn read_drop(path: &Path) -> Result<Vec<f64>> {
-    let file = std::fs::File::open(path)
-        .with_context(|| format!("cannot open drop {}", path.display()))?;
-    let name = path.display().to_string();
-    let rows = y_fields(BufReader::new(file), &name, |header| {
-        format!("{name}: line 1: expected a column `y` in `{header}`")
-    })?;
-    let mut samples = Vec::new();
-    for row in rows {
-        let (line_number, field) = row?;
-        let value: f64 = field.parse().map_err(|_| {
-            anyhow!("{name}: line {line_number}: column `y`: expected a number (calibration needs every sample), found `{field}`")
-        })?;
-        samples.push(value);
-    }
-    Ok(samples)
+/// The samples of a recorded drop laid out as `layout`. Calibration needs every sample: an
+/// empty or non-numeric cell is an error naming the line.
+pub fn read_drop(path: &Path, layout: &Layout) -> Result<Vec<f64>> {
+    Ok(recording::read(path, layout)?.every_sample()?)
 }
 
 /// Calibrate on drops already in memory (raw codes), `names` naming them in errors.
@@ -287,7 +276,7 @@ pub fn calibrate_files(
     let drops = options
         .drops
         .iter()
-        .map(|p| read_drop(p))
+        .map(|p| read_drop(p, &options.layout))
         .collect::<Result<Vec<_>>>()?;
     let names: Vec<String> = options
         .drops

@@ -68,6 +68,8 @@ pub mod montecarlo;
 #[cfg(feature = "std")]
 pub mod ramp_study;
 #[cfg(feature = "std")]
+pub mod recording;
+#[cfg(feature = "std")]
 pub mod replay;
 #[cfg(feature = "std")]
 pub mod scene;

@@ -34,10 +34,14 @@
 //! back over `bounce_s`) or `how = "drop"` (from `height_mm`, the impact lasting
 //! `contact_ms`).
 
-use std::path::{Path, PathBuf};
+mod shipped;
+
+use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use serde::Deserialize;
+
+pub use shipped::{shipped_names, shipped_scene, SHIPPED_SCENES};
 
 use crate::sensor::{Adc, Ina114, LoadCell, SensorChain, SAMPLE_RATE_HZ};
 use crate::simulated::{
@@ -209,25 +213,6 @@ pub struct Scene {
     pub snr_db: Option<f64>,
     /// The step the SNR refers to, g.
     pub snr_step_g: f64,
-}
-
-/// The directory the shipped scenes live in.
-pub fn scenes_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes")
-}
-
-/// A path as given, or a shipped scene's name (`reference-step`).
-pub fn resolve(scene: &str) -> PathBuf {
-    let path = PathBuf::from(scene);
-    if path.exists() {
-        return path;
-    }
-    let shipped = scenes_dir().join(format!("{scene}.toml"));
-    if shipped.exists() {
-        shipped
-    } else {
-        path
-    }
 }
 
 fn check(
@@ -582,12 +567,22 @@ fn disturbances_of(
 }
 
 impl Scene {
-    /// Load a scene by path or shipped name.
+    /// Load a scene: a file on disk as given, else the shipped scene of that name (built
+    /// into the binary, so a copied binary needs no source tree).
     pub fn load(scene: &str) -> Result<Self> {
-        let path = resolve(scene);
-        let text = std::fs::read_to_string(&path)
+        let path = Path::new(scene);
+        if !path.exists() {
+            match shipped_scene(scene) {
+                Some(text) => return Self::parse(Path::new(&format!("{scene}.toml")), text),
+                None => bail!(
+                    "no scene file {scene} and no shipped scene of that name (shipped: {})",
+                    shipped_names().join(", ")
+                ),
+            }
+        }
+        let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read scene file {}", path.display()))?;
-        Self::parse(&path, &text)
+        Self::parse(path, &text)
     }
 
     /// Parse the text of a scene file; `file` names it in errors. The sections are checked
@@ -681,20 +676,10 @@ mod tests {
 
     #[test]
     fn shipped_scenes_parse() {
-        for name in [
-            "reference-step",
-            "drop-and-remove",
-            "two-items",
-            "conveyor-ramp",
-            "vibration",
-            "calibration-drop",
-            "placed-by-hand",
-            "dropped-from-height",
-            "quick-succession",
-            "rig-noise",
-            "small-cell",
-        ] {
+        assert!(SHIPPED_SCENES.len() >= 11);
+        for (name, _) in SHIPPED_SCENES {
             let scene = Scene::load(name).unwrap_or_else(|e| panic!("{name}: {e:#}"));
+            assert_eq!(scene.name, *name);
             assert!(scene.samples() > 0, "{name}");
         }
     }

@@ -10,7 +10,7 @@
 //! were over all of them (a method not yet valid in every run says so instead).
 
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -50,17 +50,12 @@ fn entry(name: &str, spec: &str) -> Entry {
     }
 }
 
-/// The weighing configuration the firmware is built with (`host-sim calibrate` wrote it; the
-/// firmware's build script reads it): the study's "firmware default" is whatever it names.
-pub fn firmware_config_path() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../firmware/weighing.toml")
-}
-
 /// The firmware's configured method in f32 (as the firmware runs it) and the configuration
-/// it comes from (its identified model is the study's identified-model bank).
+/// it comes from (its identified model is the study's identified-model bank): the shipped
+/// `firmware/weighing.toml` (`host-sim calibrate` wrote it; the firmware's build script reads
+/// it), built into this binary, so the study's "firmware default" is whatever it names.
 pub fn firmware_default() -> Result<(Method, WeighingConfig)> {
-    let path = firmware_config_path();
-    let (config, _) = calibrate::load_config(&path)?;
+    let (config, _) = crate::replay::shipped_config()?;
     Ok((calibrate::method_spec(&config, Precision::F32), config))
 }
 

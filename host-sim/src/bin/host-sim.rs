@@ -14,6 +14,7 @@ use host_sim::chart;
 use host_sim::estimate::{estimate_csv, estimate_with};
 use host_sim::method::{BuildContext, Method};
 use host_sim::montecarlo::{self, Precision, Setup, Study};
+use host_sim::recording::{self, Layout};
 use host_sim::scene::Scene;
 use host_sim::study;
 
@@ -32,13 +33,14 @@ struct Cli {
 enum Command {
     /// Simulate a scene: CSV `t,y,truth` (t in s, y the ADC code, truth the load in g).
     Simulate(SimulateArgs),
-    /// Run one of the core's estimators over a CSV with a header and a column `y`; writes
-    /// `k,estimate,u,state` to stdout (estimate empty while not valid). Give `--method SPEC`
+    /// Run one of the core's estimators over a recording (a CSV of raw samples, by default a
+    /// column `y` under a header); writes `k,estimate,u,state` to stdout (estimate empty
+    /// while not valid). Give `--method SPEC`
     /// (e.g. `model:D=8`, `settled`, `step:n=7,D=16,precision=f32`), or the step estimator's
     /// shorthand `--order N [--decimation D --forgetting L --precision P]`.
     Estimate(EstimateArgs),
-    /// Calibration as one command: from recorded drops of a known mass (CSVs with a column
-    /// `y`: an empty-pan stretch, then the drop), choose the smallest method that meets the
+    /// Calibration as one command: from recorded drops of a known mass (CSVs of raw samples,
+    /// by default a column `y` under a header: an empty-pan stretch, then the drop), choose the smallest method that meets the
     /// target at the readout time and write the weighing configuration (TOML). Each scored
     /// candidate is logged on stderr; the choice and its figures on stdout.
     Calibrate(CalibrateArgs),
@@ -95,10 +97,12 @@ struct MonitorArgs {
 #[derive(Args)]
 #[command(allow_negative_numbers = true)]
 struct ReplayArgs {
-    /// A recording: CSV with a column `y` of ADC codes at the configuration's sample rate.
-    /// Converted with the configuration's gain and zero.
+    /// A recording: a CSV of ADC codes (by default a column `y` under a header) at the
+    /// configuration's sample rate. Converted with the configuration's gain and zero.
     #[arg(long, conflicts_with = "scene", required_unless_present = "scene")]
     input: Option<PathBuf>,
+    #[command(flatten)]
+    recording: RecordingArgs,
     /// A scene file or the name of a shipped scene, simulated on its own chain and converted
     /// with that chain's gain and zero (a board calibrated on that cell); or `qemu-demo`,
     /// `qemu-checked-demo`: the QEMU board's scenes with its factory calibration, exactly
@@ -116,6 +120,33 @@ struct ReplayArgs {
     /// Convert with this zero instead (counts).
     #[arg(long)]
     zero_counts: Option<f64>,
+}
+
+/// Where a recording's samples are: the options of every command that reads one.
+#[derive(Args)]
+struct RecordingArgs {
+    /// The column of raw samples: its name in the header (default `y`), or with --no-header
+    /// its 0-based index (default: the only column). A recording may separate its fields
+    /// with `,`, `;` or tabs (found from its first line), start with a UTF-8 byte order mark
+    /// and quote its header.
+    #[arg(long, value_name = "NAME|INDEX")]
+    column: Option<String>,
+    /// The recording has no header: every line holds samples (e.g. one bare number a line).
+    #[arg(long)]
+    no_header: bool,
+}
+
+impl RecordingArgs {
+    fn layout(&self) -> Layout {
+        Layout {
+            column: self.column.clone(),
+            no_header: self.no_header,
+        }
+    }
+
+    fn given(&self) -> bool {
+        self.column.is_some() || self.no_header
+    }
 }
 
 #[derive(Args)]
@@ -149,7 +180,8 @@ struct TortureArgs {
 #[derive(Args)]
 #[command(allow_negative_numbers = true)]
 struct SimulateArgs {
-    /// A scene file, or the name of a shipped scene (host-sim/scenes/NAME.toml).
+    /// A scene file, or the name of a shipped scene (built into this binary, e.g.
+    /// reference-step, calibration-drop, placed-by-hand).
     scene: String,
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -164,8 +196,11 @@ struct SimulateArgs {
 #[derive(Args)]
 #[command(allow_negative_numbers = true)]
 struct EstimateArgs {
+    /// The recording: a CSV of raw samples, one a row.
     #[arg(long)]
     input: PathBuf,
+    #[command(flatten)]
+    recording: RecordingArgs,
     /// A weighing configuration written by `calibrate`: runs the configured method's bare
     /// estimator as the firmware builds it, with its gain and zero (--zero overrides the
     /// zero), its fit checked against the configuration's noise. It assumes the load landed
@@ -221,6 +256,9 @@ struct CalibrateArgs {
     /// A recorded drop (repeat for each; 3 is typical).
     #[arg(long = "drop", required = true)]
     drops: Vec<PathBuf>,
+    /// How every drop (and second drop) is laid out.
+    #[command(flatten)]
+    recording: RecordingArgs,
     /// The known mass dropped, g.
     #[arg(long)]
     mass_g: f64,
@@ -519,6 +557,7 @@ fn calibration_options(args: &CalibrateArgs) -> calibrate::Options {
         precision: args.precision,
         evaluate_all: args.all,
         max_order: args.max_order,
+        layout: args.recording.layout(),
         ..calibrate::Options::new(args.drops.clone(), args.mass_g)
     }
 }
@@ -539,7 +578,7 @@ fn identify_platform_mass(
     let read = |paths: &[PathBuf]| {
         paths
             .iter()
-            .map(|p| calibrate::read_drop(p))
+            .map(|p| calibrate::read_drop(p, &options.layout))
             .collect::<Result<Vec<_>>>()
     };
     let fit = calibrate::platform_mass_from_drops(
@@ -648,17 +687,18 @@ fn bench(args: BenchArgs) -> Result<()> {
 
 /// `estimate`: a configuration written by `calibrate`, or a method given on the command line.
 fn estimate(args: EstimateArgs) -> Result<()> {
+    let recording = recording::read(&args.input, &args.recording.layout())?;
     match args.config.clone() {
         Some(config) => {
-            estimate_configured(args.input, config, args.zero, !args.no_check_residuals)
+            estimate_configured(&recording, config, args.zero, !args.no_check_residuals)
         }
-        None => estimate_method(args),
+        None => estimate_method(&recording, args),
     }
 }
 
 /// `estimate --config`: exactly the configured method, as the firmware builds it.
 fn estimate_configured(
-    input: PathBuf,
+    recording: &recording::Recording,
     config: PathBuf,
     zero: Option<f64>,
     check_residuals: bool,
@@ -672,24 +712,16 @@ fn estimate_configured(
         eprintln!("note: the configuration has no noise variance; the fit is not checked");
     }
     let estimator = calibrate::checked_configured_estimator(&config, precision, zero, noise)?;
-    let file = File::open(&input).with_context(|| format!("cannot open {}", input.display()))?;
     let stdout = std::io::stdout();
     let mut out = BufWriter::new(stdout.lock());
-    estimate_with(
-        estimator,
-        BufReader::new(file),
-        &input.display().to_string(),
-        zero,
-        &mut out,
-    )?;
+    estimate_with(estimator, recording, zero, &mut out)?;
     out.flush()?;
     Ok(())
 }
 
 /// `estimate --method SPEC` or `--order N`: a method and its context from the command line.
-fn estimate_method(args: EstimateArgs) -> Result<()> {
+fn estimate_method(recording: &recording::Recording, args: EstimateArgs) -> Result<()> {
     let EstimateArgs {
-        input,
         method,
         order,
         gain,
@@ -721,17 +753,9 @@ fn estimate_method(args: EstimateArgs) -> Result<()> {
         noise_check: check_residuals,
         ..BuildContext::new(Scene::load(&scene)?.chain, gain)
     };
-    let file = File::open(&input).with_context(|| format!("cannot open {}", input.display()))?;
     let stdout = std::io::stdout();
     let mut out = BufWriter::new(stdout.lock());
-    estimate_csv(
-        BufReader::new(file),
-        &input.display().to_string(),
-        &method,
-        &context,
-        zero,
-        &mut out,
-    )?;
+    estimate_csv(recording, &method, &context, zero, &mut out)?;
     out.flush()?;
     Ok(())
 }
@@ -1096,13 +1120,16 @@ fn torture(args: TortureArgs) -> Result<()> {
 fn replay(args: ReplayArgs) -> Result<()> {
     use host_sim::qemu_scenes;
     use host_sim::replay::{self, calibration, converter_samples, recorded_samples};
+    if args.input.is_none() && args.recording.given() {
+        anyhow::bail!("--column and --no-header describe a recording: give --input FILE.csv");
+    }
     let (weighing, _precision) = match &args.config {
         Some(path) => calibrate::load_config(path)?,
         None => replay::shipped_config()?,
     };
     let (samples, (gain, zero)) = match (&args.input, args.scene.as_deref()) {
         (Some(path), _) => {
-            let codes = calibrate::read_drop(path)?;
+            let codes = calibrate::read_drop(path, &args.recording.layout())?;
             let rails = (weighing.onset.rail_low, weighing.onset.rail_high);
             (
                 recorded_samples(&codes, rails.0, rails.1),
