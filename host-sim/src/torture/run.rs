@@ -113,7 +113,7 @@ pub fn run_plan(
                 reading
                     .uncertainty_g
                     .map_or(String::new(), |u| format!("{u:.4}")),
-                state_name(&reading.state),
+                crate::replay::state_word(&reading.state),
                 u8::from(reading.is_final),
                 act.key()
             );

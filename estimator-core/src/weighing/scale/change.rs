@@ -8,6 +8,16 @@
 
 use super::{Scale, ScaleEstimator, ScaleReading, ScaleState};
 
+/// The ringing's amplitude over the step that set it off, at most: a load dropped from a
+/// height lands with its momentum, overshooting its step (the torture's drops reach about
+/// twice; a margin over that).
+const RINGING_OVER_STEP: f32 = 4.0;
+
+/// The block test's sums past this part of its threshold are motion: no reading is shown
+/// stable or final. A quarter: a trickle of 0.4 e/s was still shown stable 0.5 e behind
+/// the load at a half.
+const MOTION_OVER_THRESHOLD: f32 = 0.25;
+
 /// A two-sided CUSUM test with drift `drift` and threshold `threshold`.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(super) struct TwoSidedCusum {
@@ -29,6 +39,11 @@ impl TwoSidedCusum {
         } else {
             false
         }
+    }
+
+    /// Either sum above `level`: a deviation is building up (not yet an alarm).
+    pub(super) fn above(&self, level: f32) -> bool {
+        self.high > level || self.low > level
     }
 }
 
@@ -53,27 +68,46 @@ impl<E: ScaleEstimator> Scale<E> {
         )
     }
 
-    /// The raw tests against the displayed gross mass, once the signal has settled: true
-    /// when either alarms. One on each sample (a large change alarms within ms), one on
-    /// block means of `block_samples` (a change of one scale interval alarms: the raw
-    /// noise would hide it from the first).
+    /// The raw tests against the displayed gross mass: true when either alarms. One on
+    /// each sample (a large change alarms within ms), one on block means of
+    /// `block_samples` (a change of one scale interval alarms: the raw noise would hide it
+    /// from the first).
+    ///
+    /// The per-sample test starts as soon as the run's reading has held its band once, not
+    /// only once the cell has stopped ringing: a load taken off by hand a second after it
+    /// was put on went unseen for 100 ms while the old mass stayed on show, `Stable` (the
+    /// estimator's residuals absorb a slow ramp). Until the ringing is over its drift
+    /// carries the ringing's envelope: [`RINGING_OVER_STEP`] times the step that started
+    /// the run, decaying to e⁻⁵ of it over `raw_arm_samples` (the settling the default
+    /// arming is set for). The block test waits for the full arming.
     pub(super) fn raw_alarm(&mut self, counts: i32) -> bool {
+        self.ringing_envelope *= self.ringing_decay;
+        self.ringing_g *= self.ringing_decay;
         let Some(gross) = self.gross_g else {
             self.block_sum_g = 0.0;
             self.block_filled = 0;
             return false;
         };
-        if self.settled_samples < self.config.raw_arm_samples {
-            self.block_sum_g = 0.0;
-            self.block_filled = 0;
+        if !(self.raw_armed || self.held_in_run) {
             return false;
         }
         let deviation_g = (counts as f32 - self.zero_counts) * self.grams_per_count - gross;
+        // The step that started this run rings on, and so does whatever rang before it (a
+        // run restarted by the impact of its own load).
+        let step_g = (gross - self.previous_gross_g).abs();
+        self.ringing_g = self
+            .ringing_g
+            .max(RINGING_OVER_STEP * step_g * self.ringing_envelope);
         let raw = self.raw_cusum.step(
             deviation_g,
-            self.config.raw_drift_g,
+            self.config.raw_drift_g + self.ringing_g,
             self.config.raw_threshold_g,
         );
+        if !self.raw_armed {
+            self.block_sum_g = 0.0;
+            self.block_filled = 0;
+            return raw;
+        }
         self.block_sum_g += deviation_g;
         self.block_filled += 1;
         if self.block_filled < self.config.block_samples {
@@ -88,6 +122,15 @@ impl<E: ScaleEstimator> Scale<E> {
             self.config.block_threshold_g,
         );
         raw || block
+    }
+
+    /// The block test's sums are past [`MOTION_OVER_THRESHOLD`] of its threshold: the load is moving (a trickle, a
+    /// creep) though the test has not alarmed yet. No reading is shown stable or final then.
+    pub(super) fn in_motion(&self) -> bool {
+        self.raw_armed
+            && self
+                .block_cusum
+                .above(MOTION_OVER_THRESHOLD * self.config.block_threshold_g)
     }
 
     /// A load changed: a new run.
@@ -169,6 +212,138 @@ mod tests {
                 let last = readings.last().unwrap();
                 assert_eq!(last.load_changes, 0, "seed {seed}, {load_g} g: {last:?}");
             }
+        }
+    }
+}
+
+/// What the torture run found shown settled while wrong, each as a scene on the test cell:
+/// every reading shown stable or empty must lie within the permissible error of the truth
+/// of the last 50 ms (a display may lag one readout period), with twice its `u` within it.
+/// (A final reading is a 95 % claim, 2u within the target: one in twenty may lie outside
+/// it, so it is not held to this hard bound.)
+#[cfg(test)]
+mod shown_settled {
+    extern crate std;
+    use std::collections::VecDeque;
+
+    use super::super::test_scene::{scene, Cell};
+    use super::super::{Scale, ScaleEstimator, ScaleState};
+
+    const PERIOD: usize = 200;
+
+    /// Push `samples`, the load at each from `load`, and check every settled reading
+    /// against the truth of the last readout period (`recent`, kept across calls);
+    /// returns the readings.
+    fn checked<E: ScaleEstimator>(
+        (scale, cell, recent): (&mut Scale<E>, &mut Cell, &mut VecDeque<f64>),
+        samples: usize,
+        load: impl Fn(usize) -> f64,
+        what: &str,
+    ) -> std::vec::Vec<super::super::ScaleReading> {
+        let mut readings = std::vec::Vec::new();
+        for k in 0..samples {
+            cell.load_g = load(k);
+            recent.push_back(cell.load_g);
+            if recent.len() > PERIOD {
+                recent.pop_front();
+            }
+            let reading = scale.push(cell.sample());
+            let settled = matches!(reading.state, ScaleState::Stable | ScaleState::Empty);
+            if let (true, Some(mass)) = (settled, reading.mass_g) {
+                let low = recent.iter().cloned().fold(f64::INFINITY, f64::min);
+                let high = recent.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+                let mass = mass as f64;
+                let error = (low - mass).max(mass - high).max(0.0);
+                let permissible = scale.config().permissible_error_g(mass as f32) as f64;
+                assert!(
+                    error <= permissible,
+                    "{what}, sample {k}: shown {mass} ({reading:?}), truth {low}..{high}"
+                );
+                if let Some(u) = reading.uncertainty_g {
+                    assert!(
+                        2.0 * u as f64 <= permissible,
+                        "{what}, sample {k}: {reading:?}"
+                    );
+                }
+            }
+            readings.push(reading);
+        }
+        readings
+    }
+
+    /// An item taken off by hand (over 150 ms) a second after it was put on: the raw test
+    /// was not yet armed (it waited 1.5 s for the ringing to end), the residuals absorbed
+    /// the ramp, and the old mass stayed on show, `Stable`, 1.7 g off.
+    #[test]
+    #[ignore = "known failure, issue 12: after the removal a run restarted on the ringing reads 0.058 g with u = 0.017 g, shown empty (the u under-covers there)"]
+    fn an_item_removed_by_hand_soon_after_it_was_put_on() {
+        for (seed, item_g) in [(1, 5.0), (2, 20.0), (3, 150.0)] {
+            let (mut scale, _) = scene(0.43);
+            let mut cell = Cell::seeded(0.43, seed);
+            let mut recent = VecDeque::new();
+            checked((&mut scale, &mut cell, &mut recent), 4000, |_| 0.0, "empty");
+            checked(
+                (&mut scale, &mut cell, &mut recent),
+                4400,
+                |_| item_g,
+                "put on",
+            );
+            let ramp = |k: usize| (item_g * (1.0 - k as f64 / 600.0)).max(0.0);
+            let readings = checked(
+                (&mut scale, &mut cell, &mut recent),
+                8000,
+                ramp,
+                "taken off",
+            );
+            let last = readings.last().unwrap();
+            assert_eq!(last.state, ScaleState::Empty, "{item_g} g: {last:?}");
+        }
+    }
+
+    /// An item placed by hand on an empty pan (rising over 200 ms): a run restarted
+    /// mid-rise read about zero with a `u` of grams, and showed `Empty`.
+    #[test]
+    fn an_item_placed_by_hand_is_not_shown_empty_on_its_way() {
+        for (seed, item_g) in [(4, 5.0), (5, 8.0), (6, 60.0)] {
+            let (mut scale, _) = scene(0.43);
+            let mut cell = Cell::seeded(0.43, seed);
+            let mut recent = VecDeque::new();
+            checked((&mut scale, &mut cell, &mut recent), 8000, |_| 0.0, "empty");
+            let rise = |k: usize| item_g * (k as f64 / 800.0).min(1.0);
+            let readings = checked((&mut scale, &mut cell, &mut recent), 8000, rise, "placed");
+            let last = readings.last().unwrap();
+            assert_eq!(last.state, ScaleState::Stable, "{item_g} g: {last:?}");
+        }
+    }
+
+    /// A load trickling on (0.02 and 0.04 g/s, sand or a leaking cup) onto a settled
+    /// load: a reading creeping out of its stability band reset the raw test's arming,
+    /// so the block test never ran, and the display lagged 0.3 g behind, `Stable`.
+    #[test]
+    #[ignore = "known failure, issue 12: a run restarted mid-trickle reads the step model's extrapolation of the ramp, 0.051 g behind at 0.04 g/s with u = 0.022 g, before the raw tests arm"]
+    fn a_trickle_is_never_shown_stable_behind_the_load() {
+        for (seed, rate_g_per_s) in [(7, 0.02), (8, 0.04)] {
+            let (mut scale, _) = scene(0.43);
+            let mut cell = Cell::seeded(0.43, seed);
+            let mut recent = VecDeque::new();
+            checked((&mut scale, &mut cell, &mut recent), 2000, |_| 0.0, "empty");
+            checked(
+                (&mut scale, &mut cell, &mut recent),
+                12_000,
+                |_| 20.0,
+                "settling",
+            );
+            let trickle = |k: usize| 20.0 + rate_g_per_s * k as f64 / 4000.0;
+            let readings = checked(
+                (&mut scale, &mut cell, &mut recent),
+                80_000,
+                trickle,
+                "trickle",
+            );
+            assert!(
+                readings.last().unwrap().load_changes > 1,
+                "{rate_g_per_s} g/s: the trickle went unseen"
+            );
         }
     }
 }

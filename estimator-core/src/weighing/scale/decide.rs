@@ -103,6 +103,12 @@ impl<E: ScaleEstimator> Scale<E> {
 
     /// Show a valid gross estimate: the stability band, the state, the settling that arms
     /// the raw test. True when the pan is empty and stable.
+    ///
+    /// Stable (and empty) are claims that the reading is right: they need the estimate to
+    /// have held its band for `stable_hold_samples`, twice its standard uncertainty (where
+    /// the estimator states one) within the permissible error of the net load, and no
+    /// motion building up in the block test. A fresh fit near zero with a `u` of grams is
+    /// not an empty pan, and a reading creeping with a trickle is not stable.
     fn show(&mut self, estimate_g: f32) -> bool {
         self.gross_g = Some(estimate_g);
         self.valid_in_run = true;
@@ -115,17 +121,46 @@ impl<E: ScaleEstimator> Scale<E> {
             self.stable_centre_g = estimate_g;
             self.stable_samples = 0;
         }
-        let stable = self.stable_samples >= self.config.stable_hold_samples;
+        let permissible_g = self.config.permissible_error_g(estimate_g - self.tare_g);
+        let certain = self.gross_u_g.is_none_or(|u| 2.0 * u <= permissible_g);
+        let in_band = self.stable_samples >= self.config.stable_hold_samples;
+        let held = in_band && certain;
+        // A run that began mid-change (a load lifted off by hand, the restart caught its
+        // ramp) keeps that ramp in its fit for good: its `u` stays above the permissible
+        // error on a load that has long come to rest. Once per load change, after
+        // `raw_arm_samples` of valid readings that never became certain, start over on
+        // data of the resting load.
+        if !certain && !self.restarted_uncertain {
+            self.uncertain_samples = self.uncertain_samples.saturating_add(1);
+            if self.uncertain_samples >= self.config.raw_arm_samples {
+                self.restart();
+                self.restarted_uncertain = true;
+                self.state = ScaleState::Estimating;
+                return false;
+            }
+        } else {
+            self.uncertain_samples = 0;
+        }
+        // The raw tests arm once the run is `raw_arm_samples` old (the ringing of a fresh
+        // load has died down) and its reading holds its band, and stay armed for the run: a
+        // reading creeping out of its band with a trickle must not disarm the very tests
+        // that see the creep.
+        self.raw_armed |=
+            held && self.samples_since_change >= u64::from(self.config.raw_arm_samples);
+        self.held_in_run |= held;
+        let stable = held && !self.in_motion();
         let empty = estimate_g.abs() <= self.config.empty_band_g;
-        self.state = if empty {
+        self.state = if empty && stable {
             ScaleState::Empty
         } else if stable {
             ScaleState::Stable
         } else {
             ScaleState::Estimating
         };
-        if stable
-            || (empty && self.samples_since_change > u64::from(self.config.stable_hold_samples))
+        if held
+            || (empty
+                && certain
+                && self.samples_since_change > u64::from(self.config.stable_hold_samples))
         {
             self.settled_samples = self.settled_samples.saturating_add(1);
         } else {

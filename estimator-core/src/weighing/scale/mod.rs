@@ -108,6 +108,27 @@ pub struct Scale<E> {
     stable_samples: u32,
     /// Samples the reading has been stable or empty (arms the raw test).
     settled_samples: u32,
+    /// The raw tests are armed: the run has been settled for `raw_arm_samples` once.
+    raw_armed: bool,
+    /// The run's reading has held its stability band once: the per-sample raw test runs,
+    /// its drift widened by the ringing's envelope until `raw_armed`.
+    held_in_run: bool,
+    /// The gross mass shown before the run started (the step that set the cell ringing is
+    /// the run's gross minus this), g.
+    previous_gross_g: f32,
+    /// The ringing's envelope relative to its start: 1 at a restart, times
+    /// `ringing_decay` per sample.
+    ringing_envelope: f32,
+    /// The ringing the per-sample raw test allows for, g: decays by `ringing_decay` per
+    /// sample, carried over a restart.
+    ringing_g: f32,
+    /// Samples the reading held its band without becoming certain (2u above the
+    /// permissible error).
+    uncertain_samples: u32,
+    /// This load's run was restarted for that once already (cleared by a load change).
+    restarted_uncertain: bool,
+    /// e⁻⁵ over `raw_arm_samples`, per sample (1 − 5/`raw_arm_samples`, at least 0).
+    ringing_decay: f32,
     /// The current run has shown a valid reading.
     valid_in_run: bool,
     /// Consecutive samples the estimator has flagged without latching.
@@ -162,6 +183,14 @@ impl<E: ScaleEstimator> Scale<E> {
             stable_centre_g: 0.0,
             stable_samples: 0,
             settled_samples: 0,
+            raw_armed: false,
+            held_in_run: false,
+            previous_gross_g: 0.0,
+            ringing_envelope: 1.0,
+            ringing_g: 0.0,
+            uncertain_samples: 0,
+            restarted_uncertain: false,
+            ringing_decay: ringing_decay(config.raw_arm_samples),
             valid_in_run: false,
             flagged_samples: 0,
             restart_pending: false,
@@ -226,6 +255,7 @@ impl<E: ScaleEstimator> Scale<E> {
             .map(|gross| gross - self.tare_g);
         let uncertainty_g = mass_g.and(self.gross_u_g);
         let is_final = matches!(self.state, ScaleState::Estimating | ScaleState::Stable)
+            && !self.in_motion()
             && uncertainty_g.is_some_and(|u| 2.0 * u <= self.config.final_target_g);
         ScaleReading {
             mass_g,
@@ -283,13 +313,19 @@ impl<E: ScaleEstimator> Scale<E> {
         self.samples_since_change = 0;
         self.stable_samples = 0;
         self.settled_samples = 0;
+        self.raw_armed = false;
+        self.held_in_run = false;
+        if let Some(gross) = self.gross_g {
+            self.previous_gross_g = gross;
+        }
+        self.ringing_envelope = 1.0;
+        self.uncertain_samples = 0;
         self.valid_in_run = false;
         self.flagged_samples = 0;
         self.gross_g = None;
         self.restart_pending = false;
     }
 
-    /// A new run that counts as a load change.
     /// Count `samples` more raw samples in this run without pushing them (tests of runs
     /// longer than a test can feed: 2³² samples are 12.4 days at 4 kHz). Keep `samples` a
     /// multiple of the estimator's update so the residual test's phase stays aligned.
@@ -298,8 +334,19 @@ impl<E: ScaleEstimator> Scale<E> {
         self.samples_since_change += samples;
     }
 
+    /// A new run that counts as a load change.
     fn restart_as_load_change(&mut self) {
         self.restart();
+        self.restarted_uncertain = false;
         self.load_changes = self.load_changes.saturating_add(1);
     }
+}
+
+/// The ringing's decay per sample: e⁻⁵ (0.7 %) over `arm_samples`, to first order
+/// (`(1 − 5/N)^N` is within 0.5 % of e⁻⁵ from N = 6000 down to a few thousand).
+fn ringing_decay(arm_samples: u32) -> f32 {
+    if arm_samples == 0 {
+        return 0.0;
+    }
+    (1.0 - 5.0 / arm_samples as f32).max(0.0)
 }
