@@ -81,6 +81,7 @@ impl<E: ScaleEstimator> Scale<E> {
     /// the run, decaying to e⁻⁵ of it over `raw_arm_samples` (the settling the default
     /// arming is set for). The block test waits for the full arming.
     pub(super) fn raw_alarm(&mut self, counts: i32) -> bool {
+        self.block_alarmed = false;
         self.ringing_envelope *= self.ringing_decay;
         self.ringing_g *= self.ringing_decay;
         let Some(gross) = self.gross_g else {
@@ -121,6 +122,7 @@ impl<E: ScaleEstimator> Scale<E> {
             self.config.block_drift_g,
             self.config.block_threshold_g,
         );
+        self.block_alarmed = block && !raw;
         raw || block
     }
 

@@ -32,7 +32,10 @@ impl<E: ScaleEstimator> Scale<E> {
             return self.flagged(reason);
         }
         if self.residual_alarm(reading.residual) || self.raw_alarm(counts) {
-            return self.load_changed();
+            let slow = self.block_alarmed;
+            let reading = self.load_changed();
+            self.after_slow_change = slow;
+            return reading;
         }
         let Some(estimate_counts) = reading.estimate else {
             self.state = ScaleState::Estimating;
@@ -148,7 +151,11 @@ impl<E: ScaleEstimator> Scale<E> {
         self.raw_armed |=
             held && self.samples_since_change >= u64::from(self.config.raw_arm_samples);
         self.held_in_run |= held;
-        let stable = held && !self.in_motion();
+        // After a change only the block test saw (a trickle, a creep, a small item), the
+        // load may still be moving, and a fresh fit of a ramp reads the step model's
+        // extrapolation of it: nothing is shown stable until the raw tests are armed again
+        // and see no motion.
+        let stable = held && !self.in_motion() && (self.raw_armed || !self.after_slow_change);
         let empty = estimate_g.abs() <= self.config.empty_band_g;
         self.state = if empty && stable {
             ScaleState::Empty

@@ -122,6 +122,11 @@ pub struct Scale<E> {
     /// The ringing the per-sample raw test allows for, g: decays by `ringing_decay` per
     /// sample, carried over a restart.
     ringing_g: f32,
+    /// The last alarm was the block test's alone (a slow change).
+    block_alarmed: bool,
+    /// This run began at a change only the block test saw: nothing is stable before the
+    /// raw tests are armed again.
+    after_slow_change: bool,
     /// Samples the reading held its band without becoming certain (2u above the
     /// permissible error).
     uncertain_samples: u32,
@@ -188,6 +193,8 @@ impl<E: ScaleEstimator> Scale<E> {
             previous_gross_g: 0.0,
             ringing_envelope: 1.0,
             ringing_g: 0.0,
+            block_alarmed: false,
+            after_slow_change: false,
             uncertain_samples: 0,
             restarted_uncertain: false,
             ringing_decay: ringing_decay(config.raw_arm_samples),
@@ -320,6 +327,7 @@ impl<E: ScaleEstimator> Scale<E> {
         }
         self.ringing_envelope = 1.0;
         self.uncertain_samples = 0;
+        self.after_slow_change = false;
         self.valid_in_run = false;
         self.flagged_samples = 0;
         self.gross_g = None;
