@@ -113,6 +113,8 @@ pub struct Scale<E> {
     /// The run's reading has held its stability band once: the per-sample raw test runs,
     /// its drift widened by the ringing's envelope until `raw_armed`.
     held_in_run: bool,
+    /// The last valid gross estimate shown, g (kept through faults).
+    last_shown_gross_g: f32,
     /// The gross mass shown before the run started (the step that set the cell ringing is
     /// the run's gross minus this), g.
     previous_gross_g: f32,
@@ -191,6 +193,7 @@ impl<E: ScaleEstimator> Scale<E> {
             raw_armed: false,
             held_in_run: false,
             previous_gross_g: 0.0,
+            last_shown_gross_g: 0.0,
             ringing_envelope: 1.0,
             ringing_g: 0.0,
             block_alarmed: false,
@@ -322,9 +325,9 @@ impl<E: ScaleEstimator> Scale<E> {
         self.settled_samples = 0;
         self.raw_armed = false;
         self.held_in_run = false;
-        if let Some(gross) = self.gross_g {
-            self.previous_gross_g = gross;
-        }
+        // The last mass shown, not `gross_g`: a fault clears that before the restart it
+        // causes (lost samples), and the step would then look like the whole load.
+        self.previous_gross_g = self.last_shown_gross_g;
         self.ringing_envelope = 1.0;
         self.uncertain_samples = 0;
         self.after_slow_change = false;
