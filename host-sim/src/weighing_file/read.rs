@@ -425,12 +425,18 @@ fn describe_toml_error(path: &Path, text: &str, error: &toml::de::Error) -> Stri
     let Some(span) = error.span() else {
         return format!("weighing config {}: {message}", path.display());
     };
-    let start = span.start.min(text.len());
+    // On a character boundary, whatever toml's span says (slicing inside a character
+    // panicked on a file of arbitrary text, found by tests/reader_fuzz.rs).
+    let mut start = span.start.min(text.len());
+    while !text.is_char_boundary(start) {
+        start -= 1;
+    }
     let line_number = text[..start].matches('\n').count() + 1;
     let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
-    let line = text[line_start..].lines().next().unwrap_or("").trim();
+    let raw_line = text[line_start..].lines().next().unwrap_or("");
+    let line = raw_line.trim();
     // The table the position is in: the last header at or before its line.
-    let table = text[..line_start + line.len()]
+    let table = text[..line_start + raw_line.len()]
         .lines()
         .rev()
         .map(str::trim)
