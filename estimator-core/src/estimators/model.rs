@@ -574,7 +574,19 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
                 self.models[best].uncertainty(),
                 self.models[best + 1].uncertainty(),
             ) {
-                (Some(left), Some(mid), Some(right)) => Some(interpolate(left, mid, right)),
+                (Some(left), Some(mid), Some(right)) => {
+                    let statistical = interpolate(left, mid, right);
+                    // The model itself is known only to within the parabola's width: an
+                    // offset of δ steps raises the residual sum by one noise variance,
+                    // δ² = 2 s² / curvature, and moves the estimate by its slope times δ.
+                    let variance = r_mid / T::from_u32(terms);
+                    let spread = (T::from_f64(2.0) * variance / curvature).sqrt();
+                    let slope =
+                        half * (u_right - u_left) + offset * (u_right - (u_mid + u_mid) + u_left);
+                    let model = slope * spread;
+                    let u = (statistical * statistical + model * model).sqrt();
+                    u.is_finite().then_some(u)
+                }
                 _ => None,
             }
         } else {
