@@ -287,7 +287,7 @@ impl<T: Real, const N: usize, const L: usize> StepEstimator<T, N, L> {
         }
         if determined_before {
             self.lags
-                .push_residual(folded.row_weight * folded.residual * folded.residual);
+                .push_residual(folded.residual, folded.row_weight, n);
         }
         let mismatch = match self.check.as_mut() {
             Some(check) => {
