@@ -59,6 +59,13 @@ pub struct ScaleConfig {
     /// `+∞`: every reading with a `u` is final; the default is 0.5 e, OIML R 76's maximum
     /// permissible error on the smallest loads at verification (class III, up to 500 e).
     pub final_target_g: f32,
+    /// The accuracy the instrument is configured for, relative to the load (`[target]
+    /// target_relative` of the weighing configuration; `+∞`: none): where it is tighter
+    /// than the MPE it is the permissible error ([`Self::permissible_error_g`]).
+    pub accuracy_target_relative: f32,
+    /// The load below which the relative target is taken at this mass (the calibration
+    /// mass it was set at), g.
+    pub accuracy_target_mass_g: f32,
     /// Zero tracking runs only while empty, stable, and within ±this of zero.
     pub zero_tracking_band_g: f32,
     /// The largest rate the zero may move at while tracking (OIML R 76: at most 0.5 e per
@@ -159,6 +166,8 @@ impl ScaleConfig {
             capacity_g: Self::CAPACITY_G,
             scale_interval_g: Self::SCALE_INTERVAL_G,
             final_target_g: 0.5 * Self::SCALE_INTERVAL_G,
+            accuracy_target_relative: f32::INFINITY,
+            accuracy_target_mass_g: 0.0,
             zero_tracking_band_g: 0.5 * Self::SCALE_INTERVAL_G,
             zero_tracking_rate_g_per_s: 0.1 * Self::SCALE_INTERVAL_G,
             zero_tracking_range_g: 0.5 * Self::SCALE_INTERVAL_G,
@@ -168,19 +177,32 @@ impl ScaleConfig {
         }
     }
 
-    /// The maximum permissible error for a net load of `load_g` (OIML R 76-1, class III, at
-    /// initial verification, in the scale interval e): 0.5 e up to 500 e, 1 e up to 2,000 e,
-    /// 1.5 e above. A reading is shown stable (or empty) only while twice its standard
-    /// uncertainty is within it.
+    /// The error a reading of the net load `load_g` may have: the maximum permissible error
+    /// (OIML R 76-1, class III, at initial verification, in the scale interval e: 0.5 e up
+    /// to 500 e, 1 e up to 2,000 e, 1.5 e above), or the configured accuracy target where
+    /// that is tighter (`accuracy_target_relative` of the load, or of
+    /// `accuracy_target_mass_g` below it). A reading is shown stable (or empty) only while
+    /// twice its standard uncertainty is within it.
     pub fn permissible_error_g(&self, load_g: f32) -> f32 {
         let e = self.scale_interval_g;
         let intervals = load_g.abs() / e;
-        if intervals <= 500.0 {
+        let mpe = if intervals <= 500.0 {
             0.5 * e
         } else if intervals <= 2000.0 {
             e
         } else {
             1.5 * e
+        };
+        let at = if load_g.abs() > self.accuracy_target_mass_g {
+            load_g.abs()
+        } else {
+            self.accuracy_target_mass_g
+        };
+        let target = self.accuracy_target_relative * at;
+        if target < mpe {
+            target
+        } else {
+            mpe
         }
     }
 
@@ -206,6 +228,14 @@ impl ScaleConfig {
                 self.scale_interval_g.is_finite() && self.scale_interval_g > 0.0,
             ),
             ("final_target_g", threshold(self.final_target_g)),
+            (
+                "accuracy_target_relative",
+                threshold(self.accuracy_target_relative),
+            ),
+            (
+                "accuracy_target_mass_g",
+                finite_non_negative(self.accuracy_target_mass_g),
+            ),
             ("empty_band_g", finite_non_negative(self.empty_band_g)),
             ("stable_band_g", finite_non_negative(self.stable_band_g)),
             (
@@ -261,6 +291,16 @@ impl ScaleConfig {
         }
     }
 
+    /// These decisions with the permissible error no wider than `relative` of the load (of
+    /// `at_mass_g` below it): the weighing configuration's accuracy target.
+    pub fn with_accuracy_target(self, relative: f32, at_mass_g: f32) -> Self {
+        Self {
+            accuracy_target_relative: relative,
+            accuracy_target_mass_g: at_mass_g,
+            ..self
+        }
+    }
+
     /// These decisions with readings final once `2u ≤ final_target_g`.
     pub fn with_final_target(self, final_target_g: f32) -> Self {
         Self {
@@ -309,7 +349,13 @@ mod tests {
         let good = ScaleConfig::weighing_default(FS);
         assert_eq!(good.validate(), Ok(()));
         type Set = fn(&mut ScaleConfig, f32);
-        let fields: [(&str, Set); 15] = [
+        let fields: [(&str, Set); 17] = [
+            ("accuracy_target_relative", |c, v| {
+                c.accuracy_target_relative = v
+            }),
+            ("accuracy_target_mass_g", |c, v| {
+                c.accuracy_target_mass_g = v
+            }),
             ("block_drift_g", |c, v| c.block_drift_g = v),
             ("block_threshold_g", |c, v| c.block_threshold_g = v),
             ("sample_rate_hz", |c, v| c.sample_rate_hz = v),
