@@ -8,6 +8,8 @@
 //! band: with `m` readings and a true coverage of 95 %, the observed fraction lies within
 //! `±1.96·sqrt(0.95·0.05/m)` of it 95 % of the time (±1.4 % at 1,000 runs).
 
+mod chart;
+
 use std::io::Write;
 
 use anyhow::Result;
@@ -17,6 +19,8 @@ use rayon::prelude::*;
 use crate::method::{BuildContext, Method};
 use crate::scene::Scene;
 use crate::simulated::run_seed;
+
+pub use chart::write as write_chart;
 
 /// Readout times of the table, milliseconds after the onset.
 pub const TIMES_MS: [u32; 7] = [25, 50, 75, 100, 150, 200, 400];

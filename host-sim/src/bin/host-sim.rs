@@ -782,6 +782,7 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
     } else {
         args.snr_db
     };
+    let defaults = args.methods.is_empty();
     let methods = if args.methods.is_empty() {
         let (firmware, config) = study::firmware_default()?;
         vec![firmware, study::identified_bank(&config, Precision::F32)]
@@ -802,9 +803,24 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
     let path = args.out.join("coverage.md");
     let mut file = create(&path)?;
     let stdout = std::io::stdout();
+    let mut charts = Vec::new();
     for scene in &scenes {
-        for method in &methods {
+        for (m, method) in methods.iter().enumerate() {
             let rows = host_sim::coverage::study(scene, method, runs as u64, args.seed, &snr_db)?;
+            let (name, label) = match (defaults, m) {
+                (true, 0) => (
+                    format!("coverage-{scene}-firmware"),
+                    format!("firmware `{method}`"),
+                ),
+                (true, _) => (
+                    format!("coverage-{scene}-bank"),
+                    "identified-model bank (f32)".to_string(),
+                ),
+                (false, _) => (format!("coverage-{scene}-{m}"), format!("`{method}`")),
+            };
+            let title = format!("{label} on {scene}, {runs} runs per SNR");
+            host_sim::coverage::write_chart(&rows, &title, &args.out.join(&name))?;
+            charts.push(name);
             let header = format!(
                 "`{method}` on `{scene}` (onset and tare known), {runs} runs per SNR, seed {}:",
                 args.seed
@@ -816,7 +832,11 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
         }
     }
     file.flush()?;
-    println!("wrote {}", path.display());
+    println!(
+        "wrote {} and the charts {}.{{svg,png}}",
+        path.display(),
+        charts.join(", ")
+    );
     Ok(())
 }
 
