@@ -9,6 +9,7 @@
 //! `±1.96·sqrt(0.95·0.05/m)` of it 95 % of the time (±1.4 % at 1,000 runs).
 
 mod chart;
+pub mod final_time;
 
 use std::io::Write;
 
