@@ -636,6 +636,7 @@ pub(crate) fn widen(reading: Reading<f32>) -> Reading<f64> {
         state: reading.state,
         residual: reading.residual.map(f64::from),
         uncertainty: reading.uncertainty.map(f64::from),
+        degrees_of_freedom: reading.degrees_of_freedom,
     }
 }
 

@@ -182,6 +182,7 @@ impl<E: Estimator<f32>> Estimator<f64> for Widened<E> {
             state: r.state,
             residual: r.residual.map(f64::from),
             uncertainty: r.uncertainty.map(f64::from),
+            degrees_of_freedom: r.degrees_of_freedom,
         }
     }
     fn push_missing(&mut self) -> estimator_core::Reading<f64> {
@@ -192,6 +193,7 @@ impl<E: Estimator<f32>> Estimator<f64> for Widened<E> {
             state: r.state,
             residual: r.residual.map(f64::from),
             uncertainty: r.uncertainty.map(f64::from),
+            degrees_of_freedom: r.degrees_of_freedom,
         }
     }
     fn reset(&mut self) {

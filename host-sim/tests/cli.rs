@@ -234,6 +234,7 @@ fn widen(r: Reading<f32>) -> Reading<f64> {
         state: r.state,
         residual: r.residual.map(f64::from),
         uncertainty: r.uncertainty.map(f64::from),
+        degrees_of_freedom: r.degrees_of_freedom,
     }
 }
 

@@ -29,6 +29,7 @@ pub(crate) struct Intake<T> {
     estimate: Option<T>,
     residual: Option<T>,
     uncertainty: Option<T>,
+    degrees_of_freedom: u32,
 }
 
 impl<T: Real> Intake<T> {
@@ -45,6 +46,7 @@ impl<T: Real> Intake<T> {
             estimate: None,
             residual: None,
             uncertainty: None,
+            degrees_of_freedom: 0,
         }
     }
 
@@ -86,12 +88,15 @@ impl<T: Real> Intake<T> {
         self.estimate = Some(estimate);
         self.residual = residual;
         self.uncertainty = None;
+        self.degrees_of_freedom = 0;
     }
 
-    /// State the standard uncertainty of the estimate just set by [`Self::estimating`].
-    pub(crate) fn state_uncertainty(&mut self, uncertainty: Option<T>) {
+    /// State the standard uncertainty of the estimate just set by [`Self::estimating`], and
+    /// the degrees of freedom its noise level rests on.
+    pub(crate) fn state_uncertainty(&mut self, uncertainty: Option<(T, u32)>) {
         if self.estimate.is_some() {
-            self.uncertainty = uncertainty;
+            self.uncertainty = uncertainty.map(|(u, _)| u);
+            self.degrees_of_freedom = uncertainty.map_or(0, |(_, dof)| dof);
         }
     }
 
@@ -101,6 +106,7 @@ impl<T: Real> Intake<T> {
         self.estimate = None;
         self.residual = None;
         self.uncertainty = None;
+        self.degrees_of_freedom = 0;
     }
 
     /// Mark the current reading invalid; a later valid update may clear it.
@@ -109,6 +115,7 @@ impl<T: Real> Intake<T> {
         self.estimate = None;
         self.residual = None;
         self.uncertainty = None;
+        self.degrees_of_freedom = 0;
     }
 
     /// Invalidate and stay invalid until the reset: the data stream or the state is broken.
@@ -125,6 +132,7 @@ impl<T: Real> Intake<T> {
             state: self.state,
             residual: self.residual,
             uncertainty: self.uncertainty,
+            degrees_of_freedom: self.degrees_of_freedom,
         }
     }
 }

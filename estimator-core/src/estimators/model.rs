@@ -388,6 +388,7 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
         self.intake
             .estimate()
             .and_then(|_| self.uncertainty_with(self.residual_sum, weight))
+            .map(|(u, _)| u)
     }
 
     /// The least-squares standard uncertainty of `u`: with the model known the equation
@@ -397,13 +398,13 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
     /// estimator's, `crate::estimators::step_uncertainty`). `None` below
     /// `MIN_DEGREES_OF_FREEDOM` residuals. A wrong model is not in it: that is what the
     /// consistency check and the bank's edge flag are for.
-    fn uncertainty_with(&self, residual_sum: T, weight: T) -> Option<T> {
+    fn uncertainty_with(&self, residual_sum: T, weight: T) -> Option<(T, u32)> {
         if self.residual_terms < MIN_DEGREES_OF_FREEDOM || !(weight > T::ZERO) {
             return None;
         }
         let variance = residual_sum / T::from_u32(self.residual_terms) / weight;
         let u = variance.sqrt() * coverage_factor::<T>(self.residual_terms);
-        u.is_finite().then_some(u)
+        u.is_finite().then_some((u, self.residual_terms))
     }
 }
 
@@ -507,6 +508,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
                     state: State::Invalid(InvalidReason::OutsideModelRange),
                     residual: None,
                     uncertainty: None,
+                    degrees_of_freedom: 0,
                     ..centre
                 };
             }
@@ -596,6 +598,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
             estimate: Some(estimate),
             residual,
             uncertainty,
+            degrees_of_freedom: if uncertainty.is_some() { terms } else { 0 },
             ..centre
         }
     }
@@ -610,6 +613,7 @@ impl<T: Real, const S: usize, const K: usize> Estimator<T> for ModelBank<T, S, K
             state: State::WarmingUp,
             residual: None,
             uncertainty: None,
+            degrees_of_freedom: 0,
         }; K];
         for (model, reading) in self.models.iter_mut().zip(readings.iter_mut()) {
             *reading = model.push(sample);
@@ -629,6 +633,7 @@ impl<T: Real, const S: usize, const K: usize> Estimator<T> for ModelBank<T, S, K
             state: State::Invalid(InvalidReason::MissingSample),
             residual: None,
             uncertainty: None,
+            degrees_of_freedom: 0,
         })
     }
 

@@ -324,7 +324,7 @@ impl<T: Real, const N: usize, const L: usize> StepEstimator<T, N, L> {
 
     /// The standard uncertainty of the current level (`crate::estimators::step_uncertainty`):
     /// `None` for `L < n`, with forgetting, or with too few rows. O(n³).
-    fn uncertainty(&self) -> Option<T> {
+    fn uncertainty(&self) -> Option<(T, u32)> {
         let n = self.config.order;
         if L < n || self.config.forgetting < T::ONE {
             return None;

@@ -145,7 +145,13 @@ impl<T: Real, const N: usize, const L: usize> LagSums<T, N, L> {
     /// The level's standard uncertainty (see the module docs) from `z` (the level's row of
     /// `P`: leading entries, then the constant's) and the current `ℓ` (`lead[..n]`);
     /// `None` when it cannot be stated.
-    pub(crate) fn uncertainty(&self, n: usize, z: &[T; N], z_level: T, lead: &[T; N]) -> Option<T> {
+    pub(crate) fn uncertainty(
+        &self,
+        n: usize,
+        z: &[T; N],
+        z_level: T,
+        lead: &[T; N],
+    ) -> Option<(T, u32)> {
         if !Self::covers(n) || L == 0 {
             return None;
         }
@@ -214,7 +220,7 @@ impl<T: Real, const N: usize, const L: usize> LagSums<T, N, L> {
         if !(total > T::ZERO && total.is_finite()) {
             return None;
         }
-        Some(total.sqrt() * coverage_factor::<T>(degrees))
+        Some((total.sqrt() * coverage_factor::<T>(degrees), degrees))
     }
 }
 

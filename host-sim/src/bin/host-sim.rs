@@ -868,7 +868,7 @@ fn time_to_final(
     let mass_g = 138.32;
     let limit_g = (config.target_relative * mass_g).min(config.scale_interval_g);
     let header = format!(
-        "Time to a final reading (2u ≤ {target_g} g), `{method}` on the reference drop, {runs} runs per SNR, seed {seed}; `host-sim study coverage --runs {runs} --seed {seed}`:"
+        "Time to a final reading (2u ≤ {target_g} g with the noise level at its upper 95 % bound), `{method}` on the reference drop, {runs} runs per SNR, seed {seed}; `host-sim study coverage --runs {runs} --seed {seed}`:"
     );
     let path = out.join("time-to-final.md");
     let mut file = create(&path)?;
@@ -876,7 +876,7 @@ fn time_to_final(
     final_time::write_markdown(&rows, &header, limit_g, &mut file)?;
     file.flush()?;
     let title = format!(
-        "time to a final reading (2u ≤ {target_g} g), firmware default, {runs} runs per SNR"
+        "time to a final reading (2u ≤ {target_g} g, noise level at its 95 % bound), {runs} runs per SNR"
     );
     final_time::write_chart(&rows, &title, &out.join("time-to-final"))?;
     println!("wrote {} and time-to-final.{{svg,png}}", path.display());

@@ -128,8 +128,8 @@ fn one_run(
             Ok(code) => estimator.push(f64::from(code) - zero),
             Err(_) => estimator.push_missing(),
         };
-        if let (Some(estimate), Some(u)) = (reading.estimate, reading.uncertainty) {
-            if 2.0 * u <= target_g {
+        if let (Some(estimate), Some(bound)) = (reading.estimate, reading.uncertainty_bound()) {
+            if 2.0 * bound <= target_g {
                 return Ok(Some((k as f64 / rate_hz * 1e3, estimate - mass_g)));
             }
         }

@@ -215,8 +215,9 @@ fn scale(w: &mut String, config: &WeighingConfig) {
     let _ = writeln!(w, "scale_interval_g = {}", number(config.scale_interval_g));
     let _ = writeln!(
         w,
-        "# A reading is final once twice its standard uncertainty is at or below this (g; or\n\
-         # final_target_e in scale intervals). Default 0.5 e: OIML R 76's smallest MPE."
+        "# A reading is final once twice its standard uncertainty, its noise level taken at\n\
+         # the upper 95 % confidence bound, is at or below this (g; or final_target_e in\n\
+         # scale intervals). Default 0.5 e: OIML R 76's smallest MPE."
     );
     let _ = writeln!(w, "final_target_g = {}", number(config.final_target_g));
 }

@@ -46,6 +46,9 @@ impl<E: ScaleEstimator> Scale<E> {
         let zero_shift_g = (self.zero_counts - self.run_zero_counts as f32) * self.grams_per_count;
         let estimate_g = estimate_counts * self.grams_per_count - zero_shift_g;
         self.gross_u_g = reading.uncertainty.map(|u| u * self.grams_per_count.abs());
+        self.gross_u_bound_g = reading
+            .uncertainty_bound()
+            .map(|u| u * self.grams_per_count.abs());
         if estimate_g > self.overload_limit_g() {
             return self.overloaded();
         }
@@ -126,7 +129,13 @@ impl<E: ScaleEstimator> Scale<E> {
             self.stable_samples = 0;
         }
         let permissible_g = self.config.permissible_error_g(estimate_g - self.tare_g);
-        let certain = self.gross_u_g.is_none_or(|u| 2.0 * u <= permissible_g);
+        // Judged on the upper confidence bound of `u` (`Reading::uncertainty_bound`), not on
+        // `u`: the first moment a fluctuating `u` meets a limit is biased.
+        let certain = match (self.gross_u_g, self.gross_u_bound_g) {
+            (None, _) => true,
+            (Some(_), Some(bound)) => 2.0 * bound <= permissible_g,
+            (Some(_), None) => false,
+        };
         let in_band = self.stable_samples >= self.config.stable_hold_samples;
         let held = in_band && certain;
         // A run that began mid-change (a load lifted off by hand, the restart caught its
