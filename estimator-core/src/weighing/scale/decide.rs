@@ -45,10 +45,15 @@ impl<E: ScaleEstimator> Scale<E> {
         // The tracked zero may have moved since the run started.
         let zero_shift_g = (self.zero_counts - self.run_zero_counts as f32) * self.grams_per_count;
         let estimate_g = estimate_counts * self.grams_per_count - zero_shift_g;
-        self.gross_u_g = reading.uncertainty.map(|u| u * self.grams_per_count.abs());
-        self.gross_u_bound_g = reading
-            .uncertainty_bound()
-            .map(|u| u * self.grams_per_count.abs());
+        let gross_u_g = reading.uncertainty.map(|u| u * self.grams_per_count.abs());
+        // The bound (a square root and two divisions) only when `u` changed: it changes
+        // once per block of the estimator, not on every sample.
+        if gross_u_g != self.gross_u_g {
+            self.gross_u_bound_g = reading
+                .uncertainty_bound()
+                .map(|u| u * self.grams_per_count.abs());
+        }
+        self.gross_u_g = gross_u_g;
         if estimate_g > self.overload_limit_g() {
             return self.overloaded();
         }
