@@ -155,21 +155,12 @@ pub fn measure_loop_overhead(messages: &[SampleMessage]) -> u64 {
 /// What the free stack is filled with, to find how deep it was used later.
 const STACK_PAINT: u32 = 0xA5A5_5A5A;
 
-extern "C" {
-    // Both from the linker script (cortex-m-rt's `link.x`, moved by flip-link): the stack
-    // grows down from `_stack_start` to `_stack_end`.
-    static _stack_start: u32;
-    static _stack_end: u32;
-}
-
-/// The stack's bounds, as addresses: (lowest, highest).
+/// The usable stack's bounds, as addresses: (lowest, highest): above the guard
+/// (`fault::guard_stack`), which may not be touched.
 fn stack_bounds() -> (usize, usize) {
-    // Only the addresses of the linker's symbols are taken (safe since Rust 1.82), nothing
-    // is read.
-    (
-        core::ptr::addr_of!(_stack_end) as usize,
-        core::ptr::addr_of!(_stack_start) as usize,
-    )
+    let (_, guard_end) = crate::fault::guard_range();
+    let (_, highest) = crate::fault::stack_bounds();
+    (guard_end as usize, highest as usize)
 }
 
 /// Fill the stack below the current stack pointer (less a margin for this function) with

@@ -16,6 +16,7 @@ compile_error!("features `qemu` and `stm32f411` are mutually exclusive: pick one
 #[cfg(not(any(feature = "qemu", feature = "stm32f411")))]
 compile_error!("pick a board: feature `qemu` (default) or `stm32f411` (--no-default-features)");
 
+pub mod fault;
 pub mod pipeline;
 
 #[cfg(feature = "qemu")]
@@ -27,3 +28,17 @@ pub mod qemu;
 pub mod stm32f411;
 
 pub mod bench;
+
+/// End the run after a fault or panic has been reported: a failing exit on QEMU.
+#[cfg(feature = "qemu")]
+pub fn board_fault_exit() -> ! {
+    qemu::exit(false)
+}
+
+/// End the run after a fault or panic has been reported: a permanent undefined instruction,
+/// so probe-rs sees the fault and exits with an error; without a probe the core locks up
+/// and the independent watchdog resets it.
+#[cfg(feature = "stm32f411")]
+pub fn board_fault_exit() -> ! {
+    cortex_m::asm::udf()
+}

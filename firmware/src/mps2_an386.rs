@@ -1,7 +1,7 @@
 //! A minimal hand-written device module for QEMU's `mps2-an386` (ARM MPS2 with the AN386
 //! Cortex-M4F image), in the shape RTIC expects: an `Interrupt` enum, `NVIC_PRIO_BITS`,
 //! and the interrupt vector table. Only what the firmware uses is here: the CMSDK timers
-//! and the receive side of CMSDK UART 0 (the operator's command console).
+//! the receive side of CMSDK UART 0 (the operator's command console) and the watchdog.
 //!
 //! Interrupt numbers and addresses follow QEMU's `hw/arm/mps2.c` (and ARM's AN385/AN386
 //! application notes): CMSDK APB timer 0 at `0x4000_0000` on IRQ 8, timer 1 at
@@ -219,6 +219,74 @@ impl CmsdkTimer {
     #[inline(always)]
     pub fn clear_interrupt(&mut self) {
         self.write(Self::INTCLEAR, 1);
+    }
+
+    /// Stop counting: no more interrupts (the `stall` scene's broken sample clock).
+    pub fn stop(&mut self) {
+        self.write(Self::CTRL, 0);
+    }
+}
+
+/// Base address of the CMSDK APB watchdog (QEMU's `hw/arm/mps2.c`: its interrupt is the
+/// NMI).
+pub const WATCHDOG_BASE: usize = 0x4000_8000;
+
+/// The CMSDK APB watchdog (ARM DDI 0479, "APB watchdog"): a 32-bit down-counter on the
+/// system clock. At zero it raises its interrupt (the NMI on this board) and reloads; at
+/// zero again with the interrupt still raised it resets the system. Feeding it clears the
+/// interrupt and reloads the counter. Its registers are locked against stray writes except
+/// while this driver changes them.
+pub struct CmsdkWatchdog {
+    registers: Registers,
+}
+
+impl CmsdkWatchdog {
+    const LOAD: usize = 0x000;
+    const CONTROL: usize = 0x008;
+    const INTCLR: usize = 0x00C;
+    const LOCK: usize = 0xC00;
+    const UNLOCK_KEY: u32 = 0x1ACC_E551;
+    const CONTROL_INTERRUPT_ENABLE: u32 = 1 << 0;
+    const CONTROL_RESET_ENABLE: u32 = 1 << 1;
+
+    /// Take the watchdog. Only one owner may exist: RTIC's `init` creates it once and
+    /// moves it into the task that feeds it.
+    ///
+    /// # Safety
+    /// The caller must create at most one `CmsdkWatchdog`.
+    pub unsafe fn take() -> Self {
+        Self {
+            registers: Registers {
+                base: WATCHDOG_BASE,
+            },
+        }
+    }
+
+    fn unlocked(&mut self, work: impl FnOnce(&mut Registers)) {
+        self.registers.write(Self::LOCK, Self::UNLOCK_KEY);
+        work(&mut self.registers);
+        // Any other value locks the registers again.
+        self.registers.write(Self::LOCK, 0);
+    }
+
+    /// Start: the NMI after `timeout_ticks` system clocks without a feed, the reset after
+    /// twice that.
+    pub fn start(&mut self, timeout_ticks: u32) {
+        self.unlocked(|registers| {
+            registers.write(Self::LOAD, timeout_ticks.max(1));
+            registers.write(Self::INTCLR, 1);
+            registers.write(
+                Self::CONTROL,
+                Self::CONTROL_INTERRUPT_ENABLE | Self::CONTROL_RESET_ENABLE,
+            );
+        });
+    }
+}
+
+impl crate::pipeline::Watchdog for CmsdkWatchdog {
+    /// The counter starts over from the timeout.
+    fn feed(&mut self) {
+        self.unlocked(|registers| registers.write(Self::INTCLR, 1));
     }
 }
 

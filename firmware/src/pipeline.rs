@@ -7,6 +7,7 @@
 //! hand-off, wait, or lose a sample without counting it.
 
 use core::mem::MaybeUninit;
+use core::sync::atomic::{AtomicU32, Ordering};
 
 use cortex_m::interrupt::InterruptNumber;
 use rtic::Mutex;
@@ -304,6 +305,50 @@ impl Pipeline {
             readout: tick.then_some(line),
             final_reading: first_final.then_some(line),
         }
+    }
+}
+
+/// A hardware watchdog: reset (or on QEMU, the NMI) unless fed in time.
+pub trait Watchdog {
+    /// Start the countdown over.
+    fn feed(&mut self);
+}
+
+/// The sample count at the watchdog's last feed, for the watchdog's own report (its NMI
+/// on QEMU cannot borrow the pipeline).
+pub static LAST_FED_SAMPLE: AtomicU32 = AtomicU32::new(0);
+
+/// The watchdog, fed only while samples advance: by the lowest-priority task (the
+/// readout, pended after each readout line), and only when the estimator has taken new
+/// samples since the last feed. So a stopped sample clock, a stalled DMA stream, a hung
+/// estimator or a readout task starved or stuck all end in the watchdog's reset instead
+/// of a frozen display.
+pub struct SampleWatchdog<W> {
+    watchdog: W,
+    fed_at: u32,
+}
+
+impl<W: Watchdog> SampleWatchdog<W> {
+    /// Around a started watchdog, fed now.
+    pub fn new(mut watchdog: W, samples: u32) -> Self {
+        watchdog.feed();
+        LAST_FED_SAMPLE.store(samples, Ordering::Relaxed);
+        Self {
+            watchdog,
+            fed_at: samples,
+        }
+    }
+
+    /// Feed it if `samples` (the pipeline's count) moved since the last feed; whether it
+    /// was fed.
+    pub fn service(&mut self, samples: u32) -> bool {
+        if samples == self.fed_at {
+            return false;
+        }
+        self.fed_at = samples;
+        LAST_FED_SAMPLE.store(samples, Ordering::Relaxed);
+        self.watchdog.feed();
+        true
     }
 }
 

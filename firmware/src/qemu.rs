@@ -126,6 +126,12 @@ pub enum Scene {
     /// consistency check (`estimator_core::weighing`), which the demo's short empty periods
     /// never allow.
     CheckedDemo,
+    /// The demo with a broken sample clock: the timer stops after
+    /// [`Scene::STALL_AFTER_SAMPLES`], and the watchdog must end the run.
+    Stall,
+    /// The demo with a runaway recursion in the readout task at
+    /// [`Scene::OVERFLOW_AT_SAMPLE`]: the stack guard must end the run with a fault.
+    StackOverflow,
 }
 
 impl Scene {
@@ -146,6 +152,8 @@ impl Scene {
             None | Some(b"demo") => Ok(Self::Demo),
             Some(b"commands") => Ok(Self::Commands),
             Some(b"checked-demo") => Ok(Self::CheckedDemo),
+            Some(b"stall") => Ok(Self::Stall),
+            Some(b"stack-overflow") => Ok(Self::StackOverflow),
             Some(_) => Err(UnknownScene),
         }
     }
@@ -153,11 +161,55 @@ impl Scene {
     /// The simulated cell playing this scene.
     pub fn load_cell(self) -> qemu_scenes::LoadCell {
         match self {
-            Self::Demo => qemu_scenes::demo_scene(),
+            Self::Demo | Self::Stall | Self::StackOverflow => qemu_scenes::demo_scene(),
             Self::Commands => qemu_scenes::command_scene(),
             Self::CheckedDemo => qemu_scenes::checked_demo_scene(),
         }
     }
+}
+
+impl Scene {
+    /// The `stall` scene's sample timer stops after this many samples (1 s).
+    pub const STALL_AFTER_SAMPLES: u32 = 4_000;
+    /// The `stack-overflow` scene's readout task recurses from this sample on (0.5 s).
+    pub const OVERFLOW_AT_SAMPLE: u32 = 2_000;
+
+    /// After how many samples the sample timer stops, in a scene that breaks it.
+    pub fn stalls_after(self) -> Option<u32> {
+        (self == Self::Stall).then_some(Self::STALL_AFTER_SAMPLES)
+    }
+
+    /// From which sample on the readout task overflows the stack, in a scene that does.
+    pub fn overflows_stack_at(self) -> Option<u32> {
+        (self == Self::StackOverflow).then_some(Self::OVERFLOW_AT_SAMPLE)
+    }
+}
+
+/// Recurse until the stack runs out (the `stack-overflow` scene): each level keeps a
+/// 64-byte frame alive across the call, so it cannot become a loop.
+#[inline(never)]
+pub fn exhaust_stack(depth: u32) -> u32 {
+    let frame = core::hint::black_box([depth; 16]);
+    if depth == u32::MAX {
+        return frame[0];
+    }
+    exhaust_stack(depth + 1).wrapping_add(core::hint::black_box(frame)[15])
+}
+
+/// How long the watchdog waits for a new sample before its NMI ends the run (its reset
+/// follows as long again later): 20 readout periods, far above the longest legitimate
+/// stall on this board (a calibration record written to the RAM flash, microseconds).
+pub const WATCHDOG_TIMEOUT_MS: u32 = 1_000;
+
+/// The watchdog's NMI: no new sample reached the readout task within the timeout.
+#[cortex_m_rt::exception]
+unsafe fn NonMaskableInt() {
+    defmt::error!(
+        "watchdog: no new sample for {=u32} ms after sample={=u32}: the sample clock or a task stalled",
+        WATCHDOG_TIMEOUT_MS,
+        pipeline::LAST_FED_SAMPLE.load(core::sync::atomic::Ordering::Relaxed)
+    );
+    exit(false)
 }
 
 /// End the QEMU session with a status CI reads: 0 on success, 1 on failure.
@@ -167,12 +219,5 @@ pub fn exit(success: bool) -> ! {
 
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
-    defmt::error!("panic: {}", defmt::Display2Format(info));
-    exit(false)
-}
-
-#[cortex_m_rt::exception]
-unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
-    defmt::error!("HardFault at pc={=u32:#010x}", frame.pc());
-    exit(false)
+    crate::fault::report_panic(info)
 }

@@ -219,15 +219,33 @@ impl NorFlash for Stm32Flash {
     }
 }
 
-#[panic_handler]
-fn panic(info: &core::panic::PanicInfo) -> ! {
-    defmt::error!("panic: {}", defmt::Display2Format(info));
-    // A permanent undefined instruction: probe-rs sees the fault and exits with an error.
-    cortex_m::asm::udf()
+/// The independent watchdog's timeout, nominal (the HAL assumes a 32 kHz LSI; the
+/// STM32F411's LSI runs at 17 to 47 kHz, so the real timeout is 6.8 to 18.8 s): above the
+/// longest legitimate stall, a calibration store's sector erase (128 KiB: up to 4 s at
+/// 8-bit parallelism, the CPU stalled on flash meanwhile).
+pub const WATCHDOG_TIMEOUT_MS: u32 = 10_000;
+
+impl crate::pipeline::Watchdog for stm32f4xx_hal::watchdog::IndependentWatchdog {
+    fn feed(&mut self) {
+        stm32f4xx_hal::watchdog::IndependentWatchdog::feed(self)
+    }
 }
 
-#[cortex_m_rt::exception]
-unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
-    defmt::error!("HardFault at pc={=u32:#010x}", frame.pc());
-    cortex_m::asm::udf()
+/// Say at boot when the last reset was the watchdog's (a stall or a fault without a probe
+/// attached), then clear the reset flags so the next boot tells its own cause.
+pub fn log_reset_cause() {
+    // Safety: RCC_CSR's reset flags are read and cleared once, in `init`, before the HAL
+    // takes the RCC; no other code touches this register.
+    let rcc = unsafe { &*stm32f4xx_hal::pac::RCC::ptr() };
+    if rcc.csr().read().wdgrstf().bit_is_set() {
+        defmt::error!(
+            "reset by the independent watchdog: samples had stopped, or a fault locked the core up"
+        );
+    }
+    rcc.csr().modify(|_, w| w.rmvf().set_bit());
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    crate::fault::report_panic(info)
 }

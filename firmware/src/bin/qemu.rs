@@ -3,7 +3,9 @@
 //! logs 20 lines a second over semihosting (defmt), and a command task takes the operator's
 //! bytes from UART 0 (`t` tare, `u` clear tare, `c` calibrate with 200 g, `x` cancel). After
 //! the scene (the demo, or the command scene when QEMU's semihosting command line names it)
-//! it exits QEMU with status 0; a panic or fault exits with status 1.
+//! it exits QEMU with status 0; a panic or fault exits with status 1, and so does the
+//! watchdog's NMI when no new sample has reached the readout task for a second (the scenes
+//! `stall` and `stack-overflow` break the board on purpose to show both).
 #![no_std]
 #![no_main]
 
@@ -13,9 +15,11 @@ use defmt_semihosting as _;
 mod app {
     use estimator_core::weighing::CalibrationStore;
     use estimator_core::weighing::Command;
-    use firmware::mps2_an386::{CmsdkTimer, CmsdkUart, Interrupt, SYSTEM_CLOCK_HZ};
+    use firmware::fault;
+    use firmware::mps2_an386::{CmsdkTimer, CmsdkUart, CmsdkWatchdog, Interrupt, SYSTEM_CLOCK_HZ};
     use firmware::pipeline::{
-        self, EstimatorStorage, Lines, Pipeline, SampleMessage, SampleQueue, SAMPLE_RATE_HZ,
+        self, EstimatorStorage, Lines, Pipeline, SampleMessage, SampleQueue, SampleWatchdog,
+        SAMPLE_RATE_HZ,
     };
     use firmware::qemu::{self, QemuCalibrationStore, Scene, SimulatedConverter};
     use heapless::spsc::{Consumer, Producer};
@@ -54,6 +58,9 @@ mod app {
         uart: CmsdkUart,
         store: QemuCalibrationStore,
         scene_samples: u32,
+        scene: Scene,
+        stall_at: Option<u32>,
+        watchdog: SampleWatchdog<CmsdkWatchdog>,
     }
 
     #[init(local = [
@@ -61,6 +68,8 @@ mod app {
         estimator: EstimatorStorage = EstimatorStorage::uninit(),
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
+        let mut core = cx.core;
+        fault::guard_stack(&mut core.MPU, &mut core.SCB);
         // The factory calibration (known mass, empty pan) on the simulated chain, stored as
         // a record in the flash store and read back through the same CRC-checked decoder and
         // limits as flash on hardware.
@@ -95,11 +104,9 @@ mod app {
         #[cfg(feature = "bench")]
         let pipeline = {
             let mut pipeline = pipeline;
-            run_benchmarks(cx.core.SYST, &mut pipeline);
+            run_benchmarks(core.SYST, &mut pipeline);
             pipeline
         };
-        #[cfg(not(feature = "bench"))]
-        let _ = cx.core;
 
         let scene = match Scene::from_command_line() {
             Ok(scene) => scene,
@@ -125,6 +132,9 @@ mod app {
         // Safety: the only CmsdkTimer for timer 0; it moves into the hand-off task.
         let mut timer = unsafe { CmsdkTimer::timer0() };
         timer.start_periodic(SYSTEM_CLOCK_HZ / SAMPLE_RATE_HZ);
+        // Safety: the only CmsdkWatchdog; it moves into the readout task, which feeds it.
+        let mut watchdog = unsafe { CmsdkWatchdog::take() };
+        watchdog.start(SYSTEM_CLOCK_HZ / 1000 * qemu::WATCHDOG_TIMEOUT_MS);
 
         (
             Shared {
@@ -140,15 +150,23 @@ mod app {
                 uart,
                 store,
                 scene_samples,
+                scene,
+                stall_at: scene.stalls_after(),
+                watchdog: SampleWatchdog::new(watchdog, 0),
             },
         )
     }
 
     /// The sample hand-off: no math, no logging. A full queue leaves a gap in the sequence
-    /// numbers, which the estimator task counts as dropped samples.
-    #[task(binds = Timer0, priority = 3, local = [timer, converter, producer, sequence])]
+    /// numbers, which the estimator task counts as dropped samples. (The `stall` scene
+    /// stops the timer here: the board's sample clock failing.)
+    #[task(binds = Timer0, priority = 3, local = [timer, converter, producer, sequence, stall_at])]
     fn sample_handoff(cx: sample_handoff::Context) {
         cx.local.timer.clear_interrupt();
+        if Some(*cx.local.sequence) == *cx.local.stall_at {
+            cx.local.timer.stop();
+            return;
+        }
         pipeline::hand_off(cx.local.converter, cx.local.producer, cx.local.sequence);
         rtic::pend(Interrupt::Uart3Rx);
         // The simulated analogue hardware produces the next conversion (not the hand-off).
@@ -193,15 +211,30 @@ mod app {
         }
     }
 
-    /// The readout task: 20 lines a second; the commands' regular work after each (a fresh
-    /// tare refined, a calibration in progress carried on: stored, read back and applied
-    /// once the known mass has settled); the end-of-scene summary and exit.
-    #[task(binds = Uart1Rx, priority = 1, local = [store, scene_samples, noise_told: bool = false], shared = [latest, pipeline])]
+    /// The readout task: 20 lines a second; the watchdog fed while samples advance; the
+    /// commands' regular work after each (a fresh tare refined, a calibration in progress
+    /// carried on: stored, read back and applied once the known mass has settled); the
+    /// end-of-scene summary and exit.
+    #[task(binds = Uart1Rx, priority = 1, local = [store, scene_samples, scene, watchdog, noise_told: bool = false], shared = [latest, pipeline])]
     fn readout(mut cx: readout::Context) {
         let lines = cx.shared.latest.lock(core::mem::take);
+        let samples = cx.shared.pipeline.lock(|pipeline| pipeline.samples());
+        cx.local.watchdog.service(samples);
         let Some(readout) = lines.log() else {
             return;
         };
+        if cx
+            .local
+            .scene
+            .overflows_stack_at()
+            .is_some_and(|at| readout.sample >= at)
+        {
+            defmt::println!(
+                "stack-overflow scene: recursing at sample={=u32}",
+                readout.sample
+            );
+            let _ = qemu::exhaust_stack(0);
+        }
         // Once: from here on every new run is checked against the metered empty pan.
         if !*cx.local.noise_told && cx.shared.pipeline.lock(|pipeline| pipeline.noise_checked()) {
             defmt::println!("noise metered sample={=u32}", readout.sample);

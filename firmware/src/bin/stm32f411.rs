@@ -13,9 +13,10 @@ use defmt_rtt as _;
 mod app {
     use cortex_m::peripheral::DWT;
     use estimator_core::weighing::{Command, KeyDebouncer, KeyPress, RawSample};
+    use firmware::fault;
     use firmware::pipeline::{
-        self, EstimatorStorage, Lines, Pipeline, SampleMessage, SampleQueue, QUEUE_CAPACITY,
-        SAMPLE_RATE_HZ,
+        self, EstimatorStorage, Lines, Pipeline, SampleMessage, SampleQueue, SampleWatchdog,
+        QUEUE_CAPACITY, SAMPLE_RATE_HZ,
     };
     use firmware::stm32f411::{
         self as board, CalibrationFlashStore, DMA_BLOCK, FRONT_END, KEY_DEBOUNCE_MS,
@@ -35,6 +36,7 @@ mod app {
         prelude::*,
         rcc::{Config, Rcc},
         timer::{CounterHz, Event, Flag},
+        watchdog::IndependentWatchdog,
     };
 
     type AdcTransfer =
@@ -109,6 +111,7 @@ mod app {
         consumer: Consumer<'static, SampleMessage>,
         sequence: u32,
         store: CalibrationFlashStore,
+        watchdog: SampleWatchdog<IndependentWatchdog>,
         _trigger: CounterHz<pac::TIM2>,
     }
 
@@ -122,6 +125,8 @@ mod app {
     fn init(cx: init::Context) -> (Shared, Local) {
         let device = cx.device;
         let mut core = cx.core;
+        fault::guard_stack(&mut core.MPU, &mut core.SCB);
+        board::log_reset_cause();
         let mut rcc = device
             .RCC
             .freeze(Config::hse(25.MHz()).sysclk(SYSCLK_HZ.Hz()).pclk2(84.MHz()));
@@ -181,6 +186,13 @@ mod app {
             REFERENCE_MASS_G
         );
 
+        // Started last, so the time `init` takes does not count: from here on it resets the
+        // chip unless samples keep reaching the readout task (halted with the core under a
+        // debugger).
+        let mut watchdog = IndependentWatchdog::new(device.IWDG);
+        watchdog.stop_on_debug(&device.DBGMCU, true);
+        watchdog.start(board::WATCHDOG_TIMEOUT_MS.millis());
+
         let (producer, consumer) = cx.local.queue.split();
         (
             Shared {
@@ -195,6 +207,7 @@ mod app {
                 consumer,
                 sequence: 0,
                 store,
+                watchdog: SampleWatchdog::new(watchdog, 0),
                 _trigger: trigger,
             },
         )
@@ -248,9 +261,12 @@ mod app {
     /// calibration is appended to the flash store (about 30 bytes), read back and applied;
     /// once in thousands of calibrations the store erases a sector, which stalls the CPU
     /// for seconds, and the samples the converter took meanwhile are counted as dropped.
-    #[task(binds = EXTI2, priority = 1, local = [store], shared = [latest, pipeline])]
+    /// The watchdog is fed here while samples advance.
+    #[task(binds = EXTI2, priority = 1, local = [store, watchdog], shared = [latest, pipeline])]
     fn readout(mut cx: readout::Context) {
         let lines = cx.shared.latest.lock(core::mem::take);
+        let samples = cx.shared.pipeline.lock(|pipeline| pipeline.samples());
+        cx.local.watchdog.service(samples);
         lines.log();
         let Some(result) = cx.shared.pipeline.lock(|pipeline| pipeline.poll_commands()) else {
             return;

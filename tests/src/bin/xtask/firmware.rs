@@ -121,14 +121,69 @@ pub fn monitor() -> Result<()> {
 /// of `tests::e2e::check`, the command scene (tare, refused tare, calibration typed on
 /// UART 0) meets those of `tests::commands::check`, and the checked demo (the demo after
 /// 2 s more of empty pan) meters the empty pan's noise before its first drop and meets the
-/// demo's criteria with the consistency check live.
+/// demo's criteria with the consistency check live, and the fault scenes (a stopped sample
+/// timer, a stack overflow) end in the watchdog's and the fault handler's failing exits.
 pub fn e2e_test() -> Result<()> {
     check_stm32_flash()?;
     let elf = build(Board::Qemu, false)?;
     check_replay_formats(&elf)?;
     e2e_demo(&elf)?;
     e2e_commands(&elf)?;
-    e2e_checked_demo(&elf)
+    e2e_checked_demo(&elf)?;
+    e2e_faults(&elf)
+}
+
+/// The failures the firmware must not survive silently: a sample clock that stops ends in
+/// the watchdog's NMI, a stack overflow in a fault report; both with a failing exit and
+/// their message, and neither before the scene's readout had started.
+fn e2e_faults(elf: &Path) -> Result<()> {
+    let cases = [
+        (
+            "stall",
+            "the sample timer stops after 1 s",
+            "ERROR watchdog: no new sample",
+        ),
+        (
+            "stack-overflow",
+            "the readout task recurses without end at 0.5 s",
+            "ERROR fault: stack overflow",
+        ),
+    ];
+    let mut failures = Vec::new();
+    for (scene, what, expected) in cases {
+        let run = run_firmware_scene(elf, &ICOUNT_FAST, false, scene, None, None)?;
+        let readouts = run.readouts().len();
+        let message = run.lines.iter().find(|line| line.starts_with(expected));
+        println!(
+            "fault scene {scene} ({what}): exit {}, {readouts} readout lines, {}",
+            if run.exited_successfully {
+                "0"
+            } else {
+                "failing"
+            },
+            message.map_or("no fault message", String::as_str)
+        );
+        if run.exited_successfully {
+            failures.push(format!("{scene}: QEMU exited with status 0"));
+        }
+        if message.is_none() {
+            failures.push(format!(
+                "{scene}: no line starting `{expected}`; the run ended with:\n    {}",
+                run.lines
+                    .iter()
+                    .rev()
+                    .take(4)
+                    .rev()
+                    .cloned()
+                    .collect::<Vec<_>>()
+                    .join("\n    ")
+            ));
+        }
+        if readouts == 0 {
+            failures.push(format!("{scene}: no readout line before the fault"));
+        }
+    }
+    require_passed("", &failures, "the firmware's fault handling")
 }
 
 /// Print a report's figures; fail with `what` and every failure unless there are none.
