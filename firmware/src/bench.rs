@@ -192,3 +192,76 @@ pub fn stack_used() -> (u32, u32) {
     }
     ((highest - address) as u32, (highest - lowest) as u32)
 }
+
+/// Bytes of stack `work` used below the caller's stack pointer: the free stack (down to
+/// the guard) is painted, `work` runs, and the deepest word it wrote is found.
+#[inline(never)]
+pub fn stack_depth_of(work: impl FnOnce()) -> u32 {
+    let (lowest, _) = stack_bounds();
+    let sp = cortex_m::register::msp::read() as usize;
+    let mut address = lowest;
+    while address < sp - 16 {
+        // Safety: the words between the guard and just below the stack pointer belong to
+        // no live frame (the stack grows down); `init` runs with interrupts off.
+        unsafe { core::ptr::write_volatile(address as *mut u32, STACK_PAINT) };
+        address += 4;
+    }
+    work();
+    let mut address = lowest;
+    // Safety: reads words of the stack region below the stack pointer.
+    while address < sp && unsafe { core::ptr::read_volatile(address as *const u32) } == STACK_PAINT
+    {
+        address += 4;
+    }
+    (sp - address) as u32
+}
+
+/// A shared resource as RTIC's `lock` sees it, for running a task's body from `init`.
+pub struct Unshared<'a, T>(pub &'a mut T);
+
+impl<T> rtic::Mutex for Unshared<'_, T> {
+    type T = T;
+
+    fn lock<R>(&mut self, work: impl FnOnce(&mut T) -> R) -> R {
+        work(self.0)
+    }
+}
+
+/// The hand-off's stack: one [`pipeline::hand_off`] from a register converter into a
+/// queue, as the sample ISR runs it.
+pub fn handoff_stack() -> u32 {
+    let mut queue = SampleQueue::new();
+    let (mut producer, _consumer) = queue.split();
+    let mut adc = RegisterAdc::new(30_000);
+    let mut sequence = 0u32;
+    stack_depth_of(|| pipeline::hand_off(&mut adc, &mut producer, &mut sequence))
+}
+
+/// The estimator task's stack: its body ([`pipeline::estimate`]) on each chunk of
+/// `messages` in turn, queued as the hand-off queues them; the deepest of all chunks.
+/// `readout_task` is pended as the task pends its readout: the caller unpends it.
+pub fn estimator_stack<I: cortex_m::interrupt::InterruptNumber + Copy>(
+    pipeline: &mut Pipeline,
+    latest: &mut pipeline::Lines,
+    messages: &[SampleMessage],
+    readout_task: I,
+) -> u32 {
+    let mut queue = SampleQueue::new();
+    let (mut producer, mut consumer) = queue.split();
+    let mut deepest = 0;
+    for chunk in messages.chunks(QUEUE_CAPACITY - 1) {
+        for message in chunk {
+            let _ = producer.enqueue(*message);
+        }
+        let depth = stack_depth_of(|| {
+            pipeline::estimate(
+                &mut Unshared(&mut *pipeline),
+                &mut Unshared(&mut *latest),
+                &mut consumer,
+                readout_task,
+            )
+        });
+        deepest = deepest.max(depth);
+    }
+    deepest
+}

@@ -68,6 +68,9 @@ mod app {
         estimator: EstimatorStorage = EstimatorStorage::uninit(),
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
+        // The stack `idle` will run on: what `main` and this function's entry took.
+        #[cfg(feature = "bench")]
+        let init_sp = cortex_m::register::msp::read();
         let mut core = cx.core;
         fault::guard_stack(&mut core.MPU, &mut core.SCB);
         // The factory calibration (known mass, empty pan) on the simulated chain, stored as
@@ -104,7 +107,7 @@ mod app {
         #[cfg(feature = "bench")]
         let pipeline = {
             let mut pipeline = pipeline;
-            run_benchmarks(core.SYST, &mut pipeline);
+            run_benchmarks(core.SYST, &mut pipeline, &mut store, &calibration, init_sp);
             pipeline
         };
 
@@ -262,7 +265,13 @@ mod app {
     /// application's pipeline and restart it at the end.
     #[cfg(feature = "bench")]
     #[inline(never)]
-    fn run_benchmarks(mut syst: cortex_m::peripheral::SYST, pipeline: &mut Pipeline) {
+    fn run_benchmarks(
+        mut syst: cortex_m::peripheral::SYST,
+        pipeline: &mut Pipeline,
+        store: &mut QemuCalibrationStore,
+        calibration: &estimator_core::weighing::Calibration,
+        init_sp: u32,
+    ) {
         bench::start(&mut syst);
         let iterations = 100_000;
         let (short, long) = bench::calibrate(iterations);
@@ -288,9 +297,70 @@ mod app {
         pipeline.restart();
 
         // The deepest the stack went since `init` began: the factory calibration, building
-        // the configured scale, the replay above.
+        // the configured scale, the replay above. (Before the task stacks, which paint the
+        // stack again.)
         let (used, size) = bench::stack_used();
         defmt::println!("bench stack used={=u32} size={=u32}", used, size);
+        bench_task_stacks(pipeline, &mut chunk, store, calibration, init_sp);
+        pipeline.restart();
+    }
+
+    /// Each priority's deepest stack, its task bodies run from here on a painted stack:
+    /// the hand-off (3); the estimator task over the demo scene (2); the readout (1: the
+    /// lines logged, the commands polled, a calibration stored) and the command task (1:
+    /// a tare decided and logged), which cannot preempt each other; and what `idle` stands
+    /// on (the stack at `init`'s entry). `cargo xtask bench` adds them up with the
+    /// exception frames of the three preemptions.
+    #[cfg(feature = "bench")]
+    fn bench_task_stacks(
+        pipeline: &mut Pipeline,
+        chunk: &mut [SampleMessage],
+        store: &mut QemuCalibrationStore,
+        calibration: &estimator_core::weighing::Calibration,
+        init_sp: u32,
+    ) {
+        let handoff = bench::handoff_stack();
+        let mut converter = SimulatedConverter::new(qemu_scenes::demo_scene());
+        // The QEMU board's hand-off also steps the simulated analogue chain.
+        let model = bench::stack_depth_of(|| converter.convert());
+        let mut latest = Lines::default();
+        let mut sequence = 0u32;
+        let mut estimator = 0;
+        for _ in 0..(4 * SAMPLE_RATE_HZ) as usize / chunk.len() {
+            converter.fill(chunk, &mut sequence);
+            estimator = estimator.max(bench::estimator_stack(
+                pipeline,
+                &mut latest,
+                chunk,
+                Interrupt::Uart2Rx,
+            ));
+        }
+        // Uart2Rx is never enabled: the pends above only stand for the readout's.
+        cortex_m::peripheral::NVIC::unpend(Interrupt::Uart2Rx);
+        // The lines taken into the task's own frame, as the task takes them.
+        let log = bench::stack_depth_of(|| {
+            let lines = core::hint::black_box(core::mem::take(&mut latest));
+            let _ = lines.log();
+        });
+        let poll = bench::stack_depth_of(|| {
+            let _ = pipeline.poll_commands();
+        });
+        let store_calibration = bench::stack_depth_of(|| {
+            pipeline::finish_calibration(Ok(*calibration), store, |work| work(pipeline))
+        });
+        let command = bench::stack_depth_of(|| {
+            let (sample, result) = (pipeline.samples(), pipeline.command(Command::Tare));
+            pipeline::log_command(sample, Command::Tare, &result);
+        });
+        let (_, top) = fault::stack_bounds();
+        defmt::println!(
+            "bench task stacks idle={=u32} handoff={=u32} estimator={=u32} readout={=u32} command={=u32}",
+            top - init_sp,
+            handoff.max(model),
+            estimator,
+            log.max(poll).max(store_calibration),
+            command
+        );
     }
 
     /// The hand-off with the timer's acknowledge and the pend of the estimator task.

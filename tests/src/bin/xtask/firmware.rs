@@ -461,6 +461,13 @@ fn variant_config(
     Ok(path)
 }
 
+/// An exception frame with the FPU's context: 26 words, and one more to align the stack to
+/// 8 bytes (ARMv7-M, "Exception entry behavior").
+const EXCEPTION_FRAME_BYTES: u64 = 27 * 4;
+/// RTIC's entry to a hardware task: the saved BASEPRI and the link register, pushed as a
+/// pair (rtic's `export::run`); allowed for, not measured.
+const RTIC_ENTRY_BYTES: u64 = 8;
+
 /// Run a bench image and print its figures (the hand-off only when `handoff`).
 fn bench_run(bench_elf: &Path, handoff: bool) -> Result<()> {
     let run = run_firmware(bench_elf, &ICOUNT_FAST, false, None)?;
@@ -534,6 +541,23 @@ fn bench_run(bench_elf: &Path, handoff: bool) -> Result<()> {
             field(&stack, "used")?,
             field(&stack, "size")?
         );
+    }
+    if let Ok(tasks) = find_fields(&run, "bench task stacks") {
+        let size = field(&find_fields(&run, "bench stack")?, "size")?;
+        let idle = field(&tasks, "idle")?;
+        let handoff = field(&tasks, "handoff")?;
+        let estimator = field(&tasks, "estimator")?;
+        let lowest = field(&tasks, "readout")?.max(field(&tasks, "command")?);
+        // Three preemptions (idle by priority 1, by 2, by 3), each stacking the FPU's
+        // context (26 words, one more to align), and RTIC's entry code for each task.
+        let frames = 3 * (EXCEPTION_FRAME_BYTES + RTIC_ENTRY_BYTES);
+        let bound = idle + lowest + estimator + handoff + frames;
+        println!(
+            "  stack, worst case with preemption (QEMU board): {bound} of {size} B = idle {idle} (at most: the stack at init's entry) + readout or command {lowest} + estimator {estimator} + hand-off {handoff} (each priority's deepest, measured from init on a painted stack; the hand-off's is the simulated chain's step) + 3 × ({EXCEPTION_FRAME_BYTES} B exception frame with the FPU context + {RTIC_ENTRY_BYTES} B RTIC task entry)"
+        );
+        if bound > size {
+            bail!("the worst-case stack ({bound} B) exceeds the stack ({size} B)");
+        }
     }
     if handoff {
         if let Ok(model) = find_fields(&run, "bench model") {
