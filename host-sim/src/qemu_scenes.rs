@@ -28,26 +28,27 @@ pub const CALIBRATION_MASS_G: f64 = 200.0;
 /// (and the empty pan about 1.2 g, the platform's dead load through the more sensitive
 /// cell) until the operator calibrates. Makes the calibration's effect visible.
 pub const COMMAND_SCENE_GAIN_ERROR: f64 = 0.01;
-/// The first mass of the command scene, dropped at 0.3 s (tare it once stable).
+/// The first mass of the command scene, dropped at 0.3 s (tare it once stable and known
+/// to a quarter of e: 1.4 s leaves time for that on every noise seed).
 pub const COMMAND_SCENE_FIRST_MASS_G: f64 = 138.32;
-/// From 1.2 s, 50 g is poured on in ten 5 g portions 80 ms apart (a tare then is
+/// From 1.7 s, 50 g is poured on in ten 5 g portions 80 ms apart (a tare then is
 /// refused): each portion is a load change before the estimate can be stable for 50 ms.
 /// Portions rather than a ramp, because the simulated chain re-discretises its model at
 /// every change of load, which a ramp would make every sample: far too slow for QEMU.
-pub const COMMAND_SCENE_POUR_START_S: f64 = 1.2;
+pub const COMMAND_SCENE_POUR_START_S: f64 = 1.7;
 /// Portions poured.
 pub const COMMAND_SCENE_POUR_PORTIONS: usize = 10;
 /// Mass of one portion.
 pub const COMMAND_SCENE_POUR_PORTION_G: f64 = 5.0;
 /// Time between portions.
 pub const COMMAND_SCENE_POUR_INTERVAL_S: f64 = 0.08;
-/// Everything is lifted off at 2.6 s (calibrate: the empty-pan zero).
-pub const COMMAND_SCENE_REMOVAL_S: f64 = 2.6;
-/// The 200 g reference mass is dropped at 4.0 s.
-pub const COMMAND_SCENE_KNOWN_MASS_S: f64 = 4.0;
-/// The command scene ends at 5.5 s: 1.5 s of the reference mass, of which the calibration
+/// Everything is lifted off at 3.1 s (calibrate: the empty-pan zero).
+pub const COMMAND_SCENE_REMOVAL_S: f64 = 3.1;
+/// The 200 g reference mass is dropped at 4.5 s.
+pub const COMMAND_SCENE_KNOWN_MASS_S: f64 = 4.5;
+/// The command scene ends at 6.0 s: 1.5 s of the reference mass, of which the calibration
 /// needs its 0.5 s settling and the rest shows the calibrated readout.
-pub const COMMAND_SCENE_END_S: f64 = 5.5;
+pub const COMMAND_SCENE_END_S: f64 = 6.0;
 
 /// The command scene's load changes, in time order.
 pub const COMMAND_SCENE_EVENTS: [LoadEvent; COMMAND_SCENE_POUR_PORTIONS + 3] = {

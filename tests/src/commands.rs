@@ -4,7 +4,7 @@
 //!
 //! What the run must show (tare on command; calibration from a known mass and the empty
 //! pan, stored as a CRC-protected record, read back and applied):
-//! - `t` while 138.32 g is stable: `tare=ok`, then the readout reads 0.00 g ± 0.05 g (the
+//! - `t` while 138.32 g is stable and known to a quarter of e: `tare=ok`, then the readout reads 0.00 g ± 0.05 g (the
 //!   empty-pan tolerance of `e2e::criteria`) until the next load change;
 //! - `t` while 50 g slides on: `tare=refused (Unstable)`, and the tare stays as it was;
 //! - `c` on the settled empty pan: `calibrate=zero_taken`; the 200 g reference mass, once
@@ -23,7 +23,7 @@ use std::fmt::Write as _;
 use estimator_core::weighing::{self, CalibrationStore, FlashStore, RamFlash};
 use estimator_core::weighing::{
     Calibration, CalibrationFailure, CalibrationSource, Command, CommandConfig, Commands,
-    ScaleEstimator,
+    ScaleConfig, ScaleEstimator,
 };
 
 use crate::e2e::{self, ReadoutLine, RunLog, Scene, READOUT_HZ, SAMPLE_RATE_HZ};
@@ -122,10 +122,16 @@ impl CommandScript {
         let time_s = line.time_s();
         let settled_state = line.state == "Stable" || line.state == "Empty";
         let byte = match self.sent {
-            // Tare the first mass once the scale calls it stable.
+            // Tare the first mass once the scale calls it stable and its `u` is small
+            // enough for a tare (the load known to ±0.25 e: twice u's upper bound, which
+            // is up to 1.5 times u here, within it; refused as `Uncertain` before).
             0 if time_s > timeline.drop_s
                 && time_s < timeline.pour_start_s
-                && line.state == "Stable" =>
+                && line.state == "Stable"
+                && line.u_g.is_some_and(|u| {
+                    2.0 * 1.5 * u
+                        <= f64::from(weighing::TARE_ACCURACY_E * ScaleConfig::SCALE_INTERVAL_G)
+                }) =>
             {
                 b't'
             }
@@ -875,27 +881,34 @@ mod tests {
 
     #[test]
     fn the_script_sends_each_command_once_in_order() {
-        let line = |sample: u32, state: &str, since: u32| {
+        let line_with_u = |sample: u32, state: &str, since: u32, u_g: f64| {
             ReadoutLine::parse(&format!(
-                "readout sample={sample} mass_g=1 u_g=0.01 state={state} since={since} dropped=0 changes=1 cal=stored final=0"
+                "readout sample={sample} mass_g=1 u_g={u_g} state={state} since={since} dropped=0 changes=1 cal=stored final=0"
             ))
             .unwrap()
         };
+        let line = |sample: u32, state: &str, since: u32| line_with_u(sample, state, since, 0.005);
         let mut script = CommandScript::new();
-        // Before the drop, nothing; then the first stable line of the first mass.
+        // Before the drop, nothing; then the first stable line of the first mass whose u
+        // allows a tare (±0.25 e: 2 × 1.5 × u within 0.025 g).
         assert_eq!(script.respond(&line(800, "Stable", 800)), None);
         assert_eq!(script.respond(&line(1600, "Estimating", 400)), None);
+        assert_eq!(
+            script.respond(&line_with_u(1700, "Stable", 500, 0.01)),
+            None
+        );
         assert_eq!(script.respond(&line(1800, "Stable", 600)), Some(b't'));
         assert_eq!(script.respond(&line(2000, "Stable", 800)), None);
-        // The pouring: an unstable line 0.1 s in.
-        assert_eq!(script.respond(&line(5000, "Estimating", 200)), None);
-        assert_eq!(script.respond(&line(5400, "Stable", 200)), None);
-        assert_eq!(script.respond(&line(5600, "Estimating", 200)), Some(b't'));
-        // The emptied pan, settled long enough (reading 1.2 g: stable, not empty).
-        assert_eq!(script.respond(&line(11_000, "Stable", 600)), None);
-        assert_eq!(script.respond(&line(12_000, "Estimating", 1600)), None);
-        assert_eq!(script.respond(&line(13_000, "Stable", 2600)), Some(b'c'));
-        assert_eq!(script.respond(&line(13_200, "Empty", 2800)), None);
+        // The pouring (from 1.7 s): an unstable line 0.1 s in.
+        assert_eq!(script.respond(&line(7000, "Estimating", 200)), None);
+        assert_eq!(script.respond(&line(7400, "Stable", 200)), None);
+        assert_eq!(script.respond(&line(7600, "Estimating", 200)), Some(b't'));
+        // The emptied pan (from 3.1 s), settled long enough (reading 1.2 g: stable, not
+        // empty).
+        assert_eq!(script.respond(&line(13_000, "Stable", 600)), None);
+        assert_eq!(script.respond(&line(14_000, "Estimating", 1600)), None);
+        assert_eq!(script.respond(&line(15_000, "Stable", 2600)), Some(b'c'));
+        assert_eq!(script.respond(&line(15_200, "Empty", 2800)), None);
         assert_eq!(script.sent(), 3);
     }
 }

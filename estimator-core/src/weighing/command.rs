@@ -23,7 +23,7 @@
 //! every function returns at once, so a board may call it from any task.
 
 use super::calibration::{Calibration, CalibrationError, CalibrationLimits};
-use super::scale::{Scale, ScaleEstimator, ScaleFault, ScaleReading, ScaleState};
+use super::scale::{Scale, ScaleEstimator, ScaleFault, ScaleReading, ScaleState, TareError};
 
 /// What the operator asked for.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -86,6 +86,9 @@ pub enum CommandOutcome {
 pub enum CommandRefusal {
     /// The reading is not settled (still estimating, or not stable for long enough).
     Unstable,
+    /// The reading is stable but not yet known well enough for a tare (within ±0.25 e,
+    /// see `scale::TARE_ACCURACY_E`): try again in a moment.
+    Uncertain,
     /// The scale shows no mass, and why.
     Invalid(ScaleFault),
     /// A calibration zero needs an empty pan, and the pan holds a good part of the known
@@ -225,7 +228,10 @@ impl Commands {
             Command::Tare => {
                 let reading = scale.reading();
                 settled(&reading, 0)?;
-                scale.tare().map_err(|_| CommandRefusal::Unstable)?;
+                scale.tare().map_err(|error| match error {
+                    TareError::NotStable => CommandRefusal::Unstable,
+                    TareError::Uncertain => CommandRefusal::Uncertain,
+                })?;
                 self.refining = Some(TareRefinement {
                     tare_g: scale.tare_g(),
                     load_changes: reading.load_changes,
@@ -345,8 +351,9 @@ impl Commands {
 
 impl Commands {
     /// Re-take the tare from the current estimate while the tared load is still on (no load
-    /// change since), the reading is stable, and the estimate is within the stability band
-    /// of the tare first taken; stop refining otherwise, keeping the last value.
+    /// change since), the reading is stable, the estimate is within the stability band of
+    /// the tare first taken, and better known than the tare; stop refining otherwise,
+    /// keeping the last value.
     fn refine_tare<E: ScaleEstimator>(&mut self, scale: &mut Scale<E>) {
         let Some(refinement) = self.refining else {
             return;
@@ -365,8 +372,14 @@ impl Commands {
         let gross_g = reading.mass_g.map(|net| net + scale.tare_g());
         match gross_g {
             Some(gross_g) if (gross_g - refinement.tare_g).abs() <= band => {
-                // `tare` accepts a stable or empty reading, which `settled` just checked.
-                let _ = scale.tare();
+                // Only a better-known estimate replaces the tare (`tare` itself refuses one
+                // outside the tare accuracy).
+                let better = scale
+                    .gross_u_bound_g()
+                    .is_none_or(|bound| bound < scale.tare_u_bound_g());
+                if better {
+                    let _ = scale.tare();
+                }
             }
             _ => self.refining = None,
         }
@@ -496,26 +509,56 @@ mod tests {
         assert!((gross - 138.32).abs() < 0.1383, "gross {gross}");
     }
 
-    /// Drop `mass_g`, push until the reading is first stable, and tare there.
-    fn tare_at_first_stability(bench: &mut Bench, mass_g: f64) -> f32 {
+    /// Drop `mass_g` and tare as soon as a tare is accepted (stable, and known to within
+    /// ±0.25 e); the tare.
+    fn tare_once_known(bench: &mut Bench, mass_g: f64) -> f32 {
         bench.run_s(0.5);
         bench.cell.load_g = mass_g;
-        for _ in 0..(0.5 * FS) as u32 {
+        for _ in 0..(3.0 * FS) as u32 {
             bench.now += 1;
-            if bench.scale.push(bench.cell.sample()).state == ScaleState::Stable {
-                break;
+            if bench.scale.push(bench.cell.sample()).state != ScaleState::Stable {
+                continue;
+            }
+            match bench.command(Command::Tare) {
+                Ok(CommandOutcome::Tared { tare_g }) => return tare_g,
+                Err(CommandRefusal::Uncertain) => {}
+                other => panic!("{other:?}"),
             }
         }
-        match bench.command(Command::Tare) {
-            Ok(CommandOutcome::Tared { tare_g }) => tare_g,
-            other => panic!("{other:?}"),
+        panic!("no tare accepted within 3 s of the drop")
+    }
+
+    /// A tare carries its error into every net reading after it, so it waits until the
+    /// load is known to ±0.25 e (OIML R 76): at the first stable reading of a 138 g drop
+    /// the estimate is within the 0.1 g that load permits but not within 0.025 g, and the
+    /// tare was taken there. Once taken, its `u` is part of every net reading's.
+    #[test]
+    fn a_tare_waits_until_the_load_is_known_to_a_quarter_interval() {
+        let mut bench = Bench::new(1.0);
+        bench.run_s(0.5);
+        bench.cell.load_g = 138.32;
+        while bench.scale.push(bench.cell.sample()).state != ScaleState::Stable {
+            bench.now += 1;
         }
+        assert_eq!(bench.command(Command::Tare), Err(CommandRefusal::Uncertain));
+        assert_eq!(bench.scale.tare_g(), 0.0, "a refused tare changes nothing");
+        let mut bench = Bench::new(1.0);
+        let tare_g = tare_once_known(&mut bench, 138.32);
+        let e = bench.scale.config().scale_interval_g;
+        assert!((tare_g - 138.32).abs() <= 0.25 * e, "tare {tare_g}");
+        let tare_u_bound = bench.scale.tare_u_bound_g();
+        assert!(tare_u_bound > 0.0 && 2.0 * tare_u_bound <= 0.25 * e);
+        bench.run_s(0.05);
+        let net_u = bench.scale.reading().uncertainty_g.unwrap();
+        bench.scale.clear_tare();
+        let gross_u = bench.scale.reading().uncertainty_g.unwrap();
+        assert!(net_u > gross_u, "net u {net_u}, gross u {gross_u}");
     }
 
     #[test]
     fn a_fresh_tare_follows_the_estimate_within_the_stability_band_until_a_change() {
         let mut bench = Bench::new(1.0);
-        let first_g = tare_at_first_stability(&mut bench, 138.32);
+        let first_g = tare_once_known(&mut bench, 138.32);
         assert_eq!(bench.poll_for_s(2.0), None);
         let config = *bench.scale.config();
         let band = config.stable_band_g + config.stable_band_relative * first_g;
@@ -542,7 +585,7 @@ mod tests {
     #[test]
     fn a_slow_undetected_change_cannot_pull_the_tare_beyond_the_band() {
         let mut bench = Bench::new(1.0);
-        let first_g = tare_at_first_stability(&mut bench, 100.0);
+        let first_g = tare_once_known(&mut bench, 100.0);
         bench.poll_for_s(0.2);
         // 0.5 g crept on over 1 s, polled at the readout cadence: ten times the band.
         for _ in 0..20 {

@@ -36,5 +36,5 @@ pub use method::{
 };
 pub use scale::{
     CountsScale, RawSample, Scale, ScaleConfig, ScaleEstimator, ScaleFault, ScaleReading,
-    ScaleState, StepScale, TareError,
+    ScaleState, StepScale, TareError, TARE_ACCURACY_E,
 };

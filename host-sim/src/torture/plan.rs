@@ -8,7 +8,8 @@
 //! removals by hand; small additions (0.1–0.5 g) to a load that has sat for 20–60 s;
 //! trickles (0.005–0.05 g/s for 5–40 s); tare and clear-tare; calibration with the right
 //! reference mass or a wrong one; bursts of lost samples. Noise: white at 40–60 dB on the
-//! reference step, the amplifier's own, and sometimes floor vibration and mains.
+//! reference step, the amplifier's own, and sometimes floor vibration, mains and a drifting
+//! zero.
 
 use crate::sensor::SensorChain;
 use crate::simulated::{
@@ -122,6 +123,8 @@ pub enum PlannedCommand {
 pub struct Instrument {
     /// Max, g.
     pub capacity_g: f64,
+    /// The scale interval e, g.
+    pub scale_interval_g: f64,
     /// The reference mass a calibration asks for, g.
     pub calibration_mass_g: f64,
 }
@@ -234,7 +237,7 @@ impl Plan {
     pub fn draw(seed: u64, chain: &SensorChain, instrument: Instrument) -> Self {
         let mut rng = Gaussian::new(seed);
         let rate_hz = 1.0 / chain.conversion_period_s();
-        let disturbances = draw_disturbances(&mut rng, chain);
+        let disturbances = draw_disturbances(&mut rng, chain, instrument.scale_interval_g);
         let mut d = Drawing {
             rate_hz,
             time_s: 0.0,
@@ -357,10 +360,17 @@ fn calibrate(d: &mut Drawing<'_>, instrument: Instrument) {
     d.load(0.0, 0.2);
 }
 
+/// The fastest zero drift a run may have, in scale intervals per second: OIML R 76 lets
+/// the zero of a class III instrument move 1 e per 5 °C (R 76-1 3.9.2.3, temperature
+/// effect on the no-load indication); a room swinging 10 °C in 10 minutes moves it 2 e in 600 s.
+pub const ZERO_DRIFT_LIMIT_E_PER_S: f64 = 2.0 / 600.0;
+
 /// White noise at 40–60 dB on the reference step with the amplifier's own; floor
 /// vibration (0.05–0.5 g RMS at 10–40 Hz) in three runs of ten; mains (0.05–0.3 g) in
-/// three of ten.
-fn draw_disturbances(rng: &mut Gaussian, chain: &SensorChain) -> Disturbances {
+/// three of ten; a zero drifting (either way, up to [`ZERO_DRIFT_LIMIT_E_PER_S`]) in three
+/// of ten. The drift is the instrument's, not the load's: the truth does not move with it,
+/// so a drift the scale does not track away counts as error.
+fn draw_disturbances(rng: &mut Gaussian, chain: &SensorChain, e_g: f64) -> Disturbances {
     let snr_db = 40.0 + 20.0 * rng.uniform();
     let mut disturbances = Disturbances::white(white_noise_for_snr(
         chain,
@@ -376,6 +386,9 @@ fn draw_disturbances(rng: &mut Gaussian, chain: &SensorChain) -> Disturbances {
     }
     if rng.uniform() < 0.3 {
         disturbances.mains_amplitude_g = 0.05 + 0.25 * rng.uniform();
+    }
+    if rng.uniform() < 0.3 {
+        disturbances.drift_g_per_s = (2.0 * rng.uniform() - 1.0) * ZERO_DRIFT_LIMIT_E_PER_S * e_g;
     }
     disturbances
 }

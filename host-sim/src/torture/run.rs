@@ -194,6 +194,7 @@ pub const CALIBRATION_MASS_G: f64 = 200.0;
 pub fn instrument(limits: &Limits) -> Instrument {
     Instrument {
         capacity_g: limits.capacity_g,
+        scale_interval_g: limits.scale_interval_g,
         calibration_mass_g: CALIBRATION_MASS_G,
     }
 }

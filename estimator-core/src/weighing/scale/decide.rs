@@ -4,7 +4,7 @@
 //!
 //! Never a number the estimator flagged, never a number without its state.
 
-use super::{RawSample, Scale, ScaleEstimator, ScaleFault, ScaleReading, ScaleState};
+use super::{with_tare, RawSample, Scale, ScaleEstimator, ScaleFault, ScaleReading, ScaleState};
 use crate::reading::{InvalidReason, State};
 
 impl<E: ScaleEstimator> Scale<E> {
@@ -138,7 +138,7 @@ impl<E: ScaleEstimator> Scale<E> {
         // `u`: the first moment a fluctuating `u` meets a limit is biased.
         let certain = match (self.gross_u_g, self.gross_u_bound_g) {
             (None, _) => true,
-            (Some(_), Some(bound)) => 2.0 * bound <= permissible_g,
+            (Some(_), Some(bound)) => 2.0 * with_tare(bound, self.tare_u_bound_g) <= permissible_g,
             (Some(_), None) => false,
         };
         let in_band = self.stable_samples >= self.config.stable_hold_samples;

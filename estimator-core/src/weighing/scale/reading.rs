@@ -93,6 +93,11 @@ pub struct ScaleReading {
 pub enum TareError {
     /// Tare needs a stable (or empty) reading; the pan is still moving or invalid.
     NotStable,
+    /// The reading is stable but not yet known well enough to tare with: the tare's
+    /// error carries over into every net reading after it, so it must be within
+    /// ±[`super::TARE_ACCURACY_E`] e (twice the upper bound of its `u`), as OIML R 76 asks
+    /// of zero setting and tare.
+    Uncertain,
 }
 
 /// Gain and zero the scale converts counts with (see `crate::weighing::calibration`).

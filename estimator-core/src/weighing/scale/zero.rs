@@ -5,7 +5,7 @@
 //! `zero_tracking_rate_g_per_s` (OIML R76 style), so a slowly added load is never tracked
 //! away.
 
-use super::{Scale, ScaleEstimator, ScaleState, TareError};
+use super::{Scale, ScaleEstimator, ScaleState, TareError, TARE_ACCURACY_E};
 
 impl<E: ScaleEstimator> Scale<E> {
     /// The tracked zero in counts (moves only by zero tracking).
@@ -18,20 +18,43 @@ impl<E: ScaleEstimator> Scale<E> {
         self.tare_g
     }
 
-    /// Take the current gross mass as tare. Refused unless the reading is stable or empty.
+    /// The upper bound of the gross reading's `u`, when the estimator states one.
+    pub fn gross_u_bound_g(&self) -> Option<f32> {
+        self.gross_u_bound_g
+    }
+
+    /// The upper bound of the tare's `u` when it was taken (zero without a tare).
+    pub fn tare_u_bound_g(&self) -> f32 {
+        self.tare_u_bound_g
+    }
+
+    /// Take the current gross mass as tare. Refused unless the reading is stable or empty,
+    /// and known to within ±[`TARE_ACCURACY_E`] e (its error would stay in every net
+    /// reading after it; its `u` goes into theirs).
     pub fn tare(&mut self) -> Result<(), TareError> {
-        match (self.state, self.gross_g) {
-            (ScaleState::Stable | ScaleState::Empty, Some(gross)) => {
-                self.tare_g = gross;
-                Ok(())
-            }
-            _ => Err(TareError::NotStable),
+        let (ScaleState::Stable | ScaleState::Empty, Some(gross)) = (self.state, self.gross_g)
+        else {
+            return Err(TareError::NotStable);
+        };
+        let (u, bound) = match (self.gross_u_g, self.gross_u_bound_g) {
+            (None, _) => (0.0, 0.0),
+            (Some(u), Some(bound)) => (u, bound),
+            (Some(_), None) => return Err(TareError::Uncertain),
+        };
+        if 2.0 * bound > TARE_ACCURACY_E * self.config.scale_interval_g {
+            return Err(TareError::Uncertain);
         }
+        self.tare_g = gross;
+        self.tare_u_g = u;
+        self.tare_u_bound_g = bound;
+        Ok(())
     }
 
     /// Remove the tare.
     pub fn clear_tare(&mut self) {
         self.tare_g = 0.0;
+        self.tare_u_g = 0.0;
+        self.tare_u_bound_g = 0.0;
     }
 
     /// Zero tracking on an empty, stable reading: only a pan near zero and settled since
@@ -89,37 +112,53 @@ mod tests {
     fn zero_tracking_follows_a_small_offset_slowly() {
         let (mut scale, mut cell) = scene(0.2);
         // The pan's real zero sits 0.04 g (0.4 e) above the calibrated one: tracked after
-        // the 1.5 s settling, at 0.01 g/s.
+        // the 1.5 s settling, at 0.00067 g/s: a few thousandths after 8 s, all of it after
+        // 80 s.
         cell.offset_counts += 0.04 * CPG as f64;
         run(&mut scale, &mut cell, 8 * 4000);
         let moved_g = (scale.zero_counts() - ZERO) / CPG;
-        assert!((moved_g - 0.04).abs() < 0.01, "zero moved {moved_g} g");
+        assert!(
+            moved_g > 0.002 && moved_g < 0.006,
+            "zero moved {moved_g} g in 8 s"
+        );
+        run(&mut scale, &mut cell, 72 * 4000);
+        let moved_g = (scale.zero_counts() - ZERO) / CPG;
+        assert!(
+            (moved_g - 0.04).abs() < 0.01,
+            "zero moved {moved_g} g in 80 s"
+        );
         assert!(scale.reading().mass_g.unwrap().abs() < 0.01);
     }
 
-    /// A load trickling onto the empty pan (0.005 to 0.05 g/s: sand, a leaking cup) is
-    /// never tracked away by more than the MPE at small loads (0.5 e): the tracker moved
-    /// the zero by 0.31 to 0.53 g with a rate limit and no total limit.
+    /// The fastest zero drift OIML R 76 lets a class III instrument have (1 e per 5 °C),
+    /// in a room swinging 10 °C in 10 minutes (2 e in 600 s), is followed: no reading of
+    /// the empty pan shown settled is off by the MPE (0.5 e) for the whole swing, where
+    /// untracked it would end 0.2 g off (with the 0.5 e range of before, 0.15 g, `Empty`).
     #[test]
-    fn a_trickling_load_is_not_tracked_away() {
+    fn zero_tracking_follows_the_fastest_drift_r76_allows() {
         let e = ScaleConfig::SCALE_INTERVAL_G;
-        for rate_g_per_s in [0.005, 0.01, 0.02, 0.05] {
-            let (mut scale, mut cell) = scene(0.4);
-            run(&mut scale, &mut cell, 2 * 4000);
-            for _ in 0..(100 * 4000) {
-                cell.load_g += rate_g_per_s / 4000.0;
+        let drift_g_per_s = f64::from(ScaleConfig::FASTEST_ZERO_DRIFT_E_PER_S * e);
+        let (mut scale, mut cell) = scene(0.2);
+        run(&mut scale, &mut cell, 2 * 4000);
+        let mut worst_g = 0.0f32;
+        for _ in 0..600 {
+            for _ in 0..4000 {
+                cell.offset_counts += drift_g_per_s / 4000.0 * CPG as f64;
                 scale.push(cell.sample());
             }
-            let moved_g = (scale.zero_counts() - ZERO) / CPG;
-            assert!(
-                moved_g.abs() <= 0.5 * e + 1e-4,
-                "{rate_g_per_s} g/s: the zero moved {moved_g} g"
-            );
+            let reading = scale.reading();
+            let claimed = matches!(reading.state, ScaleState::Empty | ScaleState::Stable);
+            if let (true, Some(mass_g)) = (claimed, reading.mass_g) {
+                worst_g = worst_g.max(mass_g.abs());
+            }
         }
+        assert!(
+            worst_g < 0.5 * e,
+            "the empty pan was shown settled at {worst_g} g"
+        );
+        assert_eq!(scale.reading().state, ScaleState::Empty);
     }
 
-    /// Nothing is tracked before the pan has settled after power-up: the noisy first
-    /// readings moved the zero by 0.032 g for the whole run.
     #[test]
     fn nothing_is_tracked_before_the_pan_settles() {
         for seed in 1..6 {
