@@ -16,7 +16,8 @@ use estimator_core::sensor::AdcSource;
 use estimator_core::weighing::{self, CalibrationStore, StoreFailure};
 use estimator_core::weighing::{
     Calibration, CalibrationFailure, CalibrationLimits, CalibrationSource, Command, CommandConfig,
-    CommandOutcome, CommandRefusal, Commands, CountsScale, RawSample, Scale, ScaleReading,
+    CommandOutcome, CommandRefusal, Commands, CountsScale, RawSample, SampleSequence, Scale,
+    ScaleReading,
 };
 use estimator_core::weighing::{WeighingEstimator, WeighingMethod};
 use estimator_core::ConfigError;
@@ -184,8 +185,7 @@ pub struct Pipeline {
     limits: CalibrationLimits,
     calibration_source: CalibrationSource,
     commands: Commands,
-    next_sequence: u32,
-    dropped: u32,
+    sequence: SampleSequence,
     /// The run (its load-change count) whose final reading was printed.
     final_run: Option<u32>,
 }
@@ -203,8 +203,7 @@ impl Pipeline {
             limits,
             calibration_source,
             commands: Commands::new(command_config(limits)),
-            next_sequence: 0,
-            dropped: 0,
+            sequence: SampleSequence::new(),
             final_run: None,
         }
     }
@@ -217,8 +216,7 @@ impl Pipeline {
         self.scale.forget_noise_reference();
         self.scale.recalibrate(self.scale.counts_scale());
         self.commands = Commands::new(command_config(self.limits));
-        self.next_sequence = 0;
-        self.dropped = 0;
+        self.sequence = SampleSequence::new();
         self.final_run = None;
     }
 
@@ -230,18 +228,18 @@ impl Pipeline {
 
     /// Samples lost since boot.
     pub fn dropped(&self) -> u32 {
-        self.dropped
+        self.sequence.dropped()
     }
 
     /// Samples accepted so far: the time of a command, in samples.
     pub fn samples(&self) -> u32 {
-        self.next_sequence
+        self.sequence.next()
     }
 
     /// Decide an operator command against the current reading.
     pub fn command(&mut self, command: Command) -> Result<CommandOutcome, CommandRefusal> {
         self.commands
-            .handle(command, &mut self.scale, self.next_sequence)
+            .handle(command, &mut self.scale, self.sequence.next())
     }
 
     /// True while a calibration waits for its known mass.
@@ -252,7 +250,7 @@ impl Pipeline {
     /// Refine a fresh tare and advance a calibration in progress (call it once per
     /// readout); `Some` when a calibration ends.
     pub fn poll_commands(&mut self) -> Option<Result<Calibration, CalibrationFailure>> {
-        self.commands.poll(&mut self.scale, self.next_sequence)
+        self.commands.poll(&mut self.scale, self.sequence.next())
     }
 
     /// Convert with `calibration`, which the store gave back, from now on (the estimate
@@ -266,7 +264,7 @@ impl Pipeline {
     /// converter ran on): count them and restart the estimate, as for a counted gap.
     pub fn samples_lost(&mut self, samples: u32) {
         if samples > 0 {
-            self.dropped = self.dropped.saturating_add(samples);
+            self.sequence.count_lost(samples);
             self.scale.push(RawSample::Lost);
         }
     }
@@ -276,14 +274,11 @@ impl Pipeline {
     /// change). A gap in the sequence numbers (a full queue) counts every missing sample as
     /// dropped and tells the scale once, which restarts its estimate after the gap.
     pub fn accept(&mut self, message: SampleMessage) -> Lines {
-        let gap = message.sequence.wrapping_sub(self.next_sequence);
-        if gap != 0 && gap < u32::MAX / 2 {
-            self.dropped = self.dropped.saturating_add(gap);
+        if self.sequence.accept(message.sequence) != 0 {
             self.scale.push(RawSample::Lost);
         }
-        self.next_sequence = message.sequence.wrapping_add(1);
         if message.sample == RawSample::Lost {
-            self.dropped = self.dropped.saturating_add(1);
+            self.sequence.count_lost(1);
         }
         let reading = self.scale.push(message.sample);
         let samples_done = message.sequence.wrapping_add(1);
@@ -298,7 +293,7 @@ impl Pipeline {
         let line = Readout {
             sample: samples_done,
             reading,
-            dropped: self.dropped,
+            dropped: self.sequence.dropped(),
             calibration: self.calibration_source,
         };
         Lines {

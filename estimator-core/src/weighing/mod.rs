@@ -15,6 +15,7 @@ pub mod console;
 mod key;
 mod method;
 mod scale;
+mod sequence;
 
 pub use calibration::{
     load_calibration, load_or_default, store_calibration, Calibration, CalibrationError,
@@ -38,3 +39,4 @@ pub use scale::{
     CountsScale, RawSample, Scale, ScaleConfig, ScaleEstimator, ScaleFault, ScaleReading,
     ScaleState, StepScale, TareError, TARE_ACCURACY_E,
 };
+pub use sequence::SampleSequence;

@@ -12,7 +12,7 @@ use defmt_rtt as _;
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
 mod app {
     use cortex_m::peripheral::DWT;
-    use estimator_core::weighing::{Command, KeyDebouncer, KeyPress, RawSample};
+    use estimator_core::weighing::{Command, KeyDebouncer, KeyPress, RawSample, SampleSequence};
     use firmware::fault;
     use firmware::pipeline::{
         self, EstimatorStorage, Lines, Pipeline, SampleMessage, SampleQueue, SampleWatchdog,
@@ -283,7 +283,7 @@ mod app {
             // What the converter took minus what reached the estimator (within the queue's
             // depth, which may still hold some): the samples the stall lost.
             let accepted = pipeline.samples().wrapping_sub(accepted_before);
-            let lost = converted.saturating_sub(accepted + QUEUE_CAPACITY as u32);
+            let lost = SampleSequence::stall_loss(converted, accepted, QUEUE_CAPACITY as u32);
             if lost > 0 {
                 defmt::println!(
                     "command flash write stalled the CPU for {=u32} ms: {=u32} samples lost",
