@@ -149,9 +149,15 @@ pub fn report(settings: &TortureSettings, tallies: &Tallies) -> String {
             "worst silent wrong readings (run: rerun with --only-run):"
         );
         for w in &tallies.worst {
+            // An infinite error is the judge's mark for a mass shown above Max + 9 e.
+            let error = if w.error_g.is_finite() {
+                format!("error {:.3} g", w.error_g)
+            } else {
+                "the load is above Max + 9 e: it should read overload, not a mass".to_string()
+            };
             let _ = writeln!(
                 out,
-                "  run {} at {:.2} s ({}): shown {:.3} g {}, truth {:.3}..{:.3} g, error {:.3} g, permissible ±{:.3} g",
+                "  run {} at {:.2} s ({}): shown {:.3} g {}, truth {:.3}..{:.3} g, {error}, permissible ±{:.3} g",
                 w.run,
                 w.time_s,
                 w.act.name(),
@@ -159,7 +165,6 @@ pub fn report(settings: &TortureSettings, tallies: &Tallies) -> String {
                 w.state,
                 w.truth_g.0,
                 w.truth_g.1,
-                w.error_g,
                 w.permissible_g
             );
         }
