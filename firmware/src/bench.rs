@@ -163,57 +163,62 @@ fn stack_bounds() -> (usize, usize) {
     (guard_end as usize, highest as usize)
 }
 
-/// Fill the stack below the current stack pointer (less a margin for this function) with
-/// [`STACK_PAINT`]. Call it early in `init`, with interrupts still disabled.
-#[inline(never)]
-pub fn paint_stack() {
+/// Fill the free stack, from the guard up to `margin` bytes below the stack pointer, with
+/// [`STACK_PAINT`]; the stack pointer it painted below. Inlined, so the stack pointer is
+/// its caller's.
+#[inline(always)]
+fn paint_below_sp(margin: usize) -> usize {
     let (lowest, _) = stack_bounds();
-    let below = cortex_m::register::msp::read() as usize - 256;
+    let sp = cortex_m::register::msp::read() as usize;
     let mut address = lowest;
-    while address < below {
-        // Safety: the words between the stack's end and 256 bytes below the stack pointer
+    while address < sp - margin {
+        // Safety: the words between the guard and `margin` bytes below the stack pointer
         // belong to no live frame (the stack grows down and nothing else is placed there:
         // flip-link puts `.data`/`.bss` above it), and interrupts are off in `init`.
         unsafe { core::ptr::write_volatile(address as *mut u32, STACK_PAINT) };
         address += 4;
     }
+    sp
+}
+
+/// The lowest address below `limit` (from the guard up) no longer painted: the deepest
+/// the stack went since it was painted; `limit` if nothing was.
+fn deepest_written(limit: usize) -> usize {
+    let (lowest, _) = stack_bounds();
+    let mut address = lowest;
+    // Safety: reads words of the stack region between the guard and `limit`.
+    while address < limit
+        && unsafe { core::ptr::read_volatile(address as *const u32) } == STACK_PAINT
+    {
+        address += 4;
+    }
+    address
+}
+
+/// Fill the stack below the current stack pointer (less a margin for this function) with
+/// [`STACK_PAINT`]. Call it early in `init`, with interrupts still disabled.
+#[inline(never)]
+pub fn paint_stack() {
+    paint_below_sp(256);
 }
 
 /// Bytes of the stack used since [`paint_stack`] (the deepest word no longer painted), and
 /// the stack's size.
 pub fn stack_used() -> (u32, u32) {
     let (lowest, highest) = stack_bounds();
-    let mut address = lowest;
-    // Safety: reads words of the stack region between its end and its start.
-    while address < highest
-        && unsafe { core::ptr::read_volatile(address as *const u32) } == STACK_PAINT
-    {
-        address += 4;
-    }
-    ((highest - address) as u32, (highest - lowest) as u32)
+    (
+        (highest - deepest_written(highest)) as u32,
+        (highest - lowest) as u32,
+    )
 }
 
 /// Bytes of stack `work` used below the caller's stack pointer: the free stack (down to
 /// the guard) is painted, `work` runs, and the deepest word it wrote is found.
 #[inline(never)]
 pub fn stack_depth_of(work: impl FnOnce()) -> u32 {
-    let (lowest, _) = stack_bounds();
-    let sp = cortex_m::register::msp::read() as usize;
-    let mut address = lowest;
-    while address < sp - 16 {
-        // Safety: the words between the guard and just below the stack pointer belong to
-        // no live frame (the stack grows down); `init` runs with interrupts off.
-        unsafe { core::ptr::write_volatile(address as *mut u32, STACK_PAINT) };
-        address += 4;
-    }
+    let sp = paint_below_sp(16);
     work();
-    let mut address = lowest;
-    // Safety: reads words of the stack region below the stack pointer.
-    while address < sp && unsafe { core::ptr::read_volatile(address as *const u32) } == STACK_PAINT
-    {
-        address += 4;
-    }
-    (sp - address) as u32
+    (sp - deepest_written(sp)) as u32
 }
 
 /// A shared resource as RTIC's `lock` sees it, for running a task's body from `init`.

@@ -318,9 +318,9 @@ pub static LAST_FED_SAMPLE: AtomicU32 = AtomicU32::new(0);
 /// samples since the last feed. So a stopped sample clock, a stalled DMA stream, a hung
 /// estimator or a readout task starved or stuck all end in the watchdog's reset instead
 /// of a frozen display.
+/// The count it was last fed at is [`LAST_FED_SAMPLE`] (one watchdog per board).
 pub struct SampleWatchdog<W> {
     watchdog: W,
-    fed_at: u32,
 }
 
 impl<W: Watchdog> SampleWatchdog<W> {
@@ -328,20 +328,15 @@ impl<W: Watchdog> SampleWatchdog<W> {
     pub fn new(mut watchdog: W, samples: u32) -> Self {
         watchdog.feed();
         LAST_FED_SAMPLE.store(samples, Ordering::Relaxed);
-        Self {
-            watchdog,
-            fed_at: samples,
-        }
+        Self { watchdog }
     }
 
     /// Feed it if `samples` (the pipeline's count) moved since the last feed; whether it
     /// was fed.
     pub fn service(&mut self, samples: u32) -> bool {
-        if samples == self.fed_at {
+        if LAST_FED_SAMPLE.swap(samples, Ordering::Relaxed) == samples {
             return false;
         }
-        self.fed_at = samples;
-        LAST_FED_SAMPLE.store(samples, Ordering::Relaxed);
         self.watchdog.feed();
         true
     }
