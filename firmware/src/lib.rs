@@ -16,6 +16,7 @@ compile_error!("features `qemu` and `stm32f411` are mutually exclusive: pick one
 #[cfg(not(any(feature = "qemu", feature = "stm32f411")))]
 compile_error!("pick a board: feature `qemu` (default) or `stm32f411` (--no-default-features)");
 
+pub mod console;
 pub mod fault;
 pub mod pipeline;
 

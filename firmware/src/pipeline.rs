@@ -129,6 +129,8 @@ pub fn estimate<I: InterruptNumber>(
 pub struct Lines {
     /// The latest readout tick.
     pub readout: Option<Readout>,
+    /// The latest tick of the serial console's reading lines (at its own `rate`).
+    pub console: Option<Readout>,
     /// The run's first final reading, when it has just been reached.
     pub final_reading: Option<Readout>,
 }
@@ -136,7 +138,7 @@ pub struct Lines {
 impl Lines {
     /// Nothing to print.
     pub fn is_empty(&self) -> bool {
-        self.readout.is_none() && self.final_reading.is_none()
+        self.readout.is_none() && self.console.is_none() && self.final_reading.is_none()
     }
 
     /// Take in newer lines: a newer readout replaces an unprinted one (the display shows
@@ -144,6 +146,9 @@ impl Lines {
     pub fn merge(&mut self, newer: Lines) {
         if newer.readout.is_some() {
             self.readout = newer.readout;
+        }
+        if newer.console.is_some() {
+            self.console = newer.console;
         }
         if newer.final_reading.is_some() {
             self.final_reading = newer.final_reading;
@@ -188,6 +193,26 @@ pub struct Pipeline {
     sequence: SampleSequence,
     /// The run (its load-change count) whose final reading was printed.
     final_run: Option<u32>,
+    /// Samples between two of the serial console's reading lines.
+    console_interval: u32,
+}
+
+/// The reading-line rates the console offers (`rate <Hz>`): whole divisors of the sample
+/// rate, so every line falls on a sample, up to 100 lines a second (a 70-byte line at
+/// 100 Hz is 7 kB/s, within a 115,200 baud UART).
+pub const CONSOLE_RATES_HZ: [u16; 11] = [1, 2, 4, 5, 8, 10, 20, 25, 40, 50, 100];
+/// The rates as the console's refusal lists them.
+pub const CONSOLE_RATES_TEXT: &str = "lines per second, one of 1 2 4 5 8 10 20 25 40 50 100";
+
+/// How a calibration that ended came out (what the console reports).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum CalibrationEnd {
+    /// Stored, read back and applied: the values in use now.
+    Applied(Calibration),
+    /// The measurement failed; the calibration in use stays.
+    Failed(CalibrationFailure),
+    /// The store failed; the calibration in use stays.
+    NotStored,
 }
 
 impl Pipeline {
@@ -205,7 +230,27 @@ impl Pipeline {
             commands: Commands::new(command_config(limits)),
             sequence: SampleSequence::new(),
             final_run: None,
+            console_interval: SAMPLES_PER_READOUT,
         }
+    }
+
+    /// Console reading lines at `hz` from now on, if it is one of [`CONSOLE_RATES_HZ`].
+    pub fn set_console_rate(&mut self, hz: u16) -> bool {
+        if !CONSOLE_RATES_HZ.contains(&hz) {
+            return false;
+        }
+        self.console_interval = SAMPLE_RATE_HZ / u32::from(hz);
+        true
+    }
+
+    /// The weighing decisions' configuration in use.
+    pub fn scale_config(&self) -> weighing::ScaleConfig {
+        *self.scale.config()
+    }
+
+    /// Decide with `config` from now on (the run restarts), or refuse it unchanged.
+    pub fn reconfigure(&mut self, config: weighing::ScaleConfig) -> Result<(), ConfigError> {
+        self.scale.reconfigure(config)
     }
 
     /// Start over as at boot, with the same scale configuration and the calibration in use
@@ -283,8 +328,9 @@ impl Pipeline {
         let reading = self.scale.push(message.sample);
         let samples_done = message.sequence.wrapping_add(1);
         let tick = samples_done.is_multiple_of(SAMPLES_PER_READOUT);
+        let console_tick = samples_done.is_multiple_of(self.console_interval);
         let first_final = reading.is_final && self.final_run != Some(reading.load_changes);
-        if !(tick || first_final) {
+        if !(tick || console_tick || first_final) {
             return Lines::default();
         }
         if first_final {
@@ -298,6 +344,7 @@ impl Pipeline {
         };
         Lines {
             readout: tick.then_some(line),
+            console: console_tick.then_some(line),
             final_reading: first_final.then_some(line),
         }
     }
@@ -478,6 +525,7 @@ pub fn log_command(sample: u32, command: Command, result: &Result<CommandOutcome
     let action = match command {
         Command::Tare => "tare",
         Command::ClearTare => "untare",
+        Command::Zero => "zero",
         Command::Calibrate { .. } => "calibrate",
         Command::CancelCalibration => "cancel",
     };
@@ -488,6 +536,7 @@ pub fn log_command(sample: u32, command: Command, result: &Result<CommandOutcome
         Ok(CommandOutcome::TareCleared) => {
             defmt::println!("command sample={=u32} untare=ok", sample)
         }
+        Ok(CommandOutcome::Zeroed) => defmt::println!("command sample={=u32} zero=ok", sample),
         Ok(CommandOutcome::CalibrationStarted {
             zero_counts,
             known_mass_g,
@@ -518,7 +567,8 @@ pub fn finish_calibration<S>(
     result: Result<Calibration, CalibrationFailure>,
     store: &mut S,
     mut lock: impl FnMut(&mut dyn FnMut(&mut Pipeline)),
-) where
+) -> CalibrationEnd
+where
     S: CalibrationStore,
     S::Error: defmt::Format,
 {
@@ -532,14 +582,14 @@ pub fn finish_calibration<S>(
                 sample,
                 failure
             );
-            return;
+            return CalibrationEnd::Failed(failure);
         }
     };
     let stored = match weighing::store_calibration(store, &measured) {
         Ok(stored) => stored,
         Err(failure) => {
             log_store_failure(sample, &failure);
-            return;
+            return CalibrationEnd::NotStored;
         }
     };
     lock(&mut |pipeline| {
@@ -552,6 +602,7 @@ pub fn finish_calibration<S>(
         stored.counts_per_gram,
         stored.zero_counts
     );
+    CalibrationEnd::Applied(stored)
 }
 
 fn log_store_failure<E: defmt::Format>(sample: u32, failure: &StoreFailure<E>) {

@@ -20,10 +20,10 @@
 
 use std::fmt::Write as _;
 
-use estimator_core::weighing::{self, CalibrationStore, FlashStore, RamFlash};
+use estimator_core::weighing::{self, console, CalibrationStore, FlashStore, RamFlash};
 use estimator_core::weighing::{
-    Calibration, CalibrationFailure, CalibrationSource, Command, CommandConfig, Commands,
-    ScaleConfig, ScaleEstimator,
+    Calibration, CalibrationFailure, CalibrationSource, CommandConfig, Commands, ScaleConfig,
+    ScaleEstimator,
 };
 
 use crate::e2e::{self, ReadoutLine, RunLog, Scene, READOUT_HZ, SAMPLE_RATE_HZ};
@@ -95,7 +95,17 @@ fn settle_samples() -> u32 {
         .calibration_settle_samples
 }
 
-/// The harness's side of the scene: which byte to type after which readout line. Each
+/// The console lines typed first, on the empty pan before the drop: every console
+/// command that does not touch the load (a unit, a rate, a refused rate, a configuration
+/// change that leaves this scene's weighing as it is, the configuration listed).
+pub const SETUP_LINES: &str =
+    "help\nunit kg\nrate 50\nrate 3\nconfig set capacity_g 620\nconfig show\n";
+/// The tare command's line.
+pub const TARE_LINE: &str = "tare\n";
+/// The calibration command's line, with [`REFERENCE_MASS_G`].
+pub const CALIBRATE_LINE: &str = "cal 200\n";
+
+/// The harness's side of the scene: which console lines to type after which readout line. Each
 /// command is sent once, in order, on the first line that meets its condition; the
 /// conditions leave windows of 0.6 s of scene time or more (about 2 s of wall time in
 /// QEMU), so the wall-clock delay between QEMU printing a line and the byte arriving
@@ -103,6 +113,7 @@ fn settle_samples() -> u32 {
 #[derive(Clone, Debug, Default)]
 pub struct CommandScript {
     sent: usize,
+    transcript: Vec<String>,
 }
 
 impl CommandScript {
@@ -116,16 +127,30 @@ impl CommandScript {
         self.sent
     }
 
-    /// The byte to type after `line`, if any.
-    pub fn respond(&mut self, line: &ReadoutLine) -> Option<u8> {
+    /// Keep what the board wrote on its console (the run's transcript, line by line).
+    pub fn record_console(&mut self, lines: Vec<String>) {
+        self.transcript = lines;
+    }
+
+    /// What the board wrote on its console.
+    pub fn transcript(&self) -> &[String] {
+        &self.transcript
+    }
+
+    /// The console lines to type after `line`, if any.
+    pub fn respond(&mut self, line: &ReadoutLine) -> Option<&'static str> {
         let timeline = Timeline::new();
         let time_s = line.time_s();
         let settled_state = line.state == "Stable" || line.state == "Empty";
-        let byte = match self.sent {
+        let typed = match self.sent {
+            // The setup on the empty pan, on the first lines (0.15 s before the drop at
+            // the latest: the configuration change restarts the run, which must not hit
+            // the drop).
+            0 if time_s < timeline.drop_s - 0.15 => SETUP_LINES,
             // Tare the first mass once the scale calls it stable and its `u` is small
             // enough for a tare (the load known to ±0.25 e: twice u's upper bound, which
             // is up to 1.5 times u here, within it; refused as `Uncertain` before).
-            0 if time_s > timeline.drop_s
+            1 if time_s > timeline.drop_s
                 && time_s < timeline.pour_start_s
                 && line.state == "Stable"
                 && line.u_g.is_some_and(|u| {
@@ -133,30 +158,30 @@ impl CommandScript {
                         <= f64::from(weighing::TARE_ACCURACY_E * ScaleConfig::SCALE_INTERVAL_G)
                 }) =>
             {
-                b't'
+                TARE_LINE
             }
             // Tare while the second load is poured on (0.1 s into the 0.8 s at the earliest,
             // 0.2 s before its end at the latest).
-            1 if time_s >= timeline.pour_start_s + 0.1
+            2 if time_s >= timeline.pour_start_s + 0.1
                 && time_s < timeline.pour_end_s - 0.2
                 && !settled_state =>
             {
-                b't'
+                TARE_LINE
             }
             // Calibrate on the emptied pan once it has settled for the calibration's settling
             // time and 0.1 s more. (The replacement cell's empty pan reads about 1.2 g with
             // the factory calibration: `Stable`, not `Empty`.)
-            2 if time_s > timeline.removal_s
+            3 if time_s > timeline.removal_s
                 && time_s < timeline.known_mass_s
                 && settled_state
                 && line.since_change >= settle_samples() + (0.1 * SAMPLE_RATE_HZ) as u32 =>
             {
-                b'c'
+                CALIBRATE_LINE
             }
             _ => return None,
         };
         self.sent += 1;
-        Some(byte)
+        Some(typed)
     }
 }
 
@@ -617,13 +642,24 @@ pub fn host_replay(seed: u64) -> RunLog {
     let mut adc = qemu_scenes::command_scene_with_seed(seed);
     let samples = Timeline::sample(timeline.end_s);
     let step = (SAMPLE_RATE_HZ / READOUT_HZ) as u32;
-    let mut typed: Option<u8> = None;
+    let mut typed: Option<&str> = None;
     let mut finals = e2e::FinalTracker::default();
     for index in 0..samples {
-        if let Some(byte) = typed.take() {
-            let command = Command::from_byte(byte, REFERENCE_MASS_G as f32).expect("a command");
-            let result = commands.handle(command, &mut scale, index);
-            lines.push(firmware_log::command(index, command, &result));
+        for line in typed.take().iter().flat_map(|text| text.lines()) {
+            // What the board's console does with the line, on the host's scale.
+            match console::parse_line(line.as_bytes()).expect("the script types valid lines") {
+                console::Request::ConfigSet { key, value } => {
+                    let field = ScaleConfig::field(key).expect("a configuration key");
+                    let changed = field.set(scale.config(), value).expect("a valid value");
+                    scale.reconfigure(changed).expect("a valid configuration");
+                }
+                request => {
+                    if let Some(command) = request.command() {
+                        let result = commands.handle(command, &mut scale, index);
+                        lines.push(firmware_log::command(index, command, &result));
+                    }
+                }
+            }
         }
         let reading = scale.push(weighing::RawSample::read(&mut adc));
         let done = index + 1;
@@ -889,26 +925,43 @@ mod tests {
         };
         let line = |sample: u32, state: &str, since: u32| line_with_u(sample, state, since, 0.005);
         let mut script = CommandScript::new();
-        // Before the drop, nothing; then the first stable line of the first mass whose u
+        // The setup on the first line, then nothing before the drop; then the first
+        // stable line of the first mass whose u
         // allows a tare (±0.25 e: 2 × 1.5 × u within 0.025 g).
+        assert_eq!(
+            script.respond(&line(200, "Estimating", 200)),
+            Some(SETUP_LINES)
+        );
+        assert_eq!(script.respond(&line(400, "Estimating", 400)), None);
         assert_eq!(script.respond(&line(800, "Stable", 800)), None);
         assert_eq!(script.respond(&line(1600, "Estimating", 400)), None);
         assert_eq!(
             script.respond(&line_with_u(1700, "Stable", 500, 0.01)),
             None
         );
-        assert_eq!(script.respond(&line(1800, "Stable", 600)), Some(b't'));
+        assert_eq!(script.respond(&line(1800, "Stable", 600)), Some(TARE_LINE));
         assert_eq!(script.respond(&line(2000, "Stable", 800)), None);
         // The pouring (from 1.7 s): an unstable line 0.1 s in.
         assert_eq!(script.respond(&line(7000, "Estimating", 200)), None);
         assert_eq!(script.respond(&line(7400, "Stable", 200)), None);
-        assert_eq!(script.respond(&line(7600, "Estimating", 200)), Some(b't'));
+        assert_eq!(
+            script.respond(&line(7600, "Estimating", 200)),
+            Some(TARE_LINE)
+        );
         // The emptied pan (from 3.1 s), settled long enough (reading 1.2 g: stable, not
         // empty).
         assert_eq!(script.respond(&line(13_000, "Stable", 600)), None);
         assert_eq!(script.respond(&line(14_000, "Estimating", 1600)), None);
-        assert_eq!(script.respond(&line(15_000, "Stable", 2600)), Some(b'c'));
+        assert_eq!(
+            script.respond(&line(15_000, "Stable", 2600)),
+            Some(CALIBRATE_LINE)
+        );
         assert_eq!(script.respond(&line(15_200, "Empty", 2800)), None);
-        assert_eq!(script.sent(), 3);
+        assert_eq!(script.sent(), 4);
+        assert_eq!(
+            CALIBRATE_LINE.trim(),
+            format!("cal {REFERENCE_MASS_G}"),
+            "the line calibrates with the scene's reference mass"
+        );
     }
 }

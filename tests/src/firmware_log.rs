@@ -33,6 +33,8 @@ pub const FINAL: &str =
 pub const TARED: &str = "command sample={=u32} tare=ok tare_g={=f32}";
 /// `pipeline::log_command`, the tare cleared.
 pub const TARE_CLEARED: &str = "command sample={=u32} untare=ok";
+/// `pipeline::log_command`, the zero set.
+pub const ZEROED: &str = "command sample={=u32} zero=ok";
 /// `pipeline::log_command`, a calibration's zero taken.
 pub const CALIBRATION_STARTED: &str = "command sample={=u32} calibrate=zero_taken zero_counts={=f32} known_mass_g={=f32} (put the mass on)";
 /// `pipeline::log_command`, a calibration cancelled.
@@ -52,13 +54,14 @@ pub const BOOT_CALIBRATION: &str =
 pub const END: &str = "end samples={=u32} dropped={=u32}";
 
 /// Every format string above.
-pub const ALL: [&str; 14] = [
+pub const ALL: [&str; 15] = [
     READOUT,
     FINAL,
     READOUT_NO_UNCERTAINTY,
     READOUT_NO_MASS,
     TARED,
     TARE_CLEARED,
+    ZEROED,
     CALIBRATION_STARTED,
     CALIBRATION_CANCELLED,
     REFUSED,
@@ -176,6 +179,7 @@ pub fn command(
     let action = match command {
         Command::Tare => "tare",
         Command::ClearTare => "untare",
+        Command::Zero => "zero",
         Command::Calibrate { .. } => "calibrate",
         Command::CancelCalibration => "cancel",
     };
@@ -183,6 +187,7 @@ pub fn command(
     match result {
         Ok(CommandOutcome::Tared { tare_g }) => render(TARED, &[at, Arg::F32(*tare_g)]),
         Ok(CommandOutcome::TareCleared) => render(TARE_CLEARED, &[at]),
+        Ok(CommandOutcome::Zeroed) => render(ZEROED, &[at]),
         Ok(CommandOutcome::CalibrationStarted {
             zero_counts,
             known_mass_g,

@@ -1,6 +1,7 @@
 //! Cross-crate and on-target tests of the weighing firmware and its estimators.
 
 pub mod commands;
+pub mod console_check;
 pub mod core_check;
 pub mod e2e;
 pub mod firmware_log;

@@ -23,7 +23,9 @@
 //! every function returns at once, so a board may call it from any task.
 
 use super::calibration::{Calibration, CalibrationError, CalibrationLimits};
-use super::scale::{Scale, ScaleEstimator, ScaleFault, ScaleReading, ScaleState, TareError};
+use super::scale::{
+    Scale, ScaleEstimator, ScaleFault, ScaleReading, ScaleState, TareError, ZeroError,
+};
 
 /// What the operator asked for.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -33,6 +35,8 @@ pub enum Command {
     Tare,
     /// Remove the tare.
     ClearTare,
+    /// Set the zero to the current gross reading (semi-automatic zero setting).
+    Zero,
     /// Start a calibration: the empty pan now, then `known_mass_g` put on.
     Calibrate {
         /// The reference mass the operator will put on, in grams.
@@ -43,13 +47,14 @@ pub enum Command {
 }
 
 impl Command {
-    /// The command a console byte stands for: `t` tare, `u` clear tare (untare), `c`
-    /// calibrate with `known_mass_g`, `x` cancel a calibration (either case). `None` for any
+    /// The command a console byte stands for: `t` tare, `u` clear tare (untare), `z` set
+    /// the zero, `c` calibrate with `known_mass_g`, `x` cancel a calibration (either case). `None` for any
     /// other byte; the board decides whether to report it.
     pub fn from_byte(byte: u8, known_mass_g: f32) -> Option<Self> {
         match byte.to_ascii_lowercase() {
             b't' => Some(Self::Tare),
             b'u' => Some(Self::ClearTare),
+            b'z' => Some(Self::Zero),
             b'c' => Some(Self::Calibrate { known_mass_g }),
             b'x' => Some(Self::CancelCalibration),
             _ => None,
@@ -68,6 +73,8 @@ pub enum CommandOutcome {
     },
     /// The tare is zero again.
     TareCleared,
+    /// The current gross reading is the new zero.
+    Zeroed,
     /// The empty-pan zero is taken; the calibration completes once `known_mass_g` is on
     /// the pan and settled (see [`Commands::poll`]).
     CalibrationStarted {
@@ -98,6 +105,11 @@ pub enum CommandRefusal {
     CalibrationInProgress,
     /// There is no calibration in progress to cancel.
     NotCalibrating,
+    /// Zero setting: the pan holds more than the zero-setting range allows
+    /// (`scale::ZERO_SETTING_RANGE_OF_MAX` of Max from the calibrated zero).
+    OutOfZeroRange,
+    /// Zero setting while a tare is in use: clear the tare first.
+    Tared,
     /// The known mass is not a positive, finite number of grams.
     BadKnownMass,
     /// The empty-pan zero is outside the board's limits (on a rail, or far from the
@@ -239,6 +251,16 @@ impl Commands {
                 Ok(CommandOutcome::Tared {
                     tare_g: scale.tare_g(),
                 })
+            }
+            Command::Zero => {
+                settled(&scale.reading(), 0)?;
+                scale.set_zero().map_err(|error| match error {
+                    ZeroError::NotStable => CommandRefusal::Unstable,
+                    ZeroError::Uncertain => CommandRefusal::Uncertain,
+                    ZeroError::OutOfRange => CommandRefusal::OutOfZeroRange,
+                    ZeroError::Tared => CommandRefusal::Tared,
+                })?;
+                Ok(CommandOutcome::Zeroed)
             }
             Command::ClearTare => {
                 scale.clear_tare();

@@ -37,6 +37,6 @@ pub use method::{
 };
 pub use scale::{
     CountsScale, RawSample, Scale, ScaleConfig, ScaleEstimator, ScaleFault, ScaleReading,
-    ScaleState, StepScale, TareError, TARE_ACCURACY_E,
+    ScaleState, StepScale, TareError, ZeroError, TARE_ACCURACY_E, ZERO_SETTING_RANGE_OF_MAX,
 };
 pub use sequence::SampleSequence;

@@ -1,7 +1,9 @@
 //! The weighing firmware on QEMU `mps2-an386`: a 4 kHz CMSDK timer interrupt takes samples
 //! from the simulated load cell, the estimator task runs the weighing core, a readout task
-//! logs 20 lines a second over semihosting (defmt), and a command task takes the operator's
-//! bytes from UART 0 (`t` tare, `u` clear tare, `c` calibrate with 200 g, `x` cancel). After
+//! logs 20 lines a second over semihosting (defmt), and UART 0 is the serial console
+//! (`firmware::console`): the command task takes the operator's lines (`tare`, `cal 200`,
+//! `unit kg`, `rate 50`, `config set …`, `help`), and reading lines go out at the console's
+//! rate, each outcome as its own line. After
 //! the scene (the demo, or the command scene when QEMU's semihosting command line names it)
 //! it exits QEMU with status 0; a panic or fault exits with status 1, and so does the
 //! watchdog's NMI when no new sample has reached the readout task for a second (the scenes
@@ -14,7 +16,7 @@ use defmt_semihosting as _;
 #[rtic::app(device = firmware::mps2_an386, peripherals = false)]
 mod app {
     use estimator_core::weighing::CalibrationStore;
-    use estimator_core::weighing::Command;
+    use firmware::console::Console;
     use firmware::fault;
     use firmware::mps2_an386::{CmsdkTimer, CmsdkUart, CmsdkWatchdog, Interrupt, SYSTEM_CLOCK_HZ};
     use firmware::pipeline::{
@@ -32,8 +34,6 @@ mod app {
 
     type LoadCell = qemu_scenes::LoadCell;
 
-    /// The reference mass of `c` (calibrate): the factory's known mass.
-    const REFERENCE_MASS_G: f32 = qemu_scenes::CALIBRATION_MASS_G as f32;
     /// The console's baud rate (QEMU ignores it; real CMSDK silicon would not).
     const CONSOLE_BAUD: u32 = 115_200;
     /// Bytes taken per receive interrupt: the UART holds one, and one more may land while
@@ -46,6 +46,7 @@ mod app {
     struct Shared {
         latest: Lines,
         pipeline: Pipeline,
+        console: Console<CmsdkUart>,
     }
 
     #[local]
@@ -55,7 +56,6 @@ mod app {
         producer: Producer<'static, SampleMessage>,
         consumer: Consumer<'static, SampleMessage>,
         sequence: u32,
-        uart: CmsdkUart,
         store: QemuCalibrationStore,
         scene_samples: u32,
         scene: Scene,
@@ -121,17 +121,18 @@ mod app {
         let load_cell = scene.load_cell();
         let scene_samples = (load_cell.script().end_s() * SAMPLE_RATE_HZ as f64) as u32;
         defmt::println!(
-            "scene {} samples={=u32} commands: t tare, u clear tare, c calibrate with {=f32} g, x cancel",
+            "scene {} samples={=u32} console on UART 0 (type help)",
             scene,
-            scene_samples,
-            REFERENCE_MASS_G
+            scene_samples
         );
 
         let (producer, consumer) = cx.local.queue.split();
         let converter = SimulatedConverter::new(load_cell);
         // Safety: the only CmsdkUart for UART 0; it moves into the command task.
         let mut uart = unsafe { CmsdkUart::uart0() };
-        uart.start_receiver(CONSOLE_BAUD);
+        uart.start(CONSOLE_BAUD);
+        let mut console = Console::new(uart);
+        console.banner();
         // Safety: the only CmsdkTimer for timer 0; it moves into the hand-off task.
         let mut timer = unsafe { CmsdkTimer::timer0() };
         timer.start_periodic(SYSTEM_CLOCK_HZ / SAMPLE_RATE_HZ);
@@ -143,6 +144,7 @@ mod app {
             Shared {
                 latest: Lines::default(),
                 pipeline,
+                console,
             },
             Local {
                 timer,
@@ -150,7 +152,6 @@ mod app {
                 producer,
                 consumer,
                 sequence: 0,
-                uart,
                 store,
                 scene_samples,
                 scene,
@@ -187,42 +188,44 @@ mod app {
     }
 
     /// The command task: the operator's bytes from UART 0, below the estimator's priority.
-    /// Each byte is decided against the reading at that moment and the outcome logged.
-    #[task(binds = Uart0Rx, priority = 1, local = [uart], shared = [pipeline])]
-    fn command(mut cx: command::Context) {
-        for _ in 0..BYTES_PER_INTERRUPT {
-            let byte = match cx.local.uart.take_byte() {
-                Ok(Some(byte)) => byte,
-                Ok(None) => break,
-                Err(error) => {
-                    defmt::println!("command uart={} (bytes lost)", error);
-                    continue;
+    /// Each completed line is decided against the reading at that moment; its outcome goes
+    /// to the console and the log.
+    #[task(binds = Uart0Rx, priority = 1, shared = [pipeline, console])]
+    fn command(cx: command::Context) {
+        let command::SharedResources {
+            mut pipeline,
+            mut console,
+            ..
+        } = cx.shared;
+        console.lock(|console| {
+            for _ in 0..BYTES_PER_INTERRUPT {
+                match console.port().take_byte() {
+                    Ok(Some(byte)) => console.receive(byte, &mut pipeline),
+                    Ok(None) => break,
+                    Err(error) => defmt::println!("command uart={} (bytes lost)", error),
                 }
-            };
-            if byte.is_ascii_whitespace() {
-                continue;
             }
-            let Some(command) = Command::from_byte(byte, REFERENCE_MASS_G) else {
-                defmt::println!("command byte={=u8:#04x} unknown (t, u, c, x)", byte);
-                continue;
-            };
-            let (sample, result) = cx
-                .shared
-                .pipeline
-                .lock(|pipeline| (pipeline.samples(), pipeline.command(command)));
-            pipeline::log_command(sample, command, &result);
-        }
+        });
     }
 
-    /// The readout task: 20 lines a second; the watchdog fed while samples advance; the
-    /// commands' regular work after each (a fresh tare refined, a calibration in progress
-    /// carried on: stored, read back and applied once the known mass has settled); the
-    /// end-of-scene summary and exit.
-    #[task(binds = Uart1Rx, priority = 1, local = [store, scene_samples, scene, watchdog, noise_told: bool = false], shared = [latest, pipeline])]
+    /// The readout task: 20 lines a second to the log and the console's reading lines at
+    /// its rate (a final reading on both the moment it is reached); the watchdog fed while
+    /// samples advance; the commands' regular work after each log line (a fresh tare
+    /// refined, a calibration in progress carried on: stored, read back and applied once
+    /// the known mass has settled); the end-of-scene summary and exit.
+    #[task(binds = Uart1Rx, priority = 1, local = [store, scene_samples, scene, watchdog, noise_told: bool = false], shared = [latest, pipeline, console])]
     fn readout(mut cx: readout::Context) {
         let lines = cx.shared.latest.lock(core::mem::take);
-        let samples = cx.shared.pipeline.lock(|pipeline| pipeline.samples());
+        let (samples, e) = cx
+            .shared
+            .pipeline
+            .lock(|pipeline| (pipeline.samples(), pipeline.scale_config().scale_interval_g));
         cx.local.watchdog.service(samples);
+        cx.shared.console.lock(|console| {
+            for line in [lines.final_reading, lines.console].into_iter().flatten() {
+                console.reading(&line, e);
+            }
+        });
         let Some(readout) = lines.log() else {
             return;
         };
@@ -245,9 +248,12 @@ mod app {
         }
         if let Some(result) = cx.shared.pipeline.lock(|pipeline| pipeline.poll_commands()) {
             let shared_pipeline = &mut cx.shared.pipeline;
-            pipeline::finish_calibration(result, cx.local.store, |work| {
+            let end = pipeline::finish_calibration(result, cx.local.store, |work| {
                 shared_pipeline.lock(|pipeline| work(pipeline))
             });
+            cx.shared
+                .console
+                .lock(|console| console.calibration_ended(&end));
         }
         if readout.sample >= *cx.local.scene_samples {
             defmt::println!(
@@ -337,21 +343,40 @@ mod app {
         }
         // Uart2Rx is never enabled: the pends above only stand for the readout's.
         cortex_m::peripheral::NVIC::unpend(Interrupt::Uart2Rx);
-        // The lines taken into the task's own frame, as the task takes them.
+        // The console's formatting, on a port that discards the bytes (its depth is the
+        // writing's, not the UART's).
+        let mut console = Console::new(bench::Discard);
+        let e = pipeline.scale_config().scale_interval_g;
+        // The lines taken into the task's own frame, as the task takes them; each console
+        // reading line written, then the log's.
         let log = bench::stack_depth_of(|| {
             let lines = core::hint::black_box(core::mem::take(&mut latest));
+            for line in [lines.final_reading, lines.console].into_iter().flatten() {
+                console.reading(&line, e);
+            }
             let _ = lines.log();
         });
         let poll = bench::stack_depth_of(|| {
             let _ = pipeline.poll_commands();
         });
         let store_calibration = bench::stack_depth_of(|| {
-            pipeline::finish_calibration(Ok(*calibration), store, |work| work(pipeline))
+            let end = pipeline::finish_calibration(Ok(*calibration), store, |work| work(pipeline));
+            console.calibration_ended(&end);
         });
-        let command = bench::stack_depth_of(|| {
-            let (sample, result) = (pipeline.samples(), pipeline.command(Command::Tare));
-            pipeline::log_command(sample, Command::Tare, &result);
-        });
+        // The deepest commands: a tare decided and answered, and the whole configuration
+        // listed (each typed as a line, ended by its CR).
+        let mut command = 0;
+        for line in [
+            &b"tare\r"[..],
+            b"config show\r",
+            b"config set capacity_g 600\r",
+        ] {
+            command = command.max(bench::stack_depth_of(|| {
+                for &byte in line {
+                    console.receive(byte, &mut bench::Unshared(&mut *pipeline));
+                }
+            }));
+        }
         let (_, top) = fault::stack_bounds();
         defmt::println!(
             "bench task stacks idle={=u32} handoff={=u32} estimator={=u32} readout={=u32} command={=u32}",

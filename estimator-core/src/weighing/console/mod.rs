@@ -34,10 +34,12 @@
 
 mod format;
 mod line;
+mod outcome;
 mod parse;
 mod unit;
 
 pub use format::{fault_name, write_error, write_reading, ReadingLine, StateWord};
 pub use line::{LineBuffer, LineEnd, MAX_LINE};
+pub use outcome::{write_calibration_failure, write_outcome, write_refusal};
 pub use parse::{parse_line, ConsoleError, Request};
 pub use unit::Unit;

@@ -49,6 +49,7 @@ impl Request<'_> {
         match *self {
             Request::Tare => Some(Command::Tare),
             Request::ClearTare => Some(Command::ClearTare),
+            Request::Zero => Some(Command::Zero),
             Request::Calibrate { known_mass_g } => Some(Command::Calibrate { known_mass_g }),
             Request::CancelCalibration => Some(Command::CancelCalibration),
             _ => None,
@@ -78,6 +79,11 @@ pub enum ConsoleError {
     Extra,
     /// The line was longer than the console takes.
     TooLong,
+    /// A command this board does not offer (yet), and what it offers instead.
+    Unavailable {
+        /// What the board offers instead.
+        expected: &'static str,
+    },
 }
 
 impl ConsoleError {
@@ -88,7 +94,9 @@ impl ConsoleError {
             ConsoleError::UnknownCommand => {
                 "one of tare, untare, zero, cal, cancel, unit, rate, raw, record, config, help"
             }
-            ConsoleError::Missing { expected } | ConsoleError::BadValue { expected } => expected,
+            ConsoleError::Missing { expected }
+            | ConsoleError::BadValue { expected }
+            | ConsoleError::Unavailable { expected } => expected,
             ConsoleError::Extra => "nothing after the command's arguments",
             ConsoleError::TooLong => "a line of at most 64 bytes",
         }
@@ -103,6 +111,7 @@ impl ConsoleError {
             ConsoleError::BadValue { .. } => "bad_value",
             ConsoleError::Extra => "extra_argument",
             ConsoleError::TooLong => "too_long",
+            ConsoleError::Unavailable { .. } => "unavailable",
         }
     }
 }

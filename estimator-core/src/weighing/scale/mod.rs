@@ -54,6 +54,7 @@ mod change;
 mod config;
 mod decide;
 mod estimator;
+mod fields;
 
 #[cfg(test)]
 mod fuzz;
@@ -65,7 +66,9 @@ mod zero;
 
 pub use config::ScaleConfig;
 pub use estimator::ScaleEstimator;
-pub use reading::{CountsScale, RawSample, ScaleFault, ScaleReading, ScaleState, TareError};
+pub use reading::{
+    CountsScale, RawSample, ScaleFault, ScaleReading, ScaleState, TareError, ZeroError,
+};
 
 use crate::estimators::step::StepEstimator;
 use crate::reading::ConfigError;
@@ -87,6 +90,9 @@ pub struct Scale<E> {
     /// The zero the scale started (or was recalibrated) with: zero tracking stays within
     /// `zero_tracking_range_g` of it.
     power_up_zero_counts: f32,
+    /// The zero of the calibration in use: zero setting stays within
+    /// [`ZERO_SETTING_RANGE_OF_MAX`] of it.
+    calibrated_zero_counts: f32,
     /// How far zero tracking has moved the zero from the power-up zero: kept on its own,
     /// small, so that tracking steps of 10⁻⁴ counts are not lost in rounding a zero of
     /// tens of thousands of counts (`f32` spacing there is 0.002 counts).
@@ -185,6 +191,7 @@ impl<E: ScaleEstimator> Scale<E> {
             grams_per_count: 1.0,
             zero_counts: 0.0,
             power_up_zero_counts: 0.0,
+            calibrated_zero_counts: 0.0,
             zero_tracked_counts: 0.0,
             run_zero_counts: 0,
             tare_g: 0.0,
@@ -243,6 +250,7 @@ impl<E: ScaleEstimator> Scale<E> {
             0.0
         };
         self.power_up_zero_counts = self.zero_counts;
+        self.calibrated_zero_counts = self.zero_counts;
         self.zero_tracked_counts = 0.0;
         self.clear_tare();
         self.stable_centre_g = 0.0;
@@ -326,6 +334,19 @@ impl<E: ScaleEstimator> Scale<E> {
         self.load_changes = self.load_changes.saturating_add(1);
     }
 
+    /// Decide with `config` from now on, or refuse it (nothing changes then) with the field
+    /// that is out of its domain ([`ScaleConfig::validate`]). The run restarts as after a
+    /// load change (the tests' sums and arming depend on the configuration); the
+    /// calibration, the zero and the tare stay.
+    pub fn reconfigure(&mut self, config: ScaleConfig) -> Result<(), ConfigError> {
+        config.validate()?;
+        self.config = config;
+        self.ringing_decay = ringing_decay(config.raw_arm_samples);
+        self.noise = NoiseMetering::new(self.samples_per_update, config.noise_window_samples);
+        self.restart_as_load_change();
+        Ok(())
+    }
+
     /// Start a new estimator run: a load changed, or the data stream broke.
     fn restart(&mut self) {
         // Refused only when not finite and positive, which the metering never hands over;
@@ -386,6 +407,11 @@ fn ringing_decay(arm_samples: u32) -> f32 {
 /// off by 0.1 g, taken from a reading stable within the 0.15 g a 415 g load permits, put
 /// a 21 g net load 0.1 g off for the rest of the run (`host-sim torture`).
 pub const TARE_ACCURACY_E: f32 = 0.25;
+
+/// The semi-automatic zero setting's range, a fraction of Max either side of the calibrated
+/// zero: 2 %, so zero setting and zero tracking together stay within the 4 % of Max OIML
+/// R 76 (4.5.1) allows (tracking adds at most its `zero_tracking_range_g`, 2 e by default).
+pub const ZERO_SETTING_RANGE_OF_MAX: f32 = 0.02;
 
 /// `u` of a net reading: the gross reading's and the tare's in quadrature (the tare's is
 /// zero without one, and then `u` is returned as it is).

@@ -100,6 +100,21 @@ pub enum TareError {
     Uncertain,
 }
 
+/// Why a zero-setting command was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ZeroError {
+    /// Zero setting needs a stable (or empty) reading.
+    NotStable,
+    /// The reading is not yet known to within ±0.25 e (as for a tare).
+    Uncertain,
+    /// The pan holds more than the zero-setting range from the calibrated zero allows
+    /// (±[`super::ZERO_SETTING_RANGE_OF_MAX`] of Max): a load, not a zero drift.
+    OutOfRange,
+    /// A tare is in use: clear it first (the zero is set on the gross reading).
+    Tared,
+}
+
 /// Gain and zero the scale converts counts with (see `crate::weighing::calibration`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

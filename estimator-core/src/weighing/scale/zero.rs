@@ -5,7 +5,10 @@
 //! `zero_tracking_rate_g_per_s` (OIML R76 style), so a slowly added load is never tracked
 //! away.
 
-use super::{Scale, ScaleEstimator, ScaleState, TareError, TARE_ACCURACY_E};
+use super::{
+    Scale, ScaleEstimator, ScaleState, TareError, ZeroError, TARE_ACCURACY_E,
+    ZERO_SETTING_RANGE_OF_MAX,
+};
 
 impl<E: ScaleEstimator> Scale<E> {
     /// The tracked zero in counts (moves only by zero tracking).
@@ -47,6 +50,36 @@ impl<E: ScaleEstimator> Scale<E> {
         self.tare_g = gross;
         self.tare_u_g = u;
         self.tare_u_bound_g = bound;
+        Ok(())
+    }
+
+    /// Semi-automatic zero setting (OIML R 76 4.5): the current gross reading becomes the
+    /// zero. Refused unless the reading is stable (or empty), known to within
+    /// ±[`TARE_ACCURACY_E`] e like a tare, no tare is in use, and the new zero lies within
+    /// ±[`ZERO_SETTING_RANGE_OF_MAX`] of Max of the calibrated zero. Zero tracking then
+    /// works around the new zero, within its own range.
+    pub fn set_zero(&mut self) -> Result<(), ZeroError> {
+        if self.tare_g != 0.0 {
+            return Err(ZeroError::Tared);
+        }
+        let (ScaleState::Stable | ScaleState::Empty, Some(gross)) = (self.state, self.gross_g)
+        else {
+            return Err(ZeroError::NotStable);
+        };
+        match (self.gross_u_g, self.gross_u_bound_g) {
+            (None, _) => {}
+            (Some(_), Some(bound))
+                if 2.0 * bound <= TARE_ACCURACY_E * self.config.scale_interval_g => {}
+            (Some(_), _) => return Err(ZeroError::Uncertain),
+        }
+        let zero_counts = self.zero_counts + gross * self.counts_per_gram;
+        let offset_g = (zero_counts - self.calibrated_zero_counts) * self.grams_per_count;
+        if !(offset_g.abs() <= ZERO_SETTING_RANGE_OF_MAX * self.config.capacity_g) {
+            return Err(ZeroError::OutOfRange);
+        }
+        self.power_up_zero_counts = zero_counts;
+        self.zero_tracked_counts = 0.0;
+        self.zero_counts = zero_counts;
         Ok(())
     }
 
@@ -94,6 +127,31 @@ mod tests {
     use super::super::test_scene::{run, scene, Cell, CPG, ZERO};
     use super::super::ScaleConfig;
     use super::*;
+
+    /// Zero setting takes a small load's reading as the new zero (a pan that collected
+    /// crumbs), refuses a load beyond 2 % of Max, a moving pan and a tared one, and a
+    /// refused attempt changes nothing.
+    #[test]
+    fn zero_setting_within_its_range_only() {
+        let (mut scale, mut cell) = scene(0.2);
+        assert_eq!(scale.set_zero(), Err(ZeroError::NotStable));
+        cell.load_g = 3.0;
+        run(&mut scale, &mut cell, 12_000);
+        assert_eq!(scale.reading().state, ScaleState::Stable);
+        assert_eq!(scale.set_zero(), Ok(()));
+        let after = *run(&mut scale, &mut cell, 4000).last().unwrap();
+        assert!(after.mass_g.unwrap().abs() < 0.05, "{after:?}");
+        assert_eq!(after.state, ScaleState::Empty);
+        // 3 g + 10 g is beyond 2 % of 600 g (12 g) from the calibrated zero.
+        cell.load_g = 13.0;
+        run(&mut scale, &mut cell, 12_000);
+        let before = scale.reading().mass_g.unwrap();
+        assert_eq!(scale.set_zero(), Err(ZeroError::OutOfRange));
+        assert!((scale.reading().mass_g.unwrap() - before).abs() < 1e-6);
+        assert!((before - 10.0).abs() < 0.1, "{before}");
+        assert_eq!(scale.tare(), Ok(()));
+        assert_eq!(scale.set_zero(), Err(ZeroError::Tared));
+    }
 
     #[test]
     fn tare_needs_a_stable_reading_and_subtracts() {

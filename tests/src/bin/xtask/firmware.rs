@@ -9,8 +9,9 @@
 //! written to QEMU's stdin arrives in the UART's receive buffer.
 
 use std::io::{Read, Write as _};
+use std::os::unix::net::UnixStream;
 use std::path::{Path, PathBuf};
-use std::process::{Child, ChildStdin, Command, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::thread;
 use std::time::{Duration, Instant};
@@ -18,6 +19,7 @@ use tests::weighing_constants::CONSTANTS_VAR;
 
 use anyhow::{anyhow, bail, Context, Result};
 use tests::commands::{self, CommandScript};
+use tests::console_check;
 use tests::e2e::{self, RunLog, Scene};
 use tests::firmware_log;
 use tests::qemu::{MACHINE_ARGS, QEMU};
@@ -261,21 +263,34 @@ fn e2e_demo(elf: &Path) -> Result<()> {
 /// The command scene, the harness typing on UART 0, meets `tests::commands::check`.
 fn e2e_commands(elf: &Path) -> Result<()> {
     println!(
-        "command scene: the harness types t (stable), t (sliding load), c (empty pan) on UART 0"
+        "command scene: the harness types on the serial console (UART 0): help, unit kg, rate 50, rate 3, config set capacity_g 620, config show (empty pan), tare (stable), tare (sliding load), cal 200 (empty pan)"
     );
     let mut script = CommandScript::new();
     let run = run_firmware(elf, &ICOUNT_FAST, false, Some(&mut script))?;
     for line in run.lines.iter().filter(|line| line.starts_with("command ")) {
         println!("  {line}");
     }
+    for line in script
+        .transcript()
+        .iter()
+        .filter(|line| line.starts_with("OK ") || line.starts_with("ERR "))
+    {
+        println!("  console: {line}");
+    }
     let report = commands::check(&run);
     require_passed(
         &report.summary(),
         &report.failures,
         &format!(
-            "the command path fails its criteria ({} of 3 commands typed)",
+            "the command path fails its criteria ({} of 4 console inputs typed)",
             script.sent()
         ),
+    )?;
+    let console = console_check::check(script.transcript(), &run);
+    require_passed(
+        &console.summary(),
+        &console.failures,
+        "the serial console fails its criteria",
     )?;
     println!("firmware command path end-to-end: all criteria met");
     Ok(())
@@ -634,8 +649,9 @@ fn build_with_config(board: Board, bench: bool, config: Option<&Path>) -> Result
 
 /// Run the QEMU image, decode its defmt log as it arrives (printing it when `live`), and
 /// return the decoded lines with how QEMU ended. With a `script`, QEMU plays the command
-/// scene and the bytes the script asks for after a readout line are written to QEMU's
-/// stdin, which `-serial stdio` connects to UART 0.
+/// scene, UART 0 is a socket the harness connects to, the lines the script asks for
+/// after a readout line are typed on it, and what the board wrote on it is kept in the
+/// script's transcript.
 fn run_firmware(
     elf: &Path,
     icount: &[&str],
@@ -663,8 +679,19 @@ fn run_firmware_scene(
     let mut decoder = table.new_stream_decoder();
     let can_recover = table.encoding().can_recover();
 
-    let mut child = spawn_qemu(elf, icount, scene, script.is_some())?;
-    let mut console = child.stdin.take();
+    let socket = script.is_some().then(console_socket_path);
+    let mut child = spawn_qemu(elf, icount, scene, socket.as_deref())?;
+    let (mut console, console_reader) = match &socket {
+        Some(path) => {
+            let stream = connect_console(path, &mut child)?;
+            let reader = stream.try_clone().context("the console socket")?;
+            (
+                Some(stream),
+                Some(thread::spawn(move || read_console(reader))),
+            )
+        }
+        None => (None, None),
+    };
     let mut stdout = child
         .stdout
         .take()
@@ -717,6 +744,12 @@ fn run_firmware_scene(
     drop(console);
     let status = child.wait().context("waiting for QEMU")?;
     let _ = reader.join();
+    if let (Some(script), Some(console_reader)) = (script, console_reader) {
+        script.record_console(console_reader.join().unwrap_or_default());
+    }
+    if let Some(path) = &socket {
+        let _ = std::fs::remove_file(path);
+    }
     let qemu_stderr = stderr_reader.join().unwrap_or_default();
     if timed_out {
         lines.push(format!(
@@ -733,26 +766,72 @@ fn run_firmware_scene(
     })
 }
 
-/// Start QEMU on `elf` playing `scene`, its stdout and stderr piped. With a `console`,
-/// QEMU plays the command scene and its stdin is UART 0 (`-serial stdio`).
-fn spawn_qemu(elf: &Path, icount: &[&str], scene: &str, console: bool) -> Result<Child> {
+/// A fresh path for the console's socket (in the temporary directory: a Unix socket's
+/// path must stay short).
+fn console_socket_path() -> PathBuf {
+    let path =
+        std::env::temp_dir().join(format!("fast-weighing-console-{}.sock", std::process::id()));
+    let _ = std::fs::remove_file(&path);
+    path
+}
+
+/// Connect to the console socket QEMU listens on (it starts the board only then).
+fn connect_console(path: &Path, child: &mut Child) -> Result<UnixStream> {
+    let started = Instant::now();
+    loop {
+        match UnixStream::connect(path) {
+            Ok(stream) => return Ok(stream),
+            Err(error) => {
+                if let Some(status) = child.try_wait()? {
+                    bail!("QEMU ended ({status}) before its console socket took a connection");
+                }
+                if started.elapsed() > Duration::from_secs(30) {
+                    let _ = child.kill();
+                    bail!(
+                        "QEMU's console socket {} took no connection: {error}",
+                        path.display()
+                    );
+                }
+                thread::sleep(Duration::from_millis(20));
+            }
+        }
+    }
+}
+
+/// Every line the board writes on its console until QEMU closes it (CR LF ends a line).
+fn read_console(mut stream: UnixStream) -> Vec<String> {
+    let mut bytes = Vec::new();
+    let _ = stream.read_to_end(&mut bytes);
+    String::from_utf8_lossy(&bytes)
+        .lines()
+        .map(|line| line.trim_end_matches('\r').to_string())
+        .collect()
+}
+
+/// Start QEMU on `elf` playing `scene`, its stdout and stderr piped. With a `console`
+/// socket, QEMU plays the command scene and UART 0 is that socket (QEMU waits for the
+/// harness to connect before it runs the board).
+fn spawn_qemu(elf: &Path, icount: &[&str], scene: &str, console: Option<&Path>) -> Result<Child> {
     let mut command = Command::new(QEMU);
     command
         .args(MACHINE_ARGS)
-        .args(["-nographic", "-monitor", "none"]);
-    if console {
+        .args(["-nographic", "-monitor", "none"])
+        .stdin(Stdio::null());
+    if let Some(socket) = console {
         let semihosting = format!(
             "enable=on,target=native,arg={QEMU_BIN},arg={}",
             commands::SCENE_NAME
         );
+        let chardev = format!(
+            "socket,id=console,path={},server=on,wait=on",
+            socket.display()
+        );
         command
-            .args(["-serial", "stdio", "-semihosting-config", &semihosting])
-            .stdin(Stdio::piped());
+            .args(["-chardev", &chardev, "-serial", "chardev:console"])
+            .args(["-semihosting-config", &semihosting]);
     } else {
         let semihosting = format!("enable=on,target=native,arg={QEMU_BIN},arg={scene}");
-        command
-            .args(["-serial", "none", "-semihosting-config", &semihosting])
-            .stdin(Stdio::null());
+        command.args(["-serial", "none", "-semihosting-config", &semihosting]);
     }
     command
         .args(icount)
@@ -785,13 +864,13 @@ fn decode_lines(
     }
 }
 
-/// Print `line` when `live`; after a readout line, type the byte the script asks for on
+/// Print `line` when `live`; after a readout line, type the lines the script asks for on
 /// the console.
 fn answer_line(
     line: &str,
     live: bool,
     script: Option<&mut CommandScript>,
-    console: Option<&mut ChildStdin>,
+    console: Option<&mut UnixStream>,
 ) {
     if live {
         println!("{}", pretty(line));
@@ -801,9 +880,11 @@ fn answer_line(
         (Some(script), Some(readout)) => script.respond(&readout),
         _ => None,
     };
-    if let (Some(byte), Some(console)) = (typed, console) {
+    if let (Some(text), Some(console)) = (typed, console) {
         // A broken pipe means QEMU is gone; how it ended is reported with the run.
-        let _ = console.write_all(&[byte]).and_then(|()| console.flush());
+        let _ = console
+            .write_all(text.as_bytes())
+            .and_then(|()| console.flush());
     }
 }
 

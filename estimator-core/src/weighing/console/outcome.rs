@@ -1,0 +1,172 @@
+//! The outcome lines of the operator commands: `OK <command>[ <details>]`, or
+//! `ERR <command> <reason>; expected <what would have worked>`.
+
+use core::fmt::{self, Write};
+
+use super::format::fault_name;
+use super::unit::Unit;
+use crate::weighing::calibration::CalibrationError;
+use crate::weighing::command::{CalibrationFailure, CommandOutcome, CommandRefusal};
+
+/// `OK …` for an accepted command; masses in `unit` with `decimals`.
+pub fn write_outcome(
+    out: &mut impl Write,
+    outcome: &CommandOutcome,
+    unit: Unit,
+    decimals: usize,
+) -> fmt::Result {
+    match *outcome {
+        CommandOutcome::Tared { tare_g } => write!(
+            out,
+            "OK tare {:.*} {}\r\n",
+            decimals,
+            unit.from_grams(tare_g),
+            unit.name()
+        ),
+        CommandOutcome::TareCleared => out.write_str("OK untare\r\n"),
+        CommandOutcome::Zeroed => out.write_str("OK zero\r\n"),
+        CommandOutcome::CalibrationStarted { known_mass_g, .. } => write!(
+            out,
+            "OK cal zero_taken; put {known_mass_g} g on the pan\r\n"
+        ),
+        CommandOutcome::CalibrationCancelled => out.write_str("OK cancel\r\n"),
+    }
+}
+
+/// `ERR <command> <reason>; expected …` for a refused command.
+pub fn write_refusal(out: &mut impl Write, command: &str, refusal: &CommandRefusal) -> fmt::Result {
+    let expected = match refusal {
+        CommandRefusal::Unstable => "a stable reading (state=stable or empty)",
+        CommandRefusal::Uncertain => "a reading known to a quarter of e: try again in a moment",
+        CommandRefusal::Invalid(_) => "a valid reading",
+        CommandRefusal::NotEmpty => "an empty pan for the calibration's zero",
+        CommandRefusal::CalibrationInProgress => "the reference mass on the pan, or cancel",
+        CommandRefusal::NotCalibrating => "a calibration in progress (cal <mass_g>)",
+        CommandRefusal::BadKnownMass => "a reference mass in grams, a positive number",
+        CommandRefusal::Implausible(_) => "an empty pan and a sound front end",
+        CommandRefusal::OutOfZeroRange => {
+            "a gross reading within 2 % of Max of the calibrated zero"
+        }
+        CommandRefusal::Tared => "no tare in use (untare first)",
+    };
+    write!(out, "ERR {command} ")?;
+    match refusal {
+        CommandRefusal::Unstable => out.write_str("unstable")?,
+        CommandRefusal::Uncertain => out.write_str("uncertain")?,
+        CommandRefusal::Invalid(fault) => write!(out, "invalid:{}", fault_name(*fault))?,
+        CommandRefusal::NotEmpty => out.write_str("not_empty")?,
+        CommandRefusal::CalibrationInProgress => out.write_str("calibrating")?,
+        CommandRefusal::NotCalibrating => out.write_str("not_calibrating")?,
+        CommandRefusal::BadKnownMass => out.write_str("bad_mass")?,
+        CommandRefusal::Implausible(error) => write_calibration_error(out, error)?,
+        CommandRefusal::OutOfZeroRange => out.write_str("out_of_zero_range")?,
+        CommandRefusal::Tared => out.write_str("tared")?,
+    }
+    write!(out, "; expected {expected}\r\n")
+}
+
+/// `ERR cal <reason>; expected …` for a calibration that ended without a result.
+pub fn write_calibration_failure(
+    out: &mut impl Write,
+    failure: &CalibrationFailure,
+) -> fmt::Result {
+    out.write_str("ERR cal ")?;
+    let expected = match failure {
+        CalibrationFailure::NoSpan => {
+            out.write_str("no_span")?;
+            "the reference mass on the pan"
+        }
+        CalibrationFailure::Implausible(error) => {
+            write_calibration_error(out, error)?;
+            "the mass typed in cal on the pan, and a sound front end"
+        }
+        CalibrationFailure::TimedOut => {
+            out.write_str("timed_out")?;
+            "the reference mass on the pan and left to settle"
+        }
+        CalibrationFailure::MassRemoved => {
+            out.write_str("mass_removed")?;
+            "the reference mass left on the pan until cal says done"
+        }
+    };
+    write!(out, "; expected {expected}\r\n")
+}
+
+/// A calibration's failure in one word, with its figure where it has one
+/// (`gain_off_nominal:+30%`, `zero_off_nominal:-512`).
+fn write_calibration_error(out: &mut impl Write, error: &CalibrationError) -> fmt::Result {
+    match error {
+        CalibrationError::Missing => out.write_str("missing"),
+        CalibrationError::BadMagic => out.write_str("bad_magic"),
+        CalibrationError::UnsupportedVersion(version) => {
+            write!(out, "unsupported_version:{version}")
+        }
+        CalibrationError::BadCrc => out.write_str("bad_crc"),
+        CalibrationError::OutOfDomain => out.write_str("out_of_domain"),
+        CalibrationError::NoSpan => out.write_str("no_span"),
+        CalibrationError::GainOffNominal { percent } => {
+            write!(out, "gain_off_nominal:{percent:+}%")
+        }
+        CalibrationError::ZeroOffNominal { counts } => write!(out, "zero_off_nominal:{counts:+}"),
+        CalibrationError::ZeroOutsideConverter => out.write_str("zero_outside_converter"),
+        CalibrationError::Unreadable => out.write_str("unreadable"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use std::string::String;
+
+    use super::*;
+    use crate::weighing::ScaleFault;
+
+    #[test]
+    fn every_outcome_is_one_ok_line() {
+        let mut out = String::new();
+        write_outcome(
+            &mut out,
+            &CommandOutcome::Tared { tare_g: 138.3249 },
+            Unit::G,
+            2,
+        )
+        .unwrap();
+        assert_eq!(out, "OK tare 138.32 g\r\n");
+        out.clear();
+        let started = CommandOutcome::CalibrationStarted {
+            zero_counts: 2048.0,
+            known_mass_g: 200.0,
+        };
+        write_outcome(&mut out, &started, Unit::Kg, 5).unwrap();
+        assert_eq!(out, "OK cal zero_taken; put 200 g on the pan\r\n");
+    }
+
+    #[test]
+    fn a_refusal_says_why_and_what_would_work() {
+        let mut out = String::new();
+        write_refusal(&mut out, "tare", &CommandRefusal::Unstable).unwrap();
+        assert_eq!(
+            out,
+            "ERR tare unstable; expected a stable reading (state=stable or empty)\r\n"
+        );
+        out.clear();
+        write_refusal(
+            &mut out,
+            "tare",
+            &CommandRefusal::Invalid(ScaleFault::Overload),
+        )
+        .unwrap();
+        assert!(
+            out.starts_with("ERR tare invalid:overload; expected"),
+            "{out}"
+        );
+        out.clear();
+        let off = CalibrationFailure::Implausible(CalibrationError::GainOffNominal { percent: 30 });
+        write_calibration_failure(&mut out, &off).unwrap();
+        assert!(
+            out.starts_with("ERR cal gain_off_nominal:+30%; expected"),
+            "{out}"
+        );
+        assert!(out.ends_with("\r\n") && out.matches("\r\n").count() == 1);
+    }
+}

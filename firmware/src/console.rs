@@ -1,0 +1,268 @@
+//! The serial console: the protocol of `estimator_core::weighing::console` on a board's
+//! serial port. Bytes in become commands on the pipeline; readings and every command's
+//! outcome go out as plain lines (the protocol's docs list them).
+//!
+//! Board-independent: a board hands in a [`SerialPort`] (the QEMU board's CMSDK UART 0)
+//! and calls [`Console::receive`] for each received byte and [`Console::reading`] for
+//! each reading line. Writing never blocks for long: a port that stays full drops the
+//! rest of a line, counted in [`Console::lost_bytes`].
+
+use core::fmt::{self, Write};
+
+use rtic::Mutex;
+
+use estimator_core::weighing::console::{
+    parse_line, write_calibration_failure, write_error, write_outcome, write_reading,
+    write_refusal, ConsoleError, LineBuffer, LineEnd, ReadingLine, Request, Unit, MAX_LINE,
+};
+use estimator_core::weighing::ScaleConfig;
+
+use crate::pipeline::{self, CalibrationEnd, Pipeline, Readout, SAMPLE_RATE_HZ};
+
+/// A serial port's transmit side.
+pub trait SerialPort {
+    /// Send `bytes`; returns how many went out (the rest were given up).
+    fn write_bytes(&mut self, bytes: &[u8]) -> usize;
+}
+
+/// The commands as `help` lists them, one line each.
+const HELP: [&str; 10] = [
+    "tare: take the gross reading as tare",
+    "untare: clear the tare",
+    "zero: set the zero (stable, within 2 % of Max)",
+    "cal <mass_g>: calibrate, empty pan now, then the mass on",
+    "cancel: abandon a calibration",
+    "unit g|kg|lb|oz: the unit of the reading lines",
+    "rate <Hz>: reading lines per second (1 2 4 5 8 10 20 25 40 50 100)",
+    "config show: every configuration key and its value",
+    "config set <key> <value>: change one (the run restarts)",
+    "help: this list",
+];
+
+/// What `raw` and `record` answer until the board streams raw samples.
+const NOT_BUILT: &str =
+    "tare, untare, zero, cal, cancel, unit, rate, config, help (raw streaming is not built yet)";
+
+/// The console's state: the line being typed and the unit of the reading lines.
+pub struct Console<P> {
+    port: P,
+    line: LineBuffer,
+    unit: Unit,
+    lost_bytes: u32,
+}
+
+/// Formatting straight to the port, counting what it gave up.
+struct Out<'a, P> {
+    port: &'a mut P,
+    lost_bytes: &'a mut u32,
+}
+
+impl<P: SerialPort> Write for Out<'_, P> {
+    fn write_str(&mut self, text: &str) -> fmt::Result {
+        let sent = self.port.write_bytes(text.as_bytes());
+        let lost = u32::try_from(text.len() - sent).unwrap_or(u32::MAX);
+        *self.lost_bytes = self.lost_bytes.saturating_add(lost);
+        Ok(())
+    }
+}
+
+impl<P: SerialPort> Console<P> {
+    /// A console on `port`, in grams.
+    pub fn new(port: P) -> Self {
+        Self {
+            port,
+            line: LineBuffer::new(),
+            unit: Unit::G,
+            lost_bytes: 0,
+        }
+    }
+
+    /// The port (its receive side is the board's).
+    pub fn port(&mut self) -> &mut P {
+        &mut self.port
+    }
+
+    /// Bytes the port gave up since boot.
+    pub fn lost_bytes(&self) -> u32 {
+        self.lost_bytes
+    }
+
+    fn out(&mut self) -> Out<'_, P> {
+        Out {
+            port: &mut self.port,
+            lost_bytes: &mut self.lost_bytes,
+        }
+    }
+
+    /// Write the boot banner: what the console is and how to ask for help.
+    pub fn banner(&mut self) {
+        let _ = self
+            .out()
+            .write_str("# fast-weighing console: type help\r\n");
+    }
+
+    /// Take one received byte; a completed line is decided on `pipeline` and answered.
+    pub fn receive(&mut self, byte: u8, pipeline: &mut impl Mutex<T = Pipeline>) {
+        let mut text = [0u8; MAX_LINE];
+        let len = match self.line.push(byte) {
+            None => return,
+            Some(LineEnd::TooLong) => {
+                let _ = write_error(&mut self.out(), "line", &ConsoleError::TooLong);
+                return;
+            }
+            Some(LineEnd::Line(bytes)) => {
+                text[..bytes.len()].copy_from_slice(bytes);
+                bytes.len()
+            }
+        };
+        let line = &text[..len];
+        // The first word names the command in an answer (`line` when it is not text).
+        let word = core::str::from_utf8(line)
+            .ok()
+            .and_then(|text| text.split_ascii_whitespace().next())
+            .unwrap_or("line");
+        match parse_line(line) {
+            Ok(request) => self.decide(&request, pipeline),
+            Err(error) => {
+                let _ = write_error(&mut self.out(), word, &error);
+            }
+        }
+    }
+
+    fn decide(&mut self, request: &Request<'_>, pipeline: &mut impl Mutex<T = Pipeline>) {
+        if let Some(command) = request.command() {
+            let (sample, result) = pipeline.lock(|p| (p.samples(), p.command(command)));
+            pipeline::log_command(sample, command, &result);
+            let word = command_word(request);
+            let (unit, decimals) = (self.unit, self.decimals(pipeline));
+            let _ = match result {
+                Ok(outcome) => write_outcome(&mut self.out(), &outcome, unit, decimals),
+                Err(refusal) => write_refusal(&mut self.out(), word, &refusal),
+            };
+            return;
+        }
+        let mut out = Out {
+            port: &mut self.port,
+            lost_bytes: &mut self.lost_bytes,
+        };
+        let _ = match *request {
+            Request::Unit(unit) => {
+                self.unit = unit;
+                write!(out, "OK unit {}\r\n", unit.name())
+            }
+            Request::Rate { hz } => {
+                if pipeline.lock(|p| p.set_console_rate(hz)) {
+                    write!(out, "OK rate {hz}\r\n")
+                } else {
+                    let expected = pipeline::CONSOLE_RATES_TEXT;
+                    write_error(&mut out, "rate", &ConsoleError::BadValue { expected })
+                }
+            }
+            Request::ConfigShow => {
+                let config = pipeline.lock(|p| p.scale_config());
+                for field in ScaleConfig::FIELDS {
+                    let value = field.get(&config);
+                    if field.is_whole() {
+                        let _ = write!(out, "C {}={}\r\n", field.name, value as u32);
+                    } else {
+                        let _ = write!(out, "C {}={}\r\n", field.name, value);
+                    }
+                }
+                out.write_str("OK config show\r\n")
+            }
+            Request::ConfigSet { key, value } => config_set(&mut out, key, value, pipeline),
+            Request::Help => {
+                for line in HELP {
+                    let _ = write!(out, "H {line}\r\n");
+                }
+                out.write_str("OK help\r\n")
+            }
+            Request::Raw(_) | Request::Record => {
+                let word = if matches!(request, Request::Record) {
+                    "record"
+                } else {
+                    "raw"
+                };
+                let error = ConsoleError::Unavailable {
+                    expected: NOT_BUILT,
+                };
+                write_error(&mut out, word, &error)
+            }
+            // The operator commands were decided above.
+            _ => Ok(()),
+        };
+    }
+
+    /// Decimals of a mass in the console's unit: the scale interval's.
+    fn decimals(&self, pipeline: &mut impl Mutex<T = Pipeline>) -> usize {
+        let e = pipeline.lock(|p| p.scale_config().scale_interval_g);
+        self.unit.decimals(e)
+    }
+
+    /// Write one reading line (the readout task calls it at the console's rate, and for a
+    /// final reading the moment it is reached).
+    pub fn reading(&mut self, readout: &Readout, scale_interval_g: f32) {
+        let line = ReadingLine {
+            t_s: readout.sample as f32 / SAMPLE_RATE_HZ as f32,
+            mass_g: readout.reading.mass_g,
+            u_g: readout.reading.uncertainty_g,
+            state: readout.reading.state,
+            is_final: readout.reading.is_final,
+        };
+        let (unit, decimals) = (self.unit, self.unit.decimals(scale_interval_g));
+        let _ = write_reading(&mut self.out(), &line, unit, decimals);
+    }
+
+    /// Say how a calibration in progress ended.
+    pub fn calibration_ended(&mut self, end: &CalibrationEnd) {
+        let mut out = self.out();
+        let _ = match end {
+            CalibrationEnd::Applied(calibration) => write!(
+                out,
+                "OK cal done counts_per_g={} zero_counts={}\r\n",
+                calibration.counts_per_gram, calibration.zero_counts
+            ),
+            CalibrationEnd::Failed(failure) => write_calibration_failure(&mut out, failure),
+            CalibrationEnd::NotStored => {
+                let expected = "a calibration store that writes (the calibration in use stays)";
+                write_error(&mut out, "cal", &ConsoleError::Unavailable { expected })
+            }
+        };
+    }
+}
+
+/// `config set <key> <value>`: checked with the whole configuration, then applied.
+fn config_set(
+    out: &mut impl Write,
+    key: &str,
+    value: f32,
+    pipeline: &mut impl Mutex<T = Pipeline>,
+) -> fmt::Result {
+    let Some(field) = ScaleConfig::field(key) else {
+        let expected = "a configuration key (config show lists them)";
+        return write_error(out, "config", &ConsoleError::BadValue { expected });
+    };
+    let applied = pipeline.lock(|p| {
+        let changed = field.set(&p.scale_config(), value)?;
+        p.reconfigure(changed)
+    });
+    match applied {
+        Ok(()) => write!(out, "OK config set {} {}\r\n", field.name, value),
+        Err(_) => {
+            let expected = "a value inside the key's domain (finite; positive or not negative; whole for samples)";
+            write_error(out, "config", &ConsoleError::BadValue { expected })
+        }
+    }
+}
+
+/// The console word of an operator command (as typed, in the protocol's spelling).
+fn command_word(request: &Request<'_>) -> &'static str {
+    match request {
+        Request::Tare => "tare",
+        Request::ClearTare => "untare",
+        Request::Zero => "zero",
+        Request::Calibrate { .. } => "cal",
+        Request::CancelCalibration => "cancel",
+        _ => "command",
+    }
+}
