@@ -339,8 +339,13 @@ impl Commands {
         // been seen, an empty pan ends the calibration (a torture run's operator took the
         // mass off while its reading was still unsettled, put another item on, and that
         // item, 6 % lighter, was taken as the mass: within the gain tolerance, accepted).
+        // A reading with no mass after the zero counts as a load too: the scale could not
+        // measure what was on the pan (a torture run's reference mass read
+        // `invalid:model_mismatch` for 6 s, was taken off unseen, and the 172 g put on next
+        // was taken as the 200 g: a gain 14 % off, inside the tolerance, accepted).
         let gross_g = reading.mass_g.map(|net| net + scale.tare_g());
         let now_seen = load_seen
+            || matches!(reading.state, ScaleState::Invalid(_))
             || gross_g.is_some_and(|g| g >= self.config.zero_limit_fraction * known_mass_g);
         if now_seen && reading.state == ScaleState::Empty {
             self.phase = Phase::Idle;
@@ -694,6 +699,37 @@ mod tests {
         bench.cell.load_g = 83.0;
         let other = bench.run_s(0.5).mass_g.unwrap();
         assert!((other - 83.0).abs() < 0.083, "{other}");
+    }
+
+    /// The reference mass on while the scale can measure nothing (here saturated samples;
+    /// in the torture run, a consistency flag), taken off, another item put on: the
+    /// calibration must end with the empty pan, not take the other item as the mass.
+    #[test]
+    fn a_mass_the_scale_could_not_measure_is_not_replaced_by_the_next_item() {
+        let mut bench = Bench::new(1.0);
+        bench.run_s(1.0);
+        assert!(matches!(
+            bench.command(Command::Calibrate {
+                known_mass_g: KNOWN_MASS_G
+            }),
+            Ok(CommandOutcome::CalibrationStarted { .. })
+        ));
+        for _ in 0..40 {
+            for _ in 0..200 {
+                bench.scale.push(RawSample::Saturated);
+                bench.now += 1;
+            }
+            assert_eq!(bench.commands.poll(&mut bench.scale, bench.now), None);
+        }
+        bench.cell.load_g = 0.0;
+        assert_eq!(
+            bench.poll_for_s(3.0),
+            Some(Err(CalibrationFailure::MassRemoved))
+        );
+        bench.cell.load_g = 172.0;
+        assert_eq!(bench.poll_for_s(3.0), None);
+        let reading = bench.scale.reading();
+        assert!((reading.mass_g.unwrap() - 172.0).abs() < 0.1, "{reading:?}");
     }
 
     /// The reference mass taken off before its reading settled, another item put on: the
