@@ -15,7 +15,7 @@ use estimator_core::weighing::console::{
     parse_line, write_calibration_failure, write_error, write_outcome, write_reading,
     write_refusal, ConsoleError, LineBuffer, LineEnd, ReadingLine, Request, Unit, MAX_LINE,
 };
-use estimator_core::weighing::ScaleConfig;
+use estimator_core::weighing::{Command, CommandOutcome, CommandRefusal, ScaleConfig};
 
 use crate::pipeline::{self, CalibrationEnd, Pipeline, Readout, SAMPLE_RATE_HZ};
 
@@ -131,14 +131,12 @@ impl<P: SerialPort> Console<P> {
 
     fn decide(&mut self, request: &Request<'_>, pipeline: &mut impl Mutex<T = Pipeline>) {
         if let Some(command) = request.command() {
-            let (sample, result) = pipeline.lock(|p| (p.samples(), p.command(command)));
+            let (sample, result, e) = pipeline.lock(|p| {
+                let result = p.command(command);
+                (p.samples(), result, p.scale_config().scale_interval_g)
+            });
             pipeline::log_command(sample, command, &result);
-            let word = command_word(request);
-            let (unit, decimals) = (self.unit, self.decimals(pipeline));
-            let _ = match result {
-                Ok(outcome) => write_outcome(&mut self.out(), &outcome, unit, decimals),
-                Err(refusal) => write_refusal(&mut self.out(), word, &refusal),
-            };
+            self.answer(command, &result, e);
             return;
         }
         let mut out = Out {
@@ -193,10 +191,19 @@ impl<P: SerialPort> Console<P> {
         };
     }
 
-    /// Decimals of a mass in the console's unit: the scale interval's.
-    fn decimals(&self, pipeline: &mut impl Mutex<T = Pipeline>) -> usize {
-        let e = pipeline.lock(|p| p.scale_config().scale_interval_g);
-        self.unit.decimals(e)
+    /// Answer an operator command, typed here or given another way (the board's KEY):
+    /// `OK …` with what it did, or `ERR …` with why not (masses to the scale interval).
+    pub fn answer(
+        &mut self,
+        command: Command,
+        result: &Result<CommandOutcome, CommandRefusal>,
+        scale_interval_g: f32,
+    ) {
+        let (unit, decimals) = (self.unit, self.unit.decimals(scale_interval_g));
+        let _ = match result {
+            Ok(outcome) => write_outcome(&mut self.out(), outcome, unit, decimals),
+            Err(refusal) => write_refusal(&mut self.out(), command_word(command), refusal),
+        };
     }
 
     /// Write one reading line (the readout task calls it at the console's rate, and for a
@@ -256,13 +263,12 @@ fn config_set(
 }
 
 /// The console word of an operator command (as typed, in the protocol's spelling).
-fn command_word(request: &Request<'_>) -> &'static str {
-    match request {
-        Request::Tare => "tare",
-        Request::ClearTare => "untare",
-        Request::Zero => "zero",
-        Request::Calibrate { .. } => "cal",
-        Request::CancelCalibration => "cancel",
-        _ => "command",
+fn command_word(command: Command) -> &'static str {
+    match command {
+        Command::Tare => "tare",
+        Command::ClearTare => "untare",
+        Command::Zero => "zero",
+        Command::Calibrate { .. } => "cal",
+        Command::CancelCalibration => "cancel",
     }
 }

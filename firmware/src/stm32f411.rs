@@ -1,7 +1,7 @@
 //! The STM32F411 board: its analogue front end, the KEY button's timing, the reference mass
 //! of a calibration, the calibration store in flash sectors 6–7 (the core's power-fail-safe
-//! `FlashStore` over the HAL's flash), and what a panic or fault does (halt, so probe-rs
-//! reports it and exits non-zero).
+//! `FlashStore` over the HAL's flash), the serial console's USB port, and what a panic or
+//! fault does (halt, so probe-rs reports it and exits non-zero).
 //!
 //! None of this has run on hardware yet: CI builds it and checks its size, nothing more.
 
@@ -13,7 +13,52 @@ use embedded_storage_async::nor_flash::{
 };
 use estimator_core::weighing::{self, Calibration, CalibrationSource, FlashStore, FrontEnd};
 use stm32f4xx_hal::flash::{self, FlashExt, UnlockedFlash};
+use stm32f4xx_hal::otg_fs::UsbBusType;
 use stm32f4xx_hal::pac::FLASH;
+
+/// The USB serial port (CDC ACM) the console runs on, with its buffers.
+pub type UsbSerial =
+    usbd_serial::SerialPort<'static, UsbBusType, &'static mut [u8], &'static mut [u8]>;
+
+/// Bytes the USB console buffers on their way to the host: `config show`, the longest
+/// answer (about 750 bytes), fits whole.
+pub const USB_TX_BUFFER: usize = 1024;
+/// Bytes the USB console buffers from the host (more than a line).
+pub const USB_RX_BUFFER: usize = 128;
+
+/// The console's serial port on USB: the CDC ACM class, written without waiting.
+pub struct UsbConsolePort {
+    serial: UsbSerial,
+}
+
+impl UsbConsolePort {
+    /// The port on `serial`.
+    pub fn new(serial: UsbSerial) -> Self {
+        Self { serial }
+    }
+
+    /// The CDC ACM class, for the USB device's poll.
+    pub fn class(&mut self) -> &mut UsbSerial {
+        &mut self.serial
+    }
+
+    /// Bytes received from the host into `buffer` (0 when none are waiting).
+    pub fn read(&mut self, buffer: &mut [u8]) -> usize {
+        self.serial.read(buffer).unwrap_or(0)
+    }
+}
+
+impl crate::console::SerialPort for UsbConsolePort {
+    /// Buffered for the host; while no terminal has the port open (DTR low) the bytes are
+    /// dropped on purpose (and not counted lost), so opening it later shows fresh lines
+    /// rather than a buffer of old ones.
+    fn write_bytes(&mut self, bytes: &[u8]) -> usize {
+        if !self.serial.dtr() {
+            return bytes.len();
+        }
+        self.serial.write(bytes).unwrap_or(0)
+    }
+}
 
 /// The INA114 front end as wired in `firmware/README.md`: a 600 g, 2 mV/V cell excited
 /// with 3.3 V, R_G = 130 Ω (gain 385.6), REF at 0.5 V, into the 12-bit ADC (3.3 V ref).

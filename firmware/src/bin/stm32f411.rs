@@ -1,9 +1,11 @@
 //! The weighing firmware on an STM32F411: TIM2 triggers ADC1 at 4 kHz, DMA2 stream 0
 //! double-buffers the conversions, the hand-off moves each finished buffer into the queue,
-//! the estimator task runs the weighing core, and the readout goes out over RTT (defmt).
-//! The KEY button (PA0) gives the operator's commands: a short press tares, a long press
-//! (2 s or more) calibrates with the reference mass, a short press during a calibration
-//! cancels it; the record goes to flash sectors 6–7 (power-fail safe).
+//! the estimator task runs the weighing core, and the readout goes out over RTT (defmt) and
+//! on the serial console, a USB CDC port on the OTG FS connector (`firmware::console`: the
+//! same lines and commands as the QEMU board's UART). The KEY button (PA0) gives the
+//! operator's commands too: a short press tares, a long press (2 s or more) calibrates with
+//! the reference mass, a short press during a calibration cancels it; the record goes to
+//! flash sectors 6–7 (power-fail safe).
 #![no_std]
 #![no_main]
 
@@ -13,14 +15,16 @@ use defmt_rtt as _;
 mod app {
     use cortex_m::peripheral::DWT;
     use estimator_core::weighing::{Command, KeyDebouncer, KeyPress, RawSample, SampleSequence};
+    use firmware::console::Console;
     use firmware::fault;
     use firmware::pipeline::{
         self, EstimatorStorage, Lines, Pipeline, SampleMessage, SampleQueue, SampleWatchdog,
         QUEUE_CAPACITY, SAMPLE_RATE_HZ,
     };
     use firmware::stm32f411::{
-        self as board, CalibrationFlashStore, DMA_BLOCK, FRONT_END, KEY_DEBOUNCE_MS,
-        KEY_LONG_PRESS_MS, KEY_POLL_HZ, REFERENCE_MASS_G, SYSCLK_HZ,
+        self as board, CalibrationFlashStore, UsbConsolePort, DMA_BLOCK, FRONT_END,
+        KEY_DEBOUNCE_MS, KEY_LONG_PRESS_MS, KEY_POLL_HZ, REFERENCE_MASS_G, SYSCLK_HZ,
+        USB_RX_BUFFER, USB_TX_BUFFER,
     };
     use heapless::spsc::{Consumer, Producer};
     use stm32f4xx_hal::{
@@ -32,12 +36,15 @@ mod app {
         },
         dma::{config::DmaConfig, DMAError, PeripheralToMemory, Stream0, StreamsTuple, Transfer},
         gpio::{gpioa::PA0, Edge, Input},
+        otg_fs::{UsbBus, UsbBusType, USB},
         pac::{self, ADC1, DMA2, EXTI},
         prelude::*,
         rcc::{Config, Rcc},
         timer::{CounterHz, Event, Flag},
         watchdog::IndependentWatchdog,
     };
+    use usb_device::bus::UsbBusAllocator;
+    use usb_device::device::{StringDescriptors, UsbDevice, UsbDeviceBuilder, UsbVidPid};
 
     type AdcTransfer =
         Transfer<Stream0<DMA2>, 0, Adc<ADC1>, PeripheralToMemory, &'static mut [u16; DMA_BLOCK]>;
@@ -46,6 +53,11 @@ mod app {
     const MAX_CODE: u16 = 4095;
     /// The readout task's vector, pended by the estimator task after each readout.
     const READOUT: pac::Interrupt = pac::Interrupt::EXTI2;
+    /// Words of the OTG FS endpoint memory the USB driver works in.
+    const USB_ENDPOINT_WORDS: usize = 1024;
+    /// Reads of the USB port per interrupt (64 bytes each): bounded, and more than its
+    /// receive buffer holds.
+    const USB_READS_PER_INTERRUPT: usize = 4;
 
     /// The KEY button and what debounces it: EXTI0 wakes on the first falling edge, then
     /// TIM3 polls the level at `KEY_POLL_HZ` until the button is released and settled.
@@ -101,6 +113,7 @@ mod app {
         latest: Lines,
         pipeline: Pipeline,
         key: Key,
+        console: Console<UsbConsolePort>,
     }
 
     #[local]
@@ -112,6 +125,7 @@ mod app {
         sequence: u32,
         store: CalibrationFlashStore,
         watchdog: SampleWatchdog<IndependentWatchdog>,
+        usb_device: UsbDevice<'static, UsbBusType>,
         _trigger: CounterHz<pac::TIM2>,
     }
 
@@ -121,15 +135,22 @@ mod app {
         second: [u16; DMA_BLOCK] = [0; DMA_BLOCK],
         third: [u16; DMA_BLOCK] = [0; DMA_BLOCK],
         estimator: EstimatorStorage = EstimatorStorage::uninit(),
+        usb_endpoints: [u32; USB_ENDPOINT_WORDS] = [0; USB_ENDPOINT_WORDS],
+        usb_bus: Option<UsbBusAllocator<UsbBusType>> = None,
+        usb_tx: [u8; USB_TX_BUFFER] = [0; USB_TX_BUFFER],
+        usb_rx: [u8; USB_RX_BUFFER] = [0; USB_RX_BUFFER],
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let device = cx.device;
         let mut core = cx.core;
         fault::guard_stack(&mut core.MPU, &mut core.SCB);
         board::log_reset_cause();
-        let mut rcc = device
-            .RCC
-            .freeze(Config::hse(25.MHz()).sysclk(SYSCLK_HZ.Hz()).pclk2(84.MHz()));
+        let mut rcc = device.RCC.freeze(
+            Config::hse(25.MHz())
+                .sysclk(SYSCLK_HZ.Hz())
+                .pclk2(84.MHz())
+                .require_pll48clk(),
+        );
         // The cycle counter times a calibration's flash write (see `readout`).
         core.DCB.enable_trace();
         core.DWT.enable_cycle_counter();
@@ -180,6 +201,39 @@ mod app {
         unsafe { (*pac::TIM2::ptr()).cr2().modify(|_, w| w.mms().update()) };
 
         let key = Key::new(gpioa.pa0, device.EXTI, device.SYSCFG, device.TIM3, &mut rcc);
+
+        // The console on USB (PA11/PA12, the board's USB-C connector): a CDC ACM serial port.
+        let usb = USB::new(
+            (
+                device.OTG_FS_GLOBAL,
+                device.OTG_FS_DEVICE,
+                device.OTG_FS_PWRCLK,
+            ),
+            (gpioa.pa11, gpioa.pa12),
+            &rcc.clocks,
+        );
+        let usb_bus = cx
+            .local
+            .usb_bus
+            .insert(UsbBus::new(usb, cx.local.usb_endpoints));
+        let serial = usbd_serial::SerialPort::new_with_store(
+            usb_bus,
+            &mut cx.local.usb_rx[..],
+            &mut cx.local.usb_tx[..],
+        );
+        // pid.codes' test VID/PID for CDC ACM (0x16c0/0x27dd); a product needs its own.
+        let strings = StringDescriptors::default()
+            .manufacturer("fast-weighing")
+            .product("scale console")
+            .serial_number("0001");
+        let usb_device = match UsbDeviceBuilder::new(usb_bus, UsbVidPid(0x16c0, 0x27dd))
+            .device_class(usbd_serial::USB_CLASS_CDC)
+            .strings(&[strings])
+        {
+            Ok(builder) => builder.build(),
+            Err(_) => defmt::panic!("USB string descriptors refused"),
+        };
+        let console = Console::new(UsbConsolePort::new(serial));
         defmt::println!(
             "KEY: short press tare (or cancel a calibration), long press (>= {=u32} ms) calibrate with {=f32} g",
             KEY_LONG_PRESS_MS,
@@ -199,6 +253,7 @@ mod app {
                 latest: Lines::default(),
                 pipeline: Pipeline::new(scale, FRONT_END.calibration_limits(), source),
                 key,
+                console,
             },
             Local {
                 transfer,
@@ -208,6 +263,7 @@ mod app {
                 sequence: 0,
                 store,
                 watchdog: SampleWatchdog::new(watchdog, 0),
+                usb_device,
                 _trigger: trigger,
             },
         )
@@ -262,22 +318,35 @@ mod app {
     /// once in thousands of calibrations the store erases a sector, which stalls the CPU
     /// for seconds, and the samples the converter took meanwhile are counted as dropped.
     /// The watchdog is fed here while samples advance.
-    #[task(binds = EXTI2, priority = 1, local = [store, watchdog], shared = [latest, pipeline])]
+    #[task(binds = EXTI2, priority = 1, local = [store, watchdog], shared = [latest, pipeline, console])]
     fn readout(mut cx: readout::Context) {
         let lines = cx.shared.latest.lock(core::mem::take);
-        let samples = cx.shared.pipeline.lock(|pipeline| pipeline.samples());
+        let (samples, e) = cx
+            .shared
+            .pipeline
+            .lock(|pipeline| (pipeline.samples(), pipeline.scale_config().scale_interval_g));
         cx.local.watchdog.service(samples);
-        lines.log();
+        cx.shared.console.lock(|console| {
+            for line in [lines.final_reading, lines.console].into_iter().flatten() {
+                console.reading(&line, e);
+            }
+        });
+        if lines.log().is_none() {
+            return;
+        }
         let Some(result) = cx.shared.pipeline.lock(|pipeline| pipeline.poll_commands()) else {
             return;
         };
         let shared_pipeline = &mut cx.shared.pipeline;
         let accepted_before = shared_pipeline.lock(|pipeline| pipeline.samples());
         let started = DWT::cycle_count();
-        pipeline::finish_calibration(result, cx.local.store, |work| {
+        let end = pipeline::finish_calibration(result, cx.local.store, |work| {
             shared_pipeline.lock(|pipeline| work(pipeline))
         });
         let elapsed_cycles = DWT::cycle_count().wrapping_sub(started);
+        cx.shared
+            .console
+            .lock(|console| console.calibration_ended(&end));
         let converted = elapsed_cycles / (SYSCLK_HZ / SAMPLE_RATE_HZ);
         shared_pipeline.lock(|pipeline| {
             // What the converter took minus what reached the estimator (within the queue's
@@ -313,7 +382,7 @@ mod app {
     /// One poll of the KEY (TIM3): debounce; a finished press becomes a command, decided
     /// against the reading of that moment and logged; once the key is released and
     /// settled, polling stops and the edge interrupt is back.
-    #[task(binds = TIM3, priority = 1, shared = [key, pipeline])]
+    #[task(binds = TIM3, priority = 1, shared = [key, pipeline, console])]
     fn key_poll(mut cx: key_poll::Context) {
         let press = cx.shared.key.lock(|key| {
             key.poll_timer.clear_flags(Flag::Update);
@@ -334,7 +403,7 @@ mod app {
         let Some(press) = press else {
             return;
         };
-        let (sample, command, result) = cx.shared.pipeline.lock(|pipeline| {
+        let (sample, command, result, e) = cx.shared.pipeline.lock(|pipeline| {
             let command = match press {
                 KeyPress::Short if pipeline.is_calibrating() => Command::CancelCalibration,
                 KeyPress::Short => Command::Tare,
@@ -342,9 +411,41 @@ mod app {
                     known_mass_g: REFERENCE_MASS_G,
                 },
             };
-            (pipeline.samples(), command, pipeline.command(command))
+            let result = pipeline.command(command);
+            let e = pipeline.scale_config().scale_interval_g;
+            (pipeline.samples(), command, result, e)
         });
         defmt::println!("key press={}", press);
         pipeline::log_command(sample, command, &result);
+        cx.shared
+            .console
+            .lock(|console| console.answer(command, &result, e));
+    }
+
+    /// The USB device (OTG FS): every USB event is handled here, and the bytes the host
+    /// sent go to the console, line by line, decided against the reading of that moment.
+    #[task(binds = OTG_FS, priority = 1, local = [usb_device], shared = [console, pipeline])]
+    fn usb_console(cx: usb_console::Context) {
+        let usb_console::SharedResources {
+            mut console,
+            mut pipeline,
+            ..
+        } = cx.shared;
+        let usb_device = cx.local.usb_device;
+        console.lock(|console| {
+            if !usb_device.poll(&mut [console.port().class()]) {
+                return;
+            }
+            let mut buffer = [0u8; 64];
+            for _ in 0..USB_READS_PER_INTERRUPT {
+                let count = console.port().read(&mut buffer);
+                if count == 0 {
+                    break;
+                }
+                for &byte in &buffer[..count] {
+                    console.receive(byte, &mut pipeline);
+                }
+            }
+        });
     }
 }
