@@ -2,10 +2,14 @@
 //! serial port. Bytes in become commands on the pipeline; readings and every command's
 //! outcome go out as plain lines (the protocol's docs list them).
 //!
-//! Board-independent: a board hands in a [`SerialPort`] (the QEMU board's CMSDK UART 0)
-//! and calls [`Console::receive`] for each received byte and [`Console::reading`] for
-//! each reading line. Writing never blocks for long: a port that stays full drops the
-//! rest of a line, counted in [`Console::lost_bytes`].
+//! Board-independent: a board hands in a [`SerialPort`] (the QEMU board's CMSDK UART 0, the
+//! STM32's USB CDC port) and calls [`Console::receive`] for each received byte and
+//! [`Console::reading`] for each reading line. Writing never blocks for long: a port that
+//! stays full drops the rest of a line, counted in [`Console::lost_bytes`].
+//!
+//! `unit`, `rate` and `config set` change settings a reset keeps: the board's `save` stores
+//! them (`estimator_core::weighing::Settings`) before the answer goes out, and an answer
+//! whose change could not be stored says so (`… (until reset: not stored)`).
 
 use core::fmt::{self, Write};
 
@@ -15,7 +19,7 @@ use estimator_core::weighing::console::{
     parse_line, write_calibration_failure, write_error, write_outcome, write_reading,
     write_refusal, ConsoleError, LineBuffer, LineEnd, ReadingLine, Request, Unit, MAX_LINE,
 };
-use estimator_core::weighing::{Command, CommandOutcome, CommandRefusal, ScaleConfig};
+use estimator_core::weighing::{Command, CommandOutcome, CommandRefusal, ScaleConfig, Settings};
 
 use crate::pipeline::{self, CalibrationEnd, Pipeline, Readout, SAMPLE_RATE_HZ};
 
@@ -82,6 +86,16 @@ impl<P: SerialPort> Console<P> {
         &mut self.port
     }
 
+    /// The unit of the reading lines.
+    pub fn unit(&self) -> Unit {
+        self.unit
+    }
+
+    /// Write the reading lines in `unit` from now on (the settings a reset kept).
+    pub fn set_unit(&mut self, unit: Unit) {
+        self.unit = unit;
+    }
+
     /// Bytes the port gave up since boot.
     pub fn lost_bytes(&self) -> u32 {
         self.lost_bytes
@@ -101,8 +115,14 @@ impl<P: SerialPort> Console<P> {
             .write_str("# fast-weighing console: type help\r\n");
     }
 
-    /// Take one received byte; a completed line is decided on `pipeline` and answered.
-    pub fn receive(&mut self, byte: u8, pipeline: &mut impl Mutex<T = Pipeline>) {
+    /// Take one received byte; a completed line is decided on `pipeline` and answered. A
+    /// changed setting is handed to `save` first (false: it could not be stored).
+    pub fn receive(
+        &mut self,
+        byte: u8,
+        pipeline: &mut impl Mutex<T = Pipeline>,
+        save: &mut impl FnMut(&Settings) -> bool,
+    ) {
         let mut text = [0u8; MAX_LINE];
         let len = match self.line.push(byte) {
             None => return,
@@ -122,14 +142,19 @@ impl<P: SerialPort> Console<P> {
             .and_then(|text| text.split_ascii_whitespace().next())
             .unwrap_or("line");
         match parse_line(line) {
-            Ok(request) => self.decide(&request, pipeline),
+            Ok(request) => self.decide(&request, pipeline, save),
             Err(error) => {
                 let _ = write_error(&mut self.out(), word, &error);
             }
         }
     }
 
-    fn decide(&mut self, request: &Request<'_>, pipeline: &mut impl Mutex<T = Pipeline>) {
+    fn decide(
+        &mut self,
+        request: &Request<'_>,
+        pipeline: &mut impl Mutex<T = Pipeline>,
+        save: &mut impl FnMut(&Settings) -> bool,
+    ) {
         if let Some(command) = request.command() {
             let (sample, result, e) = pipeline.lock(|p| {
                 let result = p.command(command);
@@ -139,23 +164,56 @@ impl<P: SerialPort> Console<P> {
             self.answer(command, &result, e);
             return;
         }
-        let mut out = Out {
-            port: &mut self.port,
-            lost_bytes: &mut self.lost_bytes,
+        // A setting changed: store it, then say whether that worked.
+        let stored = |unit: Unit, pipeline: &mut _, save: &mut _| -> &'static str {
+            if store(unit, pipeline, save) {
+                ""
+            } else {
+                " (until reset: not stored)"
+            }
         };
         let _ = match *request {
             Request::Unit(unit) => {
                 self.unit = unit;
-                write!(out, "OK unit {}\r\n", unit.name())
+                let note = stored(unit, pipeline, save);
+                write!(self.out(), "OK unit {}{note}\r\n", unit.name())
             }
             Request::Rate { hz } => {
                 if pipeline.lock(|p| p.set_console_rate(hz)) {
-                    write!(out, "OK rate {hz}\r\n")
+                    let note = stored(self.unit, pipeline, save);
+                    write!(self.out(), "OK rate {hz}{note}\r\n")
                 } else {
                     let expected = pipeline::CONSOLE_RATES_TEXT;
-                    write_error(&mut out, "rate", &ConsoleError::BadValue { expected })
+                    write_error(
+                        &mut self.out(),
+                        "rate",
+                        &ConsoleError::BadValue { expected },
+                    )
                 }
             }
+            Request::ConfigSet { key, value } => match config_set(key, value, pipeline) {
+                Ok(name) => {
+                    let note = stored(self.unit, pipeline, save);
+                    write!(self.out(), "OK config set {name} {value}{note}\r\n")
+                }
+                Err(expected) => write_error(
+                    &mut self.out(),
+                    "config",
+                    &ConsoleError::BadValue { expected },
+                ),
+            },
+            _ => self.inform(request, pipeline),
+        };
+    }
+
+    /// The requests that change nothing: answered from what the board holds.
+    fn inform(
+        &mut self,
+        request: &Request<'_>,
+        pipeline: &mut impl Mutex<T = Pipeline>,
+    ) -> fmt::Result {
+        let mut out = self.out();
+        match *request {
             Request::ConfigShow => {
                 let config = pipeline.lock(|p| p.scale_config());
                 for field in ScaleConfig::FIELDS {
@@ -168,7 +226,6 @@ impl<P: SerialPort> Console<P> {
                 }
                 out.write_str("OK config show\r\n")
             }
-            Request::ConfigSet { key, value } => config_set(&mut out, key, value, pipeline),
             Request::Help => {
                 for line in HELP {
                     let _ = write!(out, "H {line}\r\n");
@@ -186,9 +243,9 @@ impl<P: SerialPort> Console<P> {
                 };
                 write_error(&mut out, word, &error)
             }
-            // The operator commands were decided above.
+            // The operator commands and the settings were decided in `decide`.
             _ => Ok(()),
-        };
+        }
     }
 
     /// Answer an operator command, typed here or given another way (the board's KEY):
@@ -238,28 +295,36 @@ impl<P: SerialPort> Console<P> {
     }
 }
 
-/// `config set <key> <value>`: checked with the whole configuration, then applied.
+/// `config set <key> <value>`: checked with the whole configuration, then applied; the
+/// key's name, or what was expected instead.
 fn config_set(
-    out: &mut impl Write,
     key: &str,
     value: f32,
     pipeline: &mut impl Mutex<T = Pipeline>,
-) -> fmt::Result {
-    let Some(field) = ScaleConfig::field(key) else {
-        let expected = "a configuration key (config show lists them)";
-        return write_error(out, "config", &ConsoleError::BadValue { expected });
-    };
-    let applied = pipeline.lock(|p| {
-        let changed = field.set(&p.scale_config(), value)?;
-        p.reconfigure(changed)
-    });
-    match applied {
-        Ok(()) => write!(out, "OK config set {} {}\r\n", field.name, value),
-        Err(_) => {
-            let expected = "a value inside the key's domain (finite; positive or not negative; whole for samples)";
-            write_error(out, "config", &ConsoleError::BadValue { expected })
-        }
+) -> Result<&'static str, &'static str> {
+    let field = ScaleConfig::field(key).ok_or("a configuration key (config show lists them)")?;
+    if field.name == "sample_rate_hz" {
+        return Err("a key the board lets change (sample_rate_hz is its converter's rate)");
     }
+    pipeline
+        .lock(|p| {
+            let changed = field.set(&p.scale_config(), value)?;
+            p.reconfigure(changed)
+        })
+        .map(|()| field.name)
+        .map_err(|_| {
+            "a value inside the key's domain (finite; positive or not negative; whole for samples)"
+        })
+}
+
+/// Hand what a reset should keep to `save`.
+fn store(
+    unit: Unit,
+    pipeline: &mut impl Mutex<T = Pipeline>,
+    save: &mut impl FnMut(&Settings) -> bool,
+) -> bool {
+    let settings = pipeline.lock(|p| p.settings(unit));
+    save(&settings)
 }
 
 /// The console word of an operator command (as typed, in the protocol's spelling).

@@ -13,13 +13,14 @@ use cortex_m::interrupt::InterruptNumber;
 use rtic::Mutex;
 
 use estimator_core::sensor::AdcSource;
+use estimator_core::weighing::console::Unit;
 use estimator_core::weighing::{self, CalibrationStore, StoreFailure};
 use estimator_core::weighing::{
     Calibration, CalibrationFailure, CalibrationLimits, CalibrationSource, Command, CommandConfig,
     CommandOutcome, CommandRefusal, Commands, CountsScale, RawSample, SampleSequence, Scale,
     ScaleReading,
 };
-use estimator_core::weighing::{WeighingEstimator, WeighingMethod};
+use estimator_core::weighing::{Settings, SettingsStore, WeighingEstimator, WeighingMethod};
 use estimator_core::ConfigError;
 
 /// The weighing configuration, generated at build time from `firmware/weighing.toml` (what
@@ -195,6 +196,8 @@ pub struct Pipeline {
     final_run: Option<u32>,
     /// Samples between two of the serial console's reading lines.
     console_interval: u32,
+    /// The console's reading lines per second.
+    console_rate_hz: u16,
 }
 
 /// The reading-line rates the console offers (`rate <Hz>`): whole divisors of the sample
@@ -231,6 +234,21 @@ impl Pipeline {
             sequence: SampleSequence::new(),
             final_run: None,
             console_interval: SAMPLES_PER_READOUT,
+            console_rate_hz: READOUT_HZ as u16,
+        }
+    }
+
+    /// The console's reading lines per second.
+    pub fn console_rate_hz(&self) -> u16 {
+        self.console_rate_hz
+    }
+
+    /// What a reset should keep: the configuration in use, the console's rate, and `unit`.
+    pub fn settings(&self, unit: Unit) -> Settings {
+        Settings {
+            config: self.scale_config(),
+            console_rate_hz: self.console_rate_hz,
+            unit,
         }
     }
 
@@ -240,6 +258,7 @@ impl Pipeline {
             return false;
         }
         self.console_interval = SAMPLE_RATE_HZ / u32::from(hz);
+        self.console_rate_hz = hz;
         true
     }
 
@@ -458,6 +477,59 @@ pub fn log_calibration(calibration: &Calibration, source: &CalibrationSource) {
         calibration.zero_counts,
         source
     );
+}
+
+/// The settings a reset kept, applied at boot (the configuration, the console's rate; the
+/// caller gives the unit to its console), or the compiled-in ones and why: logged either
+/// way as `settings stored capacity_g=… rate_hz=… unit=…` or `settings compiled-in (…)`.
+/// Returns the unit to use.
+pub fn load_settings<S: SettingsStore>(store: &mut S, pipeline: &mut Pipeline) -> Unit {
+    let compiled_in = pipeline.scale_config();
+    let loaded = weighing::load_settings(store, &compiled_in).and_then(|settings| {
+        // A record written by another board's sample rate or rates is not this board's.
+        let fits = settings.config.sample_rate_hz == compiled_in.sample_rate_hz
+            && CONSOLE_RATES_HZ.contains(&settings.console_rate_hz);
+        fits.then_some(settings)
+            .ok_or(weighing::CalibrationError::OutOfDomain)
+    });
+    match loaded {
+        Ok(settings) => match pipeline.reconfigure(settings.config) {
+            Ok(()) => {
+                pipeline.set_console_rate(settings.console_rate_hz);
+                defmt::println!(
+                    "settings stored capacity_g={=f32} e_g={=f32} rate_hz={=u16} unit={=str}",
+                    settings.config.capacity_g,
+                    settings.config.scale_interval_g,
+                    settings.console_rate_hz,
+                    settings.unit.name()
+                );
+                settings.unit
+            }
+            Err(error) => {
+                defmt::println!("settings compiled-in (stored ones refused: {})", error);
+                Unit::G
+            }
+        },
+        Err(reason) => {
+            defmt::println!("settings compiled-in ({})", reason);
+            Unit::G
+        }
+    }
+}
+
+/// Store `settings` (a console change); false when the store failed (logged).
+pub fn save_settings<S>(store: &mut S, settings: &Settings) -> bool
+where
+    S: SettingsStore,
+    S::Error: defmt::Format,
+{
+    match store.write_settings(&settings.encode()) {
+        Ok(()) => true,
+        Err(error) => {
+            defmt::println!("settings not stored: {}", error);
+            false
+        }
+    }
 }
 
 /// Emit one readout line. The host-side checker (`tests::e2e`) parses exactly this format;

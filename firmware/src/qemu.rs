@@ -8,8 +8,9 @@
 use core::mem::MaybeUninit;
 
 use estimator_core::sensor::{AdcError, AdcSource};
-use estimator_core::weighing::{self, FlashStore, RamFlash};
+use estimator_core::weighing::{self, CalibrationStore, FlashStore, FlashStoreError, RamFlash};
 use estimator_core::weighing::{Calibration, CalibrationLimits, CalibrationSource};
+use estimator_core::weighing::{RamFlashError, SettingsStore, RECORD_LEN, SETTINGS_LEN};
 use host_sim::qemu_scenes;
 
 use crate::pipeline::{self, SampleMessage};
@@ -81,22 +82,121 @@ impl<M: AdcSource> AdcSource for SimulatedConverter<M> {
 /// (the core's `RamFlash`, byte-programmable like the STM32F4's).
 pub type QemuFlash = RamFlash<2, 1024>;
 
-/// The calibration store of the QEMU board: the core's power-fail-safe `FlashStore` over
-/// [`QemuFlash`], the very code the STM32 board runs over its flash sectors. The record is
-/// written at "the factory" (boot) and by the operator's calibration, and read back through
-/// the same decoder.
-pub type QemuCalibrationStore = FlashStore<QemuFlash>;
+/// The QEMU board's store: the calibration and settings records in its RAM flash
+/// (`FlashStore`, as on hardware). With an image file named on the semihosting command
+/// line (the third word: `arg=firmware-qemu,arg=<scene>,arg=<file>`), the flash starts as
+/// the file holds it and every write is copied back to the file, so a later run (a reset)
+/// boots with what this one stored; without one it lives and dies with the run.
+pub struct QemuCalibrationStore {
+    store: FlashStore<QemuFlash>,
+    image: Option<ImagePath>,
+}
 
-/// An empty store over an erased [`QemuFlash`].
+/// A host file's path, NUL-terminated for semihosting.
+#[derive(Clone, Copy)]
+pub struct ImagePath([u8; 96]);
+
+impl ImagePath {
+    fn c_str(&self) -> Option<&core::ffi::CStr> {
+        core::ffi::CStr::from_bytes_until_nul(&self.0).ok()
+    }
+}
+
+impl QemuCalibrationStore {
+    /// After a successful write: the flash to the image file, if there is one. A failed
+    /// copy is logged; the run goes on with the store in RAM.
+    fn persist(&mut self) {
+        let Some(path) = self.image else {
+            return;
+        };
+        let mut bytes = [0u8; QemuFlash::CAPACITY as usize];
+        for (slot, byte) in bytes.iter_mut().zip(self.store.flash().bytes()) {
+            *slot = byte;
+        }
+        let written = path
+            .c_str()
+            .map(|path| semihosting::fs::write(path, bytes).is_ok());
+        if written != Some(true) {
+            defmt::error!(
+                "flash image not written to its file: the next run will not see this write"
+            );
+        }
+    }
+
+    /// Whether the image file gave the flash its contents (a run after another).
+    pub fn from_image(&self) -> bool {
+        self.image.is_some()
+    }
+}
+
+impl CalibrationStore for QemuCalibrationStore {
+    type Error = FlashStoreError<RamFlashError>;
+
+    fn write_record(&mut self, record: &[u8; RECORD_LEN]) -> Result<(), Self::Error> {
+        self.store.write_record(record)?;
+        self.persist();
+        Ok(())
+    }
+
+    fn read_record(&mut self) -> Result<Option<[u8; RECORD_LEN]>, Self::Error> {
+        self.store.read_record()
+    }
+}
+
+impl SettingsStore for QemuCalibrationStore {
+    type Error = FlashStoreError<RamFlashError>;
+
+    fn write_settings(&mut self, record: &[u8; SETTINGS_LEN]) -> Result<(), Self::Error> {
+        self.store.write_settings(record)?;
+        self.persist();
+        Ok(())
+    }
+
+    fn read_settings(&mut self) -> Result<Option<[u8; SETTINGS_LEN]>, Self::Error> {
+        self.store.read_settings()
+    }
+}
+
+/// The board's store over its RAM flash, filled from the image file the semihosting
+/// command line names (if any, and if it can be read: a missing file is an erased flash).
 pub fn calibration_store() -> QemuCalibrationStore {
-    match FlashStore::new(QemuFlash::new(), 0..QemuFlash::CAPACITY) {
-        Ok(store) => store,
-        // Unreachable: two whole pages.
+    let image = image_path();
+    let mut bytes = [0xFFu8; QemuFlash::CAPACITY as usize];
+    if let Some(path) = image.as_ref().and_then(ImagePath::c_str) {
+        if let Ok(mut file) = semihosting::fs::File::open(path) {
+            let mut filled = 0;
+            while filled < bytes.len() {
+                match semihosting::io::Read::read(&mut file, &mut bytes[filled..]) {
+                    Ok(0) | Err(_) => break,
+                    Ok(count) => filled += count,
+                }
+            }
+            defmt::println!("flash image: {=usize} bytes read from its file", filled);
+        } else {
+            defmt::println!("flash image: no file yet (an erased flash)");
+        }
+    }
+    match FlashStore::new(QemuFlash::from_image(&bytes), 0..QemuFlash::CAPACITY) {
+        Ok(store) => QemuCalibrationStore { store, image },
         Err(error) => {
             defmt::error!("calibration store refused its flash: {}", error);
             exit(false)
         }
     }
+}
+
+/// The third word of the semihosting command line: the flash image's file.
+fn image_path() -> Option<ImagePath> {
+    let mut buffer = [MaybeUninit::<u8>::uninit(); 160];
+    let line = semihosting::sys::arm_compat::sys_get_cmdline_uninit(&mut buffer).ok()?;
+    let word = line
+        .split(|&byte| byte == b' ')
+        .filter(|word| !word.is_empty())
+        .nth(2)?;
+    let mut path = [0u8; 96];
+    // Room for the terminating NUL; a longer path is not taken (no file rather than another).
+    path.get_mut(..word.len())?.copy_from_slice(word);
+    (word.len() < path.len()).then_some(ImagePath(path))
 }
 
 /// The calibration to use at boot: the stored one if valid and within `limits`, else the
@@ -132,6 +232,9 @@ pub enum Scene {
     /// The demo with a runaway recursion in the readout task at
     /// [`Scene::OVERFLOW_AT_SAMPLE`]: the stack guard must end the run with a fault.
     StackOverflow,
+    /// Boot and weigh the empty pan of the demo for 0.5 s: what a reset keeps, shown in
+    /// the boot log (with a flash image file from an earlier run).
+    Boot,
 }
 
 impl Scene {
@@ -154,6 +257,7 @@ impl Scene {
             Some(b"checked-demo") => Ok(Self::CheckedDemo),
             Some(b"stall") => Ok(Self::Stall),
             Some(b"stack-overflow") => Ok(Self::StackOverflow),
+            Some(b"boot") => Ok(Self::Boot),
             Some(_) => Err(UnknownScene),
         }
     }
@@ -161,7 +265,9 @@ impl Scene {
     /// The simulated cell playing this scene.
     pub fn load_cell(self) -> qemu_scenes::LoadCell {
         match self {
-            Self::Demo | Self::Stall | Self::StackOverflow => qemu_scenes::demo_scene(),
+            Self::Demo | Self::Stall | Self::StackOverflow | Self::Boot => {
+                qemu_scenes::demo_scene()
+            }
             Self::Commands => qemu_scenes::command_scene(),
             Self::CheckedDemo => qemu_scenes::checked_demo_scene(),
         }
@@ -169,6 +275,16 @@ impl Scene {
 }
 
 impl Scene {
+    /// Samples the scene plays before the board exits: the whole script, or 0.5 s of the
+    /// `boot` scene.
+    pub fn samples(self, load_cell: &qemu_scenes::LoadCell) -> u32 {
+        let end_s = match self {
+            Self::Boot => 0.5,
+            _ => load_cell.script().end_s(),
+        };
+        (end_s * f64::from(pipeline::SAMPLE_RATE_HZ)) as u32
+    }
+
     /// The `stall` scene's sample timer stops after this many samples (1 s).
     pub const STALL_AFTER_SAMPLES: u32 = 4_000;
     /// The `stack-overflow` scene's readout task recurses from this sample on (0.5 s).

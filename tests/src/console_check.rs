@@ -296,6 +296,85 @@ fn check_readings(
     (count, compared)
 }
 
+/// What a reset must keep: a run booting on the flash the command-scene run `before` left
+/// (`after`, the `boot` scene) finds the calibration that run stored and the settings its
+/// console changed (`unit kg`, `rate 50`, `config set capacity_g 620`), and does not
+/// calibrate at "the factory" over them; `before` itself booted on the compiled-in settings.
+pub fn check_reset(before: &RunLog, after: &RunLog) -> CommandReport {
+    let mut report = CommandReport::default();
+    let failures = &mut report.failures;
+    let has = |run: &RunLog, start: &str| run.lines.iter().any(|line| line.starts_with(start));
+    if !has(before, "settings compiled-in (Missing)") {
+        failures.push("the first run did not boot on the compiled-in settings".into());
+    }
+    if !after.exited_successfully {
+        failures.push("the run after the reset did not end with status 0".into());
+    }
+    if !has(
+        after,
+        "factory calibration: the flash image holds a record already",
+    ) {
+        failures.push("the run after the reset calibrated at the factory again".into());
+    }
+    // `settings stored capacity_g=620 e_g=0.1 rate_hz=50 unit=kg`, numbers as defmt prints
+    // them.
+    let settings = after
+        .lines
+        .iter()
+        .find(|line| line.starts_with("settings "))
+        .cloned()
+        .unwrap_or_default();
+    let field = |key: &str| {
+        settings
+            .split_whitespace()
+            .find_map(|word| word.strip_prefix(key)?.strip_prefix('='))
+            .map(str::to_string)
+    };
+    let number = |key: &str| field(key).and_then(|value| value.parse::<f64>().ok());
+    let kept = settings.starts_with("settings stored ")
+        && number("capacity_g") == Some(620.0)
+        && number("e_g").is_some_and(|e| (e - 0.1).abs() < 1e-6)
+        && number("rate_hz") == Some(50.0)
+        && field("unit").as_deref() == Some("kg");
+    if !kept {
+        failures.push(format!(
+            "the run after the reset logs `{settings}`, expected the settings stored capacity_g=620 e_g=0.1 rate_hz=50 unit=kg"
+        ));
+    }
+    let stored = logged(before, "calibrate", "done")
+        .and_then(|line| Some((line.field("counts_per_gram")?, line.field("zero_counts")?)));
+    let booted = after.lines.iter().find_map(|line| {
+        let rest = line.strip_prefix("calibration counts_per_gram=")?;
+        let (gain, rest) = rest.split_once(" zero_counts=")?;
+        let (zero, source) = rest.split_once(" source=")?;
+        Some((
+            gain.parse::<f64>().ok()?,
+            zero.parse::<f64>().ok()?,
+            source.to_string(),
+        ))
+    });
+    match (stored, booted) {
+        (Some((gain, zero)), Some((booted_gain, booted_zero, source))) => {
+            if gain != booted_gain || zero != booted_zero || source != "Stored" {
+                failures.push(format!(
+                    "stored {gain} counts/g, zero {zero}; booted on {booted_gain}, {booted_zero} ({source})"
+                ));
+            }
+            report.figures.push(format!(
+                "reset: booted on the stored calibration {booted_gain} counts/g, zero {booted_zero}, and `{settings}`"
+            ));
+        }
+        other => failures.push(format!(
+            "no stored calibration to compare with the one booted: {other:?}"
+        )),
+    }
+    let readouts = after.readouts();
+    if readouts.is_empty() || readouts.iter().any(|line| line.calibration != "stored") {
+        failures.push("the run after the reset does not read with cal=stored throughout".into());
+    }
+    report
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -344,6 +423,44 @@ mod tests {
             failures[1].contains("0.100 s after the previous line"),
             "{failures:?}"
         );
+    }
+
+    #[test]
+    fn a_reset_that_kept_nothing_fails() {
+        let before = RunLog {
+            lines: vec![
+                "settings compiled-in (Missing)".into(),
+                "command sample=20000 calibrate=done counts_per_gram=73.97919 zero_counts=16853.697 (stored, read back, applied)".into(),
+            ],
+            exited_successfully: true,
+        };
+        let after = RunLog {
+            lines: vec![
+                "factory calibration: 6 s of the simulated cell, empty then 200 g...".into(),
+                "calibration counts_per_gram=73.2 zero_counts=16850 source=Stored".into(),
+                "settings compiled-in (Missing)".into(),
+            ],
+            exited_successfully: true,
+        };
+        let report = check_reset(&before, &after);
+        assert!(
+            report.failures[1].contains("logs `settings compiled-in (Missing)`"),
+            "{:?}",
+            report.failures
+        );
+        assert_eq!(report.failures.len(), 4, "{:?}", report.failures);
+        // The same reset keeping both passes.
+        let kept = RunLog {
+            lines: vec![
+                "factory calibration: the flash image holds a record already".into(),
+                "calibration counts_per_gram=73.97919 zero_counts=16853.697 source=Stored".into(),
+                "settings stored capacity_g=620.0 e_g=0.1 rate_hz=50 unit=kg".into(),
+                "readout sample=200 mass_g=0.01 u_g=0.02 state=Empty since=200 dropped=0 changes=0 cal=stored final=0".into(),
+            ],
+            exited_successfully: true,
+        };
+        let report = check_reset(&before, &kept);
+        assert!(report.failures.is_empty(), "{:?}", report.failures);
     }
 
     #[test]

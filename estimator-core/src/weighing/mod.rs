@@ -16,6 +16,7 @@ mod key;
 mod method;
 mod scale;
 mod sequence;
+mod settings;
 
 pub use calibration::{
     load_calibration, load_or_default, store_calibration, Calibration, CalibrationError,
@@ -40,3 +41,4 @@ pub use scale::{
     ScaleState, StepScale, TareError, ZeroError, TARE_ACCURACY_E, ZERO_SETTING_RANGE_OF_MAX,
 };
 pub use sequence::SampleSequence;
+pub use settings::{load_settings, Settings, SettingsStore, SETTINGS_LEN, SETTINGS_VERSION};

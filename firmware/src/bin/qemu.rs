@@ -47,6 +47,7 @@ mod app {
         latest: Lines,
         pipeline: Pipeline,
         console: Console<CmsdkUart>,
+        store: QemuCalibrationStore,
     }
 
     #[local]
@@ -56,7 +57,6 @@ mod app {
         producer: Producer<'static, SampleMessage>,
         consumer: Consumer<'static, SampleMessage>,
         sequence: u32,
-        store: QemuCalibrationStore,
         scene_samples: u32,
         scene: Scene,
         stall_at: Option<u32>,
@@ -75,19 +75,24 @@ mod app {
         fault::guard_stack(&mut core.MPU, &mut core.SCB);
         // The factory calibration (known mass, empty pan) on the simulated chain, stored as
         // a record in the flash store and read back through the same CRC-checked decoder and
-        // limits as flash on hardware.
+        // limits as flash on hardware; a flash image from an earlier run (a reset) keeps its
+        // own record instead.
         #[cfg(feature = "bench")]
         bench::paint_stack();
-        defmt::println!("factory calibration: 6 s of the simulated cell, empty then 200 g...");
         let limits = qemu_scenes::calibration_limits();
         let mut store = qemu::calibration_store();
-        match qemu_scenes::factory_calibration() {
-            Ok(factory) => {
-                if let Err(error) = store.write_record(&factory.encode()) {
-                    defmt::error!("factory calibration not stored: {}", error);
+        if matches!(store.read_record(), Ok(Some(_))) {
+            defmt::println!("factory calibration: the flash image holds a record already");
+        } else {
+            defmt::println!("factory calibration: 6 s of the simulated cell, empty then 200 g...");
+            match qemu_scenes::factory_calibration() {
+                Ok(factory) => {
+                    if let Err(error) = store.write_record(&factory.encode()) {
+                        defmt::error!("factory calibration not stored: {}", error);
+                    }
                 }
+                Err(error) => defmt::error!("factory calibration failed: {}", error),
             }
-            Err(error) => defmt::error!("factory calibration failed: {}", error),
         }
         let (calibration, source) = qemu::load_calibration(&mut store, &limits);
         pipeline::log_calibration(&calibration, &source);
@@ -100,7 +105,8 @@ mod app {
             }
         };
         pipeline::log_config();
-        let pipeline = Pipeline::new(scale, limits, source);
+        let mut pipeline = Pipeline::new(scale, limits, source);
+        let unit = pipeline::load_settings(&mut store, &mut pipeline);
 
         // The benchmarks replay a scene through the application's own pipeline and then
         // restart it: a second one would need a second estimator (20 KB for a model bank).
@@ -119,7 +125,7 @@ mod app {
             }
         };
         let load_cell = scene.load_cell();
-        let scene_samples = (load_cell.script().end_s() * SAMPLE_RATE_HZ as f64) as u32;
+        let scene_samples = scene.samples(&load_cell);
         defmt::println!(
             "scene {} samples={=u32} console on UART 0 (type help)",
             scene,
@@ -132,6 +138,7 @@ mod app {
         let mut uart = unsafe { CmsdkUart::uart0() };
         uart.start(CONSOLE_BAUD);
         let mut console = Console::new(uart);
+        console.set_unit(unit);
         console.banner();
         // Safety: the only CmsdkTimer for timer 0; it moves into the hand-off task.
         let mut timer = unsafe { CmsdkTimer::timer0() };
@@ -145,6 +152,7 @@ mod app {
                 latest: Lines::default(),
                 pipeline,
                 console,
+                store,
             },
             Local {
                 timer,
@@ -152,7 +160,6 @@ mod app {
                 producer,
                 consumer,
                 sequence: 0,
-                store,
                 scene_samples,
                 scene,
                 stall_at: scene.stalls_after(),
@@ -190,17 +197,19 @@ mod app {
     /// The command task: the operator's bytes from UART 0, below the estimator's priority.
     /// Each completed line is decided against the reading at that moment; its outcome goes
     /// to the console and the log.
-    #[task(binds = Uart0Rx, priority = 1, shared = [pipeline, console])]
+    #[task(binds = Uart0Rx, priority = 1, shared = [pipeline, console, store])]
     fn command(cx: command::Context) {
         let command::SharedResources {
             mut pipeline,
             mut console,
+            mut store,
             ..
         } = cx.shared;
+        let mut save = |settings: &_| store.lock(|store| pipeline::save_settings(store, settings));
         console.lock(|console| {
             for _ in 0..BYTES_PER_INTERRUPT {
                 match console.port().take_byte() {
-                    Ok(Some(byte)) => console.receive(byte, &mut pipeline),
+                    Ok(Some(byte)) => console.receive(byte, &mut pipeline, &mut save),
                     Ok(None) => break,
                     Err(error) => defmt::println!("command uart={} (bytes lost)", error),
                 }
@@ -213,7 +222,7 @@ mod app {
     /// samples advance; the commands' regular work after each log line (a fresh tare
     /// refined, a calibration in progress carried on: stored, read back and applied once
     /// the known mass has settled); the end-of-scene summary and exit.
-    #[task(binds = Uart1Rx, priority = 1, local = [store, scene_samples, scene, watchdog, noise_told: bool = false], shared = [latest, pipeline, console])]
+    #[task(binds = Uart1Rx, priority = 1, local = [scene_samples, scene, watchdog, noise_told: bool = false], shared = [latest, pipeline, console, store])]
     fn readout(mut cx: readout::Context) {
         let lines = cx.shared.latest.lock(core::mem::take);
         let (samples, e) = cx
@@ -248,8 +257,10 @@ mod app {
         }
         if let Some(result) = cx.shared.pipeline.lock(|pipeline| pipeline.poll_commands()) {
             let shared_pipeline = &mut cx.shared.pipeline;
-            let end = pipeline::finish_calibration(result, cx.local.store, |work| {
-                shared_pipeline.lock(|pipeline| work(pipeline))
+            let end = cx.shared.store.lock(|store| {
+                pipeline::finish_calibration(result, store, |work| {
+                    shared_pipeline.lock(|pipeline| work(pipeline))
+                })
             });
             cx.shared
                 .console
@@ -363,9 +374,10 @@ mod app {
             let end = pipeline::finish_calibration(Ok(*calibration), store, |work| work(pipeline));
             console.calibration_ended(&end);
         });
-        // The deepest commands: a tare decided and answered, and the whole configuration
-        // listed (each typed as a line, ended by its CR).
+        // The deepest commands: a tare decided and answered, the whole configuration listed,
+        // a setting changed and stored (each typed as a line, ended by its CR).
         let mut command = 0;
+        let mut save = |settings: &_| pipeline::save_settings(store, settings);
         for line in [
             &b"tare\r"[..],
             b"config show\r",
@@ -373,7 +385,7 @@ mod app {
         ] {
             command = command.max(bench::stack_depth_of(|| {
                 for &byte in line {
-                    console.receive(byte, &mut bench::Unshared(&mut *pipeline));
+                    console.receive(byte, &mut bench::Unshared(&mut *pipeline), &mut save);
                 }
             }));
         }

@@ -114,6 +114,7 @@ mod app {
         pipeline: Pipeline,
         key: Key,
         console: Console<UsbConsolePort>,
+        store: CalibrationFlashStore,
     }
 
     #[local]
@@ -123,7 +124,6 @@ mod app {
         producer: Producer<'static, SampleMessage>,
         consumer: Consumer<'static, SampleMessage>,
         sequence: u32,
-        store: CalibrationFlashStore,
         watchdog: SampleWatchdog<IndependentWatchdog>,
         usb_device: UsbDevice<'static, UsbBusType>,
         _trigger: CounterHz<pac::TIM2>,
@@ -233,7 +233,7 @@ mod app {
             Ok(builder) => builder.build(),
             Err(_) => defmt::panic!("USB string descriptors refused"),
         };
-        let console = Console::new(UsbConsolePort::new(serial));
+        let mut console = Console::new(UsbConsolePort::new(serial));
         defmt::println!(
             "KEY: short press tare (or cancel a calibration), long press (>= {=u32} ms) calibrate with {=f32} g",
             KEY_LONG_PRESS_MS,
@@ -247,13 +247,17 @@ mod app {
         watchdog.stop_on_debug(&device.DBGMCU, true);
         watchdog.start(board::WATCHDOG_TIMEOUT_MS.millis());
 
+        let mut pipeline = Pipeline::new(scale, FRONT_END.calibration_limits(), source);
+        console.set_unit(pipeline::load_settings(&mut store, &mut pipeline));
+
         let (producer, consumer) = cx.local.queue.split();
         (
             Shared {
                 latest: Lines::default(),
-                pipeline: Pipeline::new(scale, FRONT_END.calibration_limits(), source),
+                pipeline,
                 key,
                 console,
+                store,
             },
             Local {
                 transfer,
@@ -261,7 +265,6 @@ mod app {
                 producer,
                 consumer,
                 sequence: 0,
-                store,
                 watchdog: SampleWatchdog::new(watchdog, 0),
                 usb_device,
                 _trigger: trigger,
@@ -312,13 +315,13 @@ mod app {
         pipeline::estimate(&mut shared.pipeline, &mut shared.latest, consumer, READOUT);
     }
 
-    /// The readout task: 20 lines a second over RTT; after each, the commands' regular
-    /// work (a fresh tare refined, a calibration in progress carried on). A finished
-    /// calibration is appended to the flash store (about 30 bytes), read back and applied;
-    /// once in thousands of calibrations the store erases a sector, which stalls the CPU
-    /// for seconds, and the samples the converter took meanwhile are counted as dropped.
+    /// The readout task: 20 lines a second over RTT and the console's reading lines; after
+    /// each log line, the commands' regular work (a fresh tare refined, a calibration in
+    /// progress carried on). A finished calibration is appended to the flash store (about
+    /// 30 bytes), read back and applied ([`stall_counted`]: a sector erase's stall counts
+    /// its lost samples).
     /// The watchdog is fed here while samples advance.
-    #[task(binds = EXTI2, priority = 1, local = [store, watchdog], shared = [latest, pipeline, console])]
+    #[task(binds = EXTI2, priority = 1, local = [watchdog], shared = [latest, pipeline, console, store])]
     fn readout(mut cx: readout::Context) {
         let lines = cx.shared.latest.lock(core::mem::take);
         let (samples, e) = cx
@@ -337,20 +340,34 @@ mod app {
         let Some(result) = cx.shared.pipeline.lock(|pipeline| pipeline.poll_commands()) else {
             return;
         };
-        let shared_pipeline = &mut cx.shared.pipeline;
-        let accepted_before = shared_pipeline.lock(|pipeline| pipeline.samples());
-        let started = DWT::cycle_count();
-        let end = pipeline::finish_calibration(result, cx.local.store, |work| {
-            shared_pipeline.lock(|pipeline| work(pipeline))
+        let store = &mut cx.shared.store;
+        let end = stall_counted(&mut cx.shared.pipeline, |shared_pipeline| {
+            store.lock(|store| {
+                pipeline::finish_calibration(result, store, |work| {
+                    shared_pipeline.lock(|pipeline| work(pipeline))
+                })
+            })
         });
-        let elapsed_cycles = DWT::cycle_count().wrapping_sub(started);
         cx.shared
             .console
             .lock(|console| console.calibration_ended(&end));
+    }
+
+    /// Run `work`, which may write flash (a calibration or settings record: once in
+    /// thousands of writes the store erases a 128 KiB sector and the CPU stalls for 2–4 s
+    /// while the converter runs on), and count the samples such a stall lost: what the
+    /// converter took meanwhile minus what reached the estimator (within the queue's depth,
+    /// which may still hold some).
+    fn stall_counted<M: rtic::Mutex<T = Pipeline>, R>(
+        pipeline: &mut M,
+        work: impl FnOnce(&mut M) -> R,
+    ) -> R {
+        let accepted_before = pipeline.lock(|pipeline| pipeline.samples());
+        let started = DWT::cycle_count();
+        let result = work(pipeline);
+        let elapsed_cycles = DWT::cycle_count().wrapping_sub(started);
         let converted = elapsed_cycles / (SYSCLK_HZ / SAMPLE_RATE_HZ);
-        shared_pipeline.lock(|pipeline| {
-            // What the converter took minus what reached the estimator (within the queue's
-            // depth, which may still hold some): the samples the stall lost.
+        pipeline.lock(|pipeline| {
             let accepted = pipeline.samples().wrapping_sub(accepted_before);
             let lost = SampleSequence::stall_loss(converted, accepted, QUEUE_CAPACITY as u32);
             if lost > 0 {
@@ -362,6 +379,7 @@ mod app {
                 pipeline.samples_lost(lost);
             }
         });
+        result
     }
 
     /// The KEY's first falling edge: stop listening to edges (contact bounce would make
@@ -424,13 +442,17 @@ mod app {
 
     /// The USB device (OTG FS): every USB event is handled here, and the bytes the host
     /// sent go to the console, line by line, decided against the reading of that moment.
-    #[task(binds = OTG_FS, priority = 1, local = [usb_device], shared = [console, pipeline])]
+    #[task(binds = OTG_FS, priority = 1, local = [usb_device], shared = [console, pipeline, store])]
     fn usb_console(cx: usb_console::Context) {
         let usb_console::SharedResources {
             mut console,
             mut pipeline,
+            mut store,
             ..
         } = cx.shared;
+        // A changed setting goes to flash; each line is decided inside `stall_counted`, so
+        // a write that stalls the CPU counts the samples it lost.
+        let mut save = |settings: &_| store.lock(|store| pipeline::save_settings(store, settings));
         let usb_device = cx.local.usb_device;
         console.lock(|console| {
             if !usb_device.poll(&mut [console.port().class()]) {
@@ -443,7 +465,9 @@ mod app {
                     break;
                 }
                 for &byte in &buffer[..count] {
-                    console.receive(byte, &mut pipeline);
+                    stall_counted(&mut pipeline, |pipeline| {
+                        console.receive(byte, pipeline, &mut save)
+                    });
                 }
             }
         });

@@ -1,6 +1,7 @@
-//! The calibration record in NOR flash, power-fail safe: [`FlashStore`] keeps it as the one
+//! The calibration record in NOR flash, power-fail safe: [`FlashStore`] keeps it under its
 //! key of a `sequential-storage` map over two or more erase pages of any
-//! `embedded-storage-async` [`NorFlash`].
+//! `embedded-storage-async` [`NorFlash`], and the operator's settings record
+//! (`crate::weighing::Settings`) under another.
 //!
 //! Why that crate rather than a hand-written A/B scheme: its map appends each new record
 //! after the previous ones (header and data CRC-protected, its position in the page
@@ -31,12 +32,23 @@ use sequential_storage::map::{MapConfig, MapStorage};
 
 use super::record::RECORD_LEN;
 use super::store::CalibrationStore;
+use crate::weighing::settings::{SettingsStore, SETTINGS_LEN};
 
-/// The map key of the calibration record (one key: the map keeps its newest value).
+/// The map key of the calibration record (the map keeps the newest value of each key).
 const RECORD_KEY: u8 = 0xCA;
-/// The map's working buffer: the key and the record, rounded up to a word of any flash
-/// the crate supports (its largest, 32 bytes), aligned for flashes that need it.
-const BUFFER_BYTES: usize = (1 + RECORD_LEN).div_ceil(32) * 32;
+/// The map key of the settings record.
+const SETTINGS_KEY: u8 = 0x5E;
+/// The map's working buffer: the key and the larger record, rounded up to a word of any
+/// flash the crate supports (its largest, 32 bytes), aligned for flashes that need it.
+const BUFFER_BYTES: usize = (1 + max(RECORD_LEN, SETTINGS_LEN)).div_ceil(32) * 32;
+
+const fn max(a: usize, b: usize) -> usize {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
 
 #[repr(align(4))]
 struct Buffer([u8; BUFFER_BYTES]);
@@ -100,42 +112,69 @@ impl<F: NorFlash> FlashStore<F> {
 }
 
 impl<F: NorFlash> FlashStore<F> {
-    fn append(&mut self, record: &[u8; RECORD_LEN]) -> Result<(), FlashStoreError<F::Error>> {
+    fn append(&mut self, key: u8, value: &[u8]) -> Result<(), FlashStoreError<F::Error>> {
         let mut buffer = Buffer([0; BUFFER_BYTES]);
-        let value: &[u8] = record;
-        let stored = self.map.store_item(&mut buffer.0, &RECORD_KEY, &value);
+        let stored = self.map.store_item(&mut buffer.0, &key, &value);
         poll_once(stored).ok_or(FlashStoreError::WouldWait)??;
         Ok(())
+    }
+
+    /// Append `value` under `key`. A map that is full or corrupted is erased and written
+    /// again: the other key's record is lost with it (the boot log then says it is missing).
+    fn write_item(&mut self, key: u8, value: &[u8]) -> Result<(), FlashStoreError<F::Error>> {
+        match self.append(key, value) {
+            Err(FlashStoreError::Full | FlashStoreError::Corrupted) => {
+                poll_once(self.map.erase_all()).ok_or(FlashStoreError::WouldWait)??;
+                self.append(key, value)
+            }
+            appended => appended,
+        }
+    }
+
+    /// The newest value under `key`, if it is `N` bytes long.
+    fn read_item<const N: usize>(
+        &mut self,
+        key: u8,
+    ) -> Result<Option<[u8; N]>, FlashStoreError<F::Error>> {
+        let mut buffer = Buffer([0; BUFFER_BYTES]);
+        let fetched = self.map.fetch_item::<&[u8]>(&mut buffer.0, &key);
+        let Some(bytes) = poll_once(fetched).ok_or(FlashStoreError::WouldWait)?? else {
+            return Ok(None);
+        };
+        let record: [u8; N] = bytes.try_into().map_err(|_| FlashStoreError::ForeignItem)?;
+        Ok(Some(record))
+    }
+
+    /// The flash under the store (a board that keeps an image of it elsewhere, as QEMU's in
+    /// a host file, copies it from here after a write).
+    pub fn flash(&mut self) -> &mut F {
+        self.map.flash()
     }
 }
 
 impl<F: NorFlash> CalibrationStore for FlashStore<F> {
     type Error = FlashStoreError<F::Error>;
 
-    /// Append `record`. Flash that holds something else than this store's items (another
-    /// firmware's data, a state the crate cannot repair) can leave no room or no way to
-    /// append (`Full`, `Corrupted`): then the store's pages are erased and the record
-    /// written into the empty store, the one case where a cut between the two loses the
-    /// previous record, which such a flash did not hold in this store's form anyway.
+    /// Append `record` under the calibration's key (see [`FlashStore::write_item`] for a
+    /// full or corrupted map).
     fn write_record(&mut self, record: &[u8; RECORD_LEN]) -> Result<(), Self::Error> {
-        match self.append(record) {
-            Err(FlashStoreError::Full | FlashStoreError::Corrupted) => {
-                poll_once(self.map.erase_all()).ok_or(FlashStoreError::WouldWait)??;
-                self.append(record)
-            }
-            appended => appended,
-        }
+        self.write_item(RECORD_KEY, record)
     }
 
     fn read_record(&mut self) -> Result<Option<[u8; RECORD_LEN]>, Self::Error> {
-        let mut buffer = Buffer([0; BUFFER_BYTES]);
-        let fetched = self.map.fetch_item::<&[u8]>(&mut buffer.0, &RECORD_KEY);
-        let Some(bytes) = poll_once(fetched).ok_or(FlashStoreError::WouldWait)?? else {
-            return Ok(None);
-        };
-        let record: [u8; RECORD_LEN] =
-            bytes.try_into().map_err(|_| FlashStoreError::ForeignItem)?;
-        Ok(Some(record))
+        self.read_item(RECORD_KEY)
+    }
+}
+
+impl<F: NorFlash> SettingsStore for FlashStore<F> {
+    type Error = FlashStoreError<F::Error>;
+
+    fn write_settings(&mut self, record: &[u8; SETTINGS_LEN]) -> Result<(), Self::Error> {
+        self.write_item(SETTINGS_KEY, record)
+    }
+
+    fn read_settings(&mut self) -> Result<Option<[u8; SETTINGS_LEN]>, Self::Error> {
+        self.read_item(SETTINGS_KEY)
     }
 }
 

@@ -249,3 +249,75 @@ fn the_earlier_firmwares_record_in_the_range_does_not_block_the_store() {
         .expect("a calibration is stored");
     assert_eq!(store.read_record(), Ok(Some(record(8))));
 }
+
+/// The QEMU board's geometry: two 1 KiB pages.
+type BoardFlash = RamFlash<2, 1024>;
+
+fn settings_record(index: u32) -> [u8; crate::weighing::SETTINGS_LEN] {
+    let base = crate::weighing::ScaleConfig::weighing_default(4000.0);
+    crate::weighing::Settings {
+        config: crate::weighing::ScaleConfig {
+            capacity_g: 600.0 + index as f32,
+            ..base
+        },
+        console_rate_hz: 20,
+        unit: crate::weighing::console::Unit::G,
+    }
+    .encode()
+}
+
+/// The settings record beside the calibration record: a cut at every byte of a settings
+/// write, over histories that fill the pages and switch them, keeps the calibration record
+/// as it was and the settings as they were or as written, never neither.
+#[test]
+fn a_power_cut_during_a_settings_write_keeps_both_records() {
+    use crate::weighing::SettingsStore;
+    let board_store =
+        |flash: BoardFlash| FlashStore::new(flash, 0..BoardFlash::CAPACITY).expect("two pages");
+    let mut cases = 0u32;
+    let mut page_switches = 0u32;
+    for written in 0..=14u32 {
+        let mut history = board_store(BoardFlash::new());
+        for index in 0..written {
+            history.write_record(&record(index)).expect("a clean write");
+            history
+                .write_settings(&settings_record(index))
+                .expect("a clean write");
+        }
+        history
+            .write_record(&record(written))
+            .expect("a clean write");
+        let base = history.into_flash();
+        let previous = written.checked_sub(1).map(settings_record);
+        let new = settings_record(written);
+        let mut clean = board_store(base.clone());
+        clean.write_settings(&new).expect("a clean write");
+        let clean = clean.into_flash();
+        if clean.pages_erased() > base.pages_erased() {
+            page_switches += 1;
+        }
+        for cut in 0..clean.bytes_changed() - base.bytes_changed() {
+            let mut flash = base.clone();
+            flash.cut_power_after(cut);
+            let mut cut_store = board_store(flash);
+            assert!(cut_store.write_settings(&new).is_err());
+            let mut flash = cut_store.into_flash();
+            flash.restore_power();
+            let mut rebooted = board_store(flash);
+            assert_eq!(
+                rebooted.read_record(),
+                Ok(Some(record(written))),
+                "{written} pairs, cut after {cut} bytes: the calibration record"
+            );
+            let found = rebooted.read_settings().expect("readable after a cut");
+            assert!(
+                found == previous || found == Some(new),
+                "{written} pairs, cut after {cut} bytes"
+            );
+            cases += 1;
+        }
+    }
+    std::println!("{cases} cut points, {page_switches} writes that switched pages");
+    assert!(page_switches >= 1, "no page switch was cut");
+    assert!(cases > 1000, "only {cases} cut points");
+}

@@ -101,6 +101,17 @@ impl<const PAGES: usize, const PAGE_BYTES: usize> RamFlash<PAGES, PAGE_BYTES> {
         self.pages.iter().flatten().copied()
     }
 
+    /// A flash holding `image` (page after page, as [`Self::bytes`] gives it; bytes past
+    /// its end stay erased, bytes past the capacity are ignored): a board's flash kept
+    /// elsewhere between runs, as QEMU's in a host file.
+    pub fn from_image(image: &[u8]) -> Self {
+        let mut flash = Self::new();
+        for (slot, &byte) in flash.pages.iter_mut().flatten().zip(image) {
+            *slot = byte;
+        }
+        flash
+    }
+
     fn byte_mut(&mut self, address: u32) -> &mut u8 {
         let address = address as usize;
         &mut self.pages[address / PAGE_BYTES][address % PAGE_BYTES]

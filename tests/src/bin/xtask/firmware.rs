@@ -78,7 +78,14 @@ pub fn monitor() -> Result<()> {
         .with_context(|| format!("cannot write {}", csv_path.display()))?;
     let (sender, receiver) = mpsc::channel();
     let qemu = thread::spawn(move || {
-        run_firmware_scene(&elf, &ICOUNT_REAL_TIME, false, "demo", None, Some(sender))
+        run_firmware_scene(
+            &elf,
+            &ICOUNT_REAL_TIME,
+            false,
+            &["demo"],
+            None,
+            Some(sender),
+        )
     });
     let settings = MonitorSettings {
         window_s: 5.0,
@@ -153,7 +160,7 @@ fn e2e_faults(elf: &Path) -> Result<()> {
     ];
     let mut failures = Vec::new();
     for (scene, what, expected) in cases {
-        let run = run_firmware_scene(elf, &ICOUNT_FAST, false, scene, None, None)?;
+        let run = run_firmware_scene(elf, &ICOUNT_FAST, false, &[scene], None, None)?;
         let readouts = run.readouts().len();
         let message = run.lines.iter().find(|line| line.starts_with(expected));
         println!(
@@ -266,7 +273,14 @@ fn e2e_commands(elf: &Path) -> Result<()> {
         "command scene: the harness types on the serial console (UART 0): help, unit kg, rate 50, rate 3, config set capacity_g 620, config show (empty pan), tare (stable), tare (sliding load), cal 200 (empty pan)"
     );
     let mut script = CommandScript::new();
-    let run = run_firmware(elf, &ICOUNT_FAST, false, Some(&mut script))?;
+    // The board's flash kept in a file, so a second run (a reset) boots with what this one
+    // stored.
+    let image =
+        std::env::temp_dir().join(format!("fast-weighing-flash-{}.bin", std::process::id()));
+    let _ = std::fs::remove_file(&image);
+    let image_arg = image.to_string_lossy().into_owned();
+    let scene = [commands::SCENE_NAME, image_arg.as_str()];
+    let run = run_firmware_scene(elf, &ICOUNT_FAST, false, &scene, Some(&mut script), None)?;
     for line in run.lines.iter().filter(|line| line.starts_with("command ")) {
         println!("  {line}");
     }
@@ -292,6 +306,15 @@ fn e2e_commands(elf: &Path) -> Result<()> {
         &console.failures,
         "the serial console fails its criteria",
     )?;
+    // A reset: the board boots again on the same flash.
+    let rebooted = run_firmware_scene(elf, &ICOUNT_FAST, false, &["boot", &image_arg], None, None);
+    let _ = std::fs::remove_file(&image);
+    let kept = console_check::check_reset(&run, &rebooted?);
+    require_passed(
+        &kept.summary(),
+        &kept.failures,
+        "a reset does not keep the calibration and settings stored before it",
+    )?;
     println!("firmware command path end-to-end: all criteria met");
     Ok(())
 }
@@ -304,7 +327,7 @@ fn e2e_checked_demo(elf: &Path) -> Result<()> {
         "checked demo: the demo after {:.1} s more of empty pan, the consistency check live from the first drop",
         scene.loads[1].0 - Scene::demo().loads[1].0
     );
-    let run = run_firmware_scene(elf, &ICOUNT_FAST, false, "checked-demo", None, None)?;
+    let run = run_firmware_scene(elf, &ICOUNT_FAST, false, &["checked-demo"], None, None)?;
     let mut report = e2e::check(&scene, &run);
     let metered = run
         .lines
@@ -658,17 +681,22 @@ fn run_firmware(
     live: bool,
     script: Option<&mut CommandScript>,
 ) -> Result<RunLog> {
-    run_firmware_scene(elf, icount, live, "demo", script, None)
+    let scene: &[&str] = if script.is_some() {
+        &[commands::SCENE_NAME]
+    } else {
+        &["demo"]
+    };
+    run_firmware_scene(elf, icount, live, scene, script, None)
 }
 
-/// [`run_firmware`] on the scene `scene` (the firmware's `qemu::Scene` name; a command
-/// `script` plays the command scene whatever `scene` says), each decoded line also sent to
+/// [`run_firmware`] on the scene and further semihosting words `scene` (the firmware's
+/// `qemu::Scene` name, then a flash image file if any), each decoded line also sent to
 /// `tap` as it arrives.
 fn run_firmware_scene(
     elf: &Path,
     icount: &[&str],
     live: bool,
-    scene: &str,
+    scene: &[&str],
     mut script: Option<&mut CommandScript>,
     tap: Option<mpsc::Sender<String>>,
 ) -> Result<RunLog> {
@@ -808,30 +836,34 @@ fn read_console(mut stream: UnixStream) -> Vec<String> {
         .collect()
 }
 
-/// Start QEMU on `elf` playing `scene`, its stdout and stderr piped. With a `console`
-/// socket, QEMU plays the command scene and UART 0 is that socket (QEMU waits for the
-/// harness to connect before it runs the board).
-fn spawn_qemu(elf: &Path, icount: &[&str], scene: &str, console: Option<&Path>) -> Result<Child> {
+/// Start QEMU on `elf` with the semihosting words `scene` (the scene, then a flash image
+/// file if any), its stdout and stderr piped. With a `console` socket UART 0 is that socket
+/// (QEMU waits for the harness to connect before it runs the board).
+fn spawn_qemu(
+    elf: &Path,
+    icount: &[&str],
+    scene: &[&str],
+    console: Option<&Path>,
+) -> Result<Child> {
     let mut command = Command::new(QEMU);
     command
         .args(MACHINE_ARGS)
         .args(["-nographic", "-monitor", "none"])
         .stdin(Stdio::null());
+    let mut semihosting = format!("enable=on,target=native,arg={QEMU_BIN}");
+    for word in scene {
+        semihosting.push_str(",arg=");
+        semihosting.push_str(word);
+    }
+    command.args(["-semihosting-config", &semihosting]);
     if let Some(socket) = console {
-        let semihosting = format!(
-            "enable=on,target=native,arg={QEMU_BIN},arg={}",
-            commands::SCENE_NAME
-        );
         let chardev = format!(
             "socket,id=console,path={},server=on,wait=on",
             socket.display()
         );
-        command
-            .args(["-chardev", &chardev, "-serial", "chardev:console"])
-            .args(["-semihosting-config", &semihosting]);
+        command.args(["-chardev", &chardev, "-serial", "chardev:console"]);
     } else {
-        let semihosting = format!("enable=on,target=native,arg={QEMU_BIN},arg={scene}");
-        command.args(["-serial", "none", "-semihosting-config", &semihosting]);
+        command.args(["-serial", "none"]);
     }
     command
         .args(icount)
