@@ -141,12 +141,11 @@ impl<E: ScaleEstimator> Scale<E> {
         // stand if the block ended now with its remaining samples at the shown mass. An
         // item put on just after a block boundary otherwise stayed `Stable` at the old
         // mass for up to a block (100 ms; `host-sim torture`, small additions).
-        let filled = self.block_filled as f32;
-        let partial =
-            |sum: f32| (sum - filled * self.block_drift_g()) / self.config.block_samples as f32;
+        let per_block = 1.0 / self.config.block_samples as f32;
+        let drifted = self.block_filled as f32 * self.block_drift_g();
         let running = TwoSidedCusum {
-            high: self.block_cusum.high + partial(self.block_sum_g),
-            low: self.block_cusum.low + partial(-self.block_sum_g),
+            high: self.block_cusum.high + (self.block_sum_g - drifted) * per_block,
+            low: self.block_cusum.low + (-self.block_sum_g - drifted) * per_block,
         };
         self.block_cusum.above(level) || running.above(level)
     }

@@ -137,6 +137,8 @@ pub struct Scale<E> {
     ringing_g: f32,
     /// The last alarm was the block test's alone (a slow change).
     block_alarmed: bool,
+    /// The block test saw motion at the last shown reading (`change::in_motion`).
+    moving: bool,
     /// This run began at a change only the block test saw: nothing is stable before the
     /// raw tests are armed again.
     after_slow_change: bool,
@@ -214,6 +216,7 @@ impl<E: ScaleEstimator> Scale<E> {
             ringing_envelope: 1.0,
             ringing_g: 0.0,
             block_alarmed: false,
+            moving: false,
             after_slow_change: false,
             uncertain_samples: 0,
             restarted_uncertain: false,
@@ -290,7 +293,7 @@ impl<E: ScaleEstimator> Scale<E> {
         // `Reading::uncertainty_bound`: on `u` itself the first final readings at 40 dB
         // were wrong a quarter of the time).
         let is_final = matches!(self.state, ScaleState::Estimating | ScaleState::Stable)
-            && !self.in_motion()
+            && !self.moving
             && mass_g.and(self.gross_u_bound_g).is_some_and(|u| {
                 2.0 * with_tare(u, self.tare_u_bound_g) <= self.config.final_target_g
             });
@@ -360,6 +363,7 @@ impl<E: ScaleEstimator> Scale<E> {
         self.block_cusum = TwoSidedCusum::default();
         self.block_sum_g = 0.0;
         self.block_filled = 0;
+        self.moving = false;
         self.samples_since_change = 0;
         self.stable_samples = 0;
         self.settled_samples = 0;
