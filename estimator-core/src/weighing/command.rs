@@ -483,6 +483,16 @@ mod tests {
             self.commands.handle(command, &mut self.scale, self.now)
         }
 
+        /// Start a calibration with [`KNOWN_MASS_G`] on the settled empty pan.
+        fn start_calibration(&mut self) {
+            assert!(matches!(
+                self.command(Command::Calibrate {
+                    known_mass_g: KNOWN_MASS_G
+                }),
+                Ok(CommandOutcome::CalibrationStarted { .. })
+            ));
+        }
+
         /// Run, polling at the readout cadence (every 200 samples), until the calibration
         /// ends or `seconds` pass.
         fn poll_for_s(&mut self, seconds: f32) -> Option<Result<Calibration, CalibrationFailure>> {
@@ -725,12 +735,7 @@ mod tests {
     fn a_mass_the_scale_could_not_measure_is_not_replaced_by_the_next_item() {
         let mut bench = Bench::new(1.0);
         bench.run_s(1.0);
-        assert!(matches!(
-            bench.command(Command::Calibrate {
-                known_mass_g: KNOWN_MASS_G
-            }),
-            Ok(CommandOutcome::CalibrationStarted { .. })
-        ));
+        bench.start_calibration();
         for _ in 0..40 {
             for _ in 0..200 {
                 bench.scale.push(RawSample::Saturated);
@@ -756,12 +761,7 @@ mod tests {
     fn a_mass_never_measured_within_the_settle_timeout_ends_the_calibration() {
         let mut bench = Bench::new(1.0);
         bench.run_s(1.0);
-        assert!(matches!(
-            bench.command(Command::Calibrate {
-                known_mass_g: KNOWN_MASS_G
-            }),
-            Ok(CommandOutcome::CalibrationStarted { .. })
-        ));
+        bench.start_calibration();
         let mut ended = None;
         for _ in 0..(8.0 * 20.0) as u32 {
             for _ in 0..200 {
@@ -792,12 +792,7 @@ mod tests {
     fn a_mass_taken_off_before_it_settled_ends_the_calibration() {
         let mut bench = Bench::new(1.0);
         bench.run_s(1.0);
-        assert!(matches!(
-            bench.command(Command::Calibrate {
-                known_mass_g: KNOWN_MASS_G
-            }),
-            Ok(CommandOutcome::CalibrationStarted { .. })
-        ));
+        bench.start_calibration();
         // On for 60 ms (polled at the readout cadence: not yet settled), then off.
         bench.cell.load_g = KNOWN_MASS_G as f64;
         assert_eq!(bench.poll_for_s(0.1), None);

@@ -9,7 +9,7 @@
 //! check is refused with its reason and nothing of it is used: the board then runs on the
 //! compiled-in configuration and says so.
 
-use super::calibration::{crc32, CalibrationError};
+use super::calibration::{check_frame, crc32, CalibrationError};
 use super::console::Unit;
 use super::scale::ScaleConfig;
 
@@ -53,26 +53,7 @@ impl Settings {
     /// `UnsupportedVersion`, `BadCrc` (or a wrong length), `OutOfDomain` (a field, the rate
     /// or the unit outside its domain).
     pub fn decode(bytes: &[u8], base: &ScaleConfig) -> Result<Self, CalibrationError> {
-        if bytes.len() < SETTINGS_LEN || bytes[..SETTINGS_LEN].iter().all(|&b| b == 0xFF) {
-            return Err(CalibrationError::Missing);
-        }
-        if bytes[0..4] != MAGIC {
-            return Err(CalibrationError::BadMagic);
-        }
-        let version = u16::from_le_bytes([bytes[4], bytes[5]]);
-        if version != SETTINGS_VERSION {
-            return Err(CalibrationError::UnsupportedVersion(version));
-        }
-        let length = u16::from_le_bytes([bytes[6], bytes[7]]);
-        let stored_crc = u32::from_le_bytes([
-            bytes[SETTINGS_LEN - 4],
-            bytes[SETTINGS_LEN - 3],
-            bytes[SETTINGS_LEN - 2],
-            bytes[SETTINGS_LEN - 1],
-        ]);
-        if length as usize != SETTINGS_LEN || crc32(&bytes[..SETTINGS_LEN - 4]) != stored_crc {
-            return Err(CalibrationError::BadCrc);
-        }
+        check_frame(bytes, MAGIC, SETTINGS_VERSION, SETTINGS_LEN)?;
         let mut config = *base;
         for (slot, field) in bytes[8..].chunks_exact(4).zip(ScaleConfig::FIELDS) {
             let value = f32::from_le_bytes([slot[0], slot[1], slot[2], slot[3]]);

@@ -28,7 +28,7 @@ mod fuzz_tests;
 mod power_cut_tests;
 
 pub use limits::{CalibrationLimits, FrontEnd};
-pub(crate) use record::crc32;
+pub(crate) use record::{check_frame, crc32};
 pub use record::{Calibration, CalibrationError, RECORD_LEN, RECORD_VERSION};
 pub use store::{
     load_calibration, load_or_default, store_calibration, CalibrationSource, CalibrationStore,

@@ -103,21 +103,7 @@ impl Calibration {
 
     /// Read a stored record; every way it can be wrong is a typed error.
     pub fn decode(bytes: &[u8]) -> Result<Self, CalibrationError> {
-        if bytes.len() < RECORD_LEN || bytes[..RECORD_LEN].iter().all(|&b| b == 0xFF) {
-            return Err(CalibrationError::Missing);
-        }
-        if bytes[0..4] != MAGIC {
-            return Err(CalibrationError::BadMagic);
-        }
-        let version = u16::from_le_bytes([bytes[4], bytes[5]]);
-        if version != RECORD_VERSION {
-            return Err(CalibrationError::UnsupportedVersion(version));
-        }
-        let stored_crc = u32::from_le_bytes([bytes[16], bytes[17], bytes[18], bytes[19]]);
-        let length = u16::from_le_bytes([bytes[6], bytes[7]]);
-        if length as usize != RECORD_LEN || crc32(&bytes[..16]) != stored_crc {
-            return Err(CalibrationError::BadCrc);
-        }
+        check_frame(bytes, MAGIC, RECORD_VERSION, RECORD_LEN)?;
         let calibration = Self {
             counts_per_gram: f32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]),
             zero_counts: f32::from_le_bytes([bytes[12], bytes[13], bytes[14], bytes[15]]),
@@ -136,6 +122,37 @@ impl Calibration {
             zero_counts: self.zero_counts,
         }
     }
+}
+
+/// The checks every stored record passes before its fields are read: present (not erased,
+/// not short), its magic, its version, its length and the CRC-32 in its last four bytes.
+pub(crate) fn check_frame(
+    bytes: &[u8],
+    magic: [u8; 4],
+    version: u16,
+    len: usize,
+) -> Result<(), CalibrationError> {
+    if bytes.len() < len || bytes[..len].iter().all(|&b| b == 0xFF) {
+        return Err(CalibrationError::Missing);
+    }
+    if bytes[0..4] != magic {
+        return Err(CalibrationError::BadMagic);
+    }
+    let stored_version = u16::from_le_bytes([bytes[4], bytes[5]]);
+    if stored_version != version {
+        return Err(CalibrationError::UnsupportedVersion(stored_version));
+    }
+    let length = u16::from_le_bytes([bytes[6], bytes[7]]);
+    let crc = [
+        bytes[len - 4],
+        bytes[len - 3],
+        bytes[len - 2],
+        bytes[len - 1],
+    ];
+    if length as usize != len || crc32(&bytes[..len - 4]) != u32::from_le_bytes(crc) {
+        return Err(CalibrationError::BadCrc);
+    }
+    Ok(())
 }
 
 /// CRC-32/ISO-HDLC, bitwise: 20 bytes at boot do not justify a 1 KiB table in flash.
