@@ -86,11 +86,6 @@ impl<P: SerialPort> Console<P> {
         &mut self.port
     }
 
-    /// The unit of the reading lines.
-    pub fn unit(&self) -> Unit {
-        self.unit
-    }
-
     /// Write the reading lines in `unit` from now on (the settings a reset kept).
     pub fn set_unit(&mut self, unit: Unit) {
         self.unit = unit;

@@ -122,11 +122,6 @@ impl QemuCalibrationStore {
             );
         }
     }
-
-    /// Whether the image file gave the flash its contents (a run after another).
-    pub fn from_image(&self) -> bool {
-        self.image.is_some()
-    }
 }
 
 impl CalibrationStore for QemuCalibrationStore {

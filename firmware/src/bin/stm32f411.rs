@@ -450,8 +450,8 @@ mod app {
             mut store,
             ..
         } = cx.shared;
-        // A changed setting goes to flash; each line is decided inside `stall_counted`, so
-        // a write that stalls the CPU counts the samples it lost.
+        // A changed setting goes to flash; the bytes of each read are decided inside
+        // `stall_counted`, so a write that stalls the CPU counts the samples it lost.
         let mut save = |settings: &_| store.lock(|store| pipeline::save_settings(store, settings));
         let usb_device = cx.local.usb_device;
         console.lock(|console| {
@@ -464,11 +464,11 @@ mod app {
                 if count == 0 {
                     break;
                 }
-                for &byte in &buffer[..count] {
-                    stall_counted(&mut pipeline, |pipeline| {
-                        console.receive(byte, pipeline, &mut save)
-                    });
-                }
+                stall_counted(&mut pipeline, |pipeline| {
+                    for &byte in &buffer[..count] {
+                        console.receive(byte, pipeline, &mut save);
+                    }
+                });
             }
         });
     }
