@@ -8,7 +8,7 @@ use estimator_core::weighing::console::{
     parse_line, write_error, write_reading, ConsoleError, LineBuffer, LineEnd, ReadingLine,
     Request, Unit, MAX_LINE,
 };
-use estimator_core::weighing::ScaleState;
+use estimator_core::weighing::{ScaleState, WeighingMethod};
 use proptest::prelude::*;
 
 /// The line a request is typed as.
@@ -25,6 +25,8 @@ fn typed(request: &Request<'_>) -> String {
         Request::Record => "record".into(),
         Request::ConfigShow => "config show".into(),
         Request::ConfigSet { key, value } => format!("config set {key} {value}"),
+        Request::Method { spec: None } => "method".into(),
+        Request::Method { spec: Some(spec) } => format!("method {spec}"),
         Request::Help => "help".into(),
     }
 }
@@ -70,7 +72,7 @@ proptest! {
 
     #[test]
     fn command_words_with_any_argument_never_panic(
-        command in prop::sample::select(vec!["tare", "cal", "unit", "rate", "raw", "config", "config set", "help", "zero"]),
+        command in prop::sample::select(vec!["tare", "cal", "unit", "rate", "raw", "config", "config set", "help", "zero", "method"]),
         argument in "\\PC{0,20}",
         more in "\\PC{0,20}",
     ) {
@@ -83,6 +85,32 @@ proptest! {
                 Request::ConfigSet { value, .. } => prop_assert!(value.is_finite()),
                 _ => {}
             }
+        }
+    }
+
+    /// A method spec from anyone (`method <spec>`): refused with a reason, or a method
+    /// whose numbers are in their domain and whose own spec reads back as the same method.
+    #[test]
+    fn any_method_spec_is_refused_or_reads_back(
+        family in prop::sample::select(vec!["step:", "bc:", "iv:", "model:", "", "x:"]),
+        keys in proptest::collection::vec(
+            (prop::sample::select(vec!["n", "D", "lambda", "K", "span", "precision", "delay", ""]),
+             "[-0-9.ef]{0,8}|f32|f64|0.68-1.3"),
+            0..5,
+        ),
+    ) {
+        let pairs: Vec<String> = keys.iter().map(|(key, value)| format!("{key}={value}")).collect();
+        let spec = format!("{family}{}", pairs.join(","));
+        match WeighingMethod::parse_spec(&spec) {
+            Ok(method) => {
+                prop_assert!(method.decimation() >= 1);
+                if let WeighingMethod::Step { forgetting, .. } = method {
+                    prop_assert!(forgetting > 0.0 && forgetting <= 1.0, "{}", spec);
+                }
+                let again = method.spec().to_string();
+                prop_assert_eq!(WeighingMethod::parse_spec(&again), Ok(method), "{} -> {}", spec, again);
+            }
+            Err(error) => prop_assert!(!error.expected().is_empty()),
         }
     }
 

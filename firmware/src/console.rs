@@ -16,12 +16,16 @@ use core::fmt::{self, Write};
 use rtic::Mutex;
 
 use estimator_core::weighing::console::{
-    parse_line, write_calibration_failure, write_error, write_outcome, write_reading,
-    write_refusal, ConsoleError, LineBuffer, LineEnd, ReadingLine, Request, Unit, MAX_LINE,
+    parse_line, write_calibration_failure, write_error, write_method_refusal, write_outcome,
+    write_reading, write_refusal, write_spec_error, ConsoleError, LineBuffer, LineEnd, ReadingLine,
+    Request, Unit, MAX_LINE,
 };
-use estimator_core::weighing::{Command, CommandOutcome, CommandRefusal, ScaleConfig, Settings};
+use estimator_core::weighing::{
+    Command, CommandOutcome, CommandRefusal, RawSample, RecordRefusal, ScaleConfig, Settings,
+    WeighingMethod,
+};
 
-use crate::pipeline::{self, CalibrationEnd, Pipeline, Readout, SAMPLE_RATE_HZ};
+use crate::pipeline::{self, CalibrationEnd, FirmwareRecorder, Pipeline, Readout, SAMPLE_RATE_HZ};
 
 /// A serial port's transmit side.
 pub trait SerialPort {
@@ -30,7 +34,7 @@ pub trait SerialPort {
 }
 
 /// The commands as `help` lists them, one line each.
-const HELP: [&str; 10] = [
+const HELP: [&str; 12] = [
     "tare: take the gross reading as tare",
     "untare: clear the tare",
     "zero: set the zero (stable, within 2 % of Max)",
@@ -40,12 +44,25 @@ const HELP: [&str; 10] = [
     "rate <Hz>: reading lines per second (1 2 4 5 8 10 20 25 40 50 100)",
     "config show: every configuration key and its value",
     "config set <key> <value>: change one (the run restarts)",
+    "method [<spec>]: the weighing method, or run another (step:n=5,D=24; the run restarts)",
+    "record: the raw samples around the next load change (RECORD/D lines)",
     "help: this list",
 ];
 
-/// What `raw` and `record` answer until the board streams raw samples.
+/// What `raw` answers until the board streams raw samples continuously.
 const NOT_BUILT: &str =
-    "tare, untare, zero, cal, cancel, unit, rate, config, help (raw streaming is not built yet)";
+    "record (raw samples around the next load change); continuous raw streaming is not built";
+
+/// Raw samples on one `D` line of a recording.
+const RECORD_LINE_SAMPLES: usize = 16;
+
+/// A recording being written out.
+struct Dump {
+    next: usize,
+    len: usize,
+    lost: u32,
+    saturated: u32,
+}
 
 /// The console's state: the line being typed and the unit of the reading lines.
 pub struct Console<P> {
@@ -53,6 +70,7 @@ pub struct Console<P> {
     line: LineBuffer,
     unit: Unit,
     lost_bytes: u32,
+    dump: Option<Dump>,
 }
 
 /// Formatting straight to the port, counting what it gave up.
@@ -78,6 +96,7 @@ impl<P: SerialPort> Console<P> {
             line: LineBuffer::new(),
             unit: Unit::G,
             lost_bytes: 0,
+            dump: None,
         }
     }
 
@@ -94,6 +113,11 @@ impl<P: SerialPort> Console<P> {
     /// Bytes the port gave up since boot.
     pub fn lost_bytes(&self) -> u32 {
         self.lost_bytes
+    }
+
+    fn count_lost(&mut self, bytes: usize) {
+        let lost = u32::try_from(bytes).unwrap_or(u32::MAX);
+        self.lost_bytes = self.lost_bytes.saturating_add(lost);
     }
 
     fn out(&mut self) -> Out<'_, P> {
@@ -197,6 +221,20 @@ impl<P: SerialPort> Console<P> {
                     &ConsoleError::BadValue { expected },
                 ),
             },
+            Request::Method { spec: Some(spec) } => match WeighingMethod::parse_spec(spec) {
+                Err(error) => write_spec_error(&mut self.out(), &error),
+                Ok(method) => {
+                    let (sample, result) = pipeline.lock(|p| (p.samples(), p.set_method(method)));
+                    pipeline::log_method(sample, &method, &result);
+                    match result {
+                        Ok(()) => {
+                            let note = stored(self.unit, pipeline, save);
+                            write!(self.out(), "OK method {}{note}\r\n", method.spec())
+                        }
+                        Err(refusal) => write_method_refusal(&mut self.out(), &refusal),
+                    }
+                }
+            },
             _ => self.inform(request, pipeline),
         };
     }
@@ -209,8 +247,13 @@ impl<P: SerialPort> Console<P> {
     ) -> fmt::Result {
         let mut out = self.out();
         match *request {
+            Request::Method { spec: None } => {
+                let method = pipeline.lock(|p| p.method());
+                write!(out, "OK method {}\r\n", method.spec())
+            }
             Request::ConfigShow => {
-                let config = pipeline.lock(|p| p.scale_config());
+                let (config, method) = pipeline.lock(|p| (p.scale_config(), p.method()));
+                let _ = write!(out, "C method={}\r\n", method.spec());
                 for field in ScaleConfig::FIELDS {
                     let value = field.get(&config);
                     if field.is_whole() {
@@ -227,17 +270,26 @@ impl<P: SerialPort> Console<P> {
                 }
                 out.write_str("OK help\r\n")
             }
-            Request::Raw(_) | Request::Record => {
-                let word = if matches!(request, Request::Record) {
-                    "record"
-                } else {
-                    "raw"
-                };
+            Request::Raw(_) => {
                 let error = ConsoleError::Unavailable {
                     expected: NOT_BUILT,
                 };
-                write_error(&mut out, word, &error)
+                write_error(&mut out, "raw", &error)
             }
+            Request::Record => match pipeline.lock(|p| p.arm_record()) {
+                Ok(()) => write!(
+                    out,
+                    "OK record armed; the next load change is recorded ({} samples, {} before it)\r\n",
+                    pipeline::RECORD_SAMPLES,
+                    FirmwareRecorder::BEFORE
+                ),
+                Err(RecordRefusal::Busy) => out.write_str(
+                    "ERR record busy; expected the recording under way to end (RECORD end)\r\n",
+                ),
+                Err(RecordRefusal::NotBuilt) => out.write_str(
+                    "ERR record unavailable; expected a board built without the model bank (no RAM for samples)\r\n",
+                ),
+            },
             // The operator commands and the settings were decided in `decide`.
             _ => Ok(()),
         }
@@ -270,6 +322,80 @@ impl<P: SerialPort> Console<P> {
         };
         let (unit, decimals) = (self.unit, self.unit.decimals(scale_interval_g));
         let _ = write_reading(&mut self.out(), &line, unit, decimals);
+    }
+
+    /// Write out a completed recording, at most `max_lines` lines a call (the readout task
+    /// calls it every tick; a board sets the pace its port drains): `RECORD begin
+    /// samples=… before=… rate_hz=…`, then `D <index> <code>…` lines of 16 samples (`L` a
+    /// lost sample, `S` a saturated one), then `RECORD end samples=… lost=… saturated=…`,
+    /// and the recording is given up. The pipeline is locked only to copy each line's
+    /// samples, never while formatting. A line the port cut short ends the recording with
+    /// `RECORD abandoned (…)` instead: the host must not take a damaged one.
+    pub fn pump_record(&mut self, pipeline: &mut impl Mutex<T = Pipeline>, max_lines: usize) {
+        if self.dump.is_none() {
+            let Some(info) = pipeline.lock(|p| p.record_capture()) else {
+                return;
+            };
+            let _ = write!(
+                self.out(),
+                "RECORD begin samples={} before={} rate_hz={}\r\n",
+                info.len,
+                info.change_index,
+                SAMPLE_RATE_HZ
+            );
+            self.dump = Some(Dump {
+                next: 0,
+                len: info.len as usize,
+                lost: 0,
+                saturated: 0,
+            });
+        }
+        for _ in 0..max_lines {
+            let Some(dump) = self.dump.as_mut() else {
+                return;
+            };
+            let start = dump.next;
+            if start >= dump.len {
+                let (len, lost, saturated) = (dump.len, dump.lost, dump.saturated);
+                self.dump = None;
+                pipeline.lock(|p| p.release_record());
+                let _ = write!(
+                    self.out(),
+                    "RECORD end samples={len} lost={lost} saturated={saturated}\r\n"
+                );
+                return;
+            }
+            let mut samples = [RawSample::Lost; RECORD_LINE_SAMPLES];
+            let count = pipeline.lock(|p| p.record_samples(start, &mut samples));
+            dump.next = start + count.max(1);
+            let mut line = heapless::String::<160>::new();
+            let _ = write!(line, "D {start}");
+            for sample in &samples[..count] {
+                let _ = match sample {
+                    RawSample::Counts(code) => write!(line, " {code}"),
+                    RawSample::Lost => {
+                        dump.lost += 1;
+                        line.push_str(" L").map_err(|_| fmt::Error)
+                    }
+                    RawSample::Saturated => {
+                        dump.saturated += 1;
+                        line.push_str(" S").map_err(|_| fmt::Error)
+                    }
+                };
+            }
+            let _ = line.push_str("\r\n");
+            let sent = self.port.write_bytes(line.as_bytes());
+            if sent < line.len() {
+                // The port dropped part of the line: the host could not trust the rest.
+                self.count_lost(line.len() - sent);
+                self.dump = None;
+                pipeline.lock(|p| p.release_record());
+                let _ = self.out().write_str(
+                    "\r\nRECORD abandoned (the port dropped bytes; type record again)\r\n",
+                );
+                return;
+            }
+        }
     }
 
     /// Say how a calibration in progress ended.

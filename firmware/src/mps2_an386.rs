@@ -305,6 +305,10 @@ pub enum UartError {
 /// flag, written by polling.
 pub struct CmsdkUart {
     registers: Registers,
+    /// A byte was given up and none has gone out since: the reader is gone or stuck, so
+    /// the next bytes are tried only briefly (a terminal that stopped reading must not
+    /// hold the readout task, which feeds the watchdog).
+    stalled: bool,
 }
 
 impl CmsdkUart {
@@ -333,6 +337,7 @@ impl CmsdkUart {
     pub unsafe fn uart0() -> Self {
         Self {
             registers: Registers { base: UART0_BASE },
+            stalled: false,
         }
     }
 
@@ -345,9 +350,14 @@ impl CmsdkUart {
     }
 
     /// Polls of a full transmit buffer before a byte is given up: at 115,200 baud a byte
-    /// leaves in 87 µs, 2,200 clocks at 25 MHz, so this waits several byte times and never
-    /// hangs a task on a UART nobody reads.
-    const TX_POLLS: u32 = 10_000;
+    /// leaves in 87 µs, 2,200 clocks at 25 MHz. QEMU holds the buffer full while the host
+    /// end of the console's socket is full (one skb a byte: a few hundred bytes when the
+    /// harness's reader is not scheduled for a while), so this waits for the reader: about
+    /// 1.6 M instructions, 60 ms at QEMU's 25 MHz, within the watchdog's second. 10,000
+    /// polls lost bytes of a recording's dump on a loaded host.
+    const TX_POLLS: u32 = 200_000;
+    /// Polls while [`Self::stalled`]: enough for a reader that came back.
+    const TX_POLLS_STALLED: u32 = 1_000;
 
     /// Enable the receiver with its interrupt and the transmitter at `baud`.
     pub fn start(&mut self, baud: u32) {
@@ -363,17 +373,25 @@ impl CmsdkUart {
     }
 
     /// Send `bytes`, each once the transmit buffer has room; returns how many went out (a
-    /// byte still blocked after [`Self::TX_POLLS`] polls is given up with the rest).
+    /// byte still blocked after [`Self::TX_POLLS`] polls, or [`Self::TX_POLLS_STALLED`]
+    /// after one was given up, is given up with the rest).
     pub fn write_bytes(&mut self, bytes: &[u8]) -> usize {
         for (sent, &byte) in bytes.iter().enumerate() {
+            let limit = if self.stalled {
+                Self::TX_POLLS_STALLED
+            } else {
+                Self::TX_POLLS
+            };
             let mut polls = 0;
             while self.read(Self::STATE) & Self::STATE_TX_FULL != 0 {
                 polls += 1;
-                if polls >= Self::TX_POLLS {
+                if polls >= limit {
+                    self.stalled = true;
                     return sent;
                 }
             }
             self.write(Self::DATA, u32::from(byte));
+            self.stalled = false;
         }
         bytes.len()
     }

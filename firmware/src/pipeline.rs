@@ -6,6 +6,7 @@
 //! Written once so both boards run the same weighing path. Nothing here may compute in the
 //! hand-off, wait, or lose a sample without counting it.
 
+use core::fmt::Write as _;
 use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicU32, Ordering};
 
@@ -20,7 +21,10 @@ use estimator_core::weighing::{
     CommandOutcome, CommandRefusal, Commands, CountsScale, RawSample, SampleSequence, Scale,
     ScaleReading,
 };
-use estimator_core::weighing::{Settings, SettingsStore, WeighingEstimator, WeighingMethod};
+use estimator_core::weighing::{
+    CaptureInfo, MethodRefusal, RecordRefusal, Recorder, Settings, SettingsStore,
+    WeighingEstimator, WeighingMethod,
+};
 use estimator_core::ConfigError;
 
 /// The weighing configuration, generated at build time from `firmware/weighing.toml` (what
@@ -58,6 +62,18 @@ pub type EstimatorStorage = MaybeUninit<FirmwareEstimator>;
 
 /// The scale both boards run: the weighing decisions around the configured method.
 pub type FirmwareScale = Scale<&'static mut FirmwareEstimator>;
+
+/// Raw samples a `record` keeps: 1.25 s at 4 kHz (0.25 s before the load change, 1 s
+/// after), 20 KB. None on a board built with the model bank: its 20 KB bank and the 95 KB
+/// of stack building it take the RAM (`record` answers that it is not built there).
+pub const RECORD_SAMPLES: usize = if config::BANK_CANDIDATES > 1 {
+    0
+} else {
+    5_000
+};
+/// The recorder of `record`, in a `static` of its own (an RTIC `init` local), as the
+/// estimator is.
+pub type FirmwareRecorder = Recorder<RECORD_SAMPLES>;
 
 // The configuration was identified and scored at a sample rate: it must be the boards'.
 const _: () = assert!(
@@ -198,6 +214,11 @@ pub struct Pipeline {
     console_interval: u32,
     /// The console's reading lines per second.
     console_rate_hz: u16,
+    /// The weighing method the scale runs (the configured one until the console's
+    /// `method` or a stored setting changes it).
+    method: WeighingMethod,
+    /// Raw samples around a load change, for the console's `record`.
+    recorder: &'static mut FirmwareRecorder,
 }
 
 /// The reading-line rates the console offers (`rate <Hz>`): whole divisors of the sample
@@ -225,6 +246,7 @@ impl Pipeline {
         scale: FirmwareScale,
         limits: CalibrationLimits,
         calibration_source: CalibrationSource,
+        recorder: &'static mut FirmwareRecorder,
     ) -> Self {
         Self {
             scale,
@@ -235,7 +257,48 @@ impl Pipeline {
             final_run: None,
             console_interval: SAMPLES_PER_READOUT,
             console_rate_hz: READOUT_HZ as u16,
+            method: config::WEIGHING.method,
+            recorder,
         }
+    }
+
+    /// Record the raw samples around the next load change (`record`), or why not.
+    pub fn arm_record(&mut self) -> Result<(), RecordRefusal> {
+        let changes = self.scale.reading().load_changes;
+        self.recorder.arm(changes)
+    }
+
+    /// The recording once it is complete (and until [`Self::release_record`]).
+    pub fn record_capture(&self) -> Option<CaptureInfo> {
+        self.recorder.capture()
+    }
+
+    /// Copy the recording's samples from `start` into `out`; how many there were.
+    pub fn record_samples(&self, start: usize, out: &mut [RawSample]) -> usize {
+        self.recorder.copy(start, out)
+    }
+
+    /// The recording was read out: give it up.
+    pub fn release_record(&mut self) {
+        self.recorder.release();
+    }
+
+    /// The weighing method in use.
+    pub fn method(&self) -> WeighingMethod {
+        self.method
+    }
+
+    /// Run `method` from now on, with the rest of the board's weighing configuration
+    /// (its model decides the valid region), or refuse it and keep the one in use. The run
+    /// restarts as after a load change (`Scale::set_method`).
+    pub fn set_method(&mut self, method: WeighingMethod) -> Result<(), MethodRefusal> {
+        let weighing = weighing::WeighingConfig {
+            method,
+            ..config::WEIGHING
+        };
+        self.scale.set_method(&weighing)?;
+        self.method = method;
+        Ok(())
     }
 
     /// The console's reading lines per second.
@@ -249,6 +312,7 @@ impl Pipeline {
             config: self.scale_config(),
             console_rate_hz: self.console_rate_hz,
             unit,
+            method: self.method,
         }
     }
 
@@ -339,12 +403,14 @@ impl Pipeline {
     /// dropped and tells the scale once, which restarts its estimate after the gap.
     pub fn accept(&mut self, message: SampleMessage) -> Lines {
         if self.sequence.accept(message.sequence) != 0 {
-            self.scale.push(RawSample::Lost);
+            let reading = self.scale.push(RawSample::Lost);
+            self.recorder.push(RawSample::Lost, reading.load_changes);
         }
         if message.sample == RawSample::Lost {
             self.sequence.count_lost(1);
         }
         let reading = self.scale.push(message.sample);
+        self.recorder.push(message.sample, reading.load_changes);
         let samples_done = message.sequence.wrapping_add(1);
         let tick = samples_done.is_multiple_of(SAMPLES_PER_READOUT);
         let console_tick = samples_done.is_multiple_of(self.console_interval);
@@ -479,10 +545,12 @@ pub fn log_calibration(calibration: &Calibration, source: &CalibrationSource) {
     );
 }
 
-/// The settings a reset kept, applied at boot (the configuration, the console's rate; the
-/// caller gives the unit to its console), or the compiled-in ones and why: logged either
-/// way as `settings stored capacity_g=… rate_hz=… unit=…` or `settings compiled-in (…)`.
-/// Returns the unit to use.
+/// The settings a reset kept, applied at boot (the method, the configuration, the console's
+/// rate; the caller gives the unit to its console), or the compiled-in ones and why: logged
+/// either way as `settings stored capacity_g=… e_g=… rate_hz=… unit=… method=<spec>` or
+/// `settings compiled-in (…)`. A stored method this image cannot run (another model or a
+/// smaller estimator since) is logged `settings method refused (…)` and the configured
+/// one stays; the rest of the record is used. Returns the unit to use.
 pub fn load_settings<S: SettingsStore>(store: &mut S, pipeline: &mut Pipeline) -> Unit {
     let compiled_in = pipeline.scale_config();
     let loaded = weighing::load_settings(store, &compiled_in).and_then(|settings| {
@@ -492,28 +560,57 @@ pub fn load_settings<S: SettingsStore>(store: &mut S, pipeline: &mut Pipeline) -
         fits.then_some(settings)
             .ok_or(weighing::CalibrationError::OutOfDomain)
     });
-    match loaded {
-        Ok(settings) => match pipeline.reconfigure(settings.config) {
-            Ok(()) => {
-                pipeline.set_console_rate(settings.console_rate_hz);
-                defmt::println!(
-                    "settings stored capacity_g={=f32} e_g={=f32} rate_hz={=u16} unit={=str}",
-                    settings.config.capacity_g,
-                    settings.config.scale_interval_g,
-                    settings.console_rate_hz,
-                    settings.unit.name()
-                );
-                settings.unit
-            }
-            Err(error) => {
-                defmt::println!("settings compiled-in (stored ones refused: {})", error);
-                Unit::G
-            }
-        },
+    let settings = match loaded {
+        Ok(settings) => settings,
         Err(reason) => {
             defmt::println!("settings compiled-in ({})", reason);
+            return Unit::G;
+        }
+    };
+    // The method first: changing it sets the decisions' residual drift for it, and the
+    // stored configuration was saved with the method it was used with.
+    if let Err(refusal) = pipeline.set_method(settings.method) {
+        defmt::println!("settings method refused ({})", refusal);
+    }
+    match pipeline.reconfigure(settings.config) {
+        Ok(()) => {
+            pipeline.set_console_rate(settings.console_rate_hz);
+            let mut spec = heapless::String::<64>::new();
+            let _ = write!(spec, "{}", pipeline.method().spec());
+            defmt::println!(
+                "settings stored capacity_g={=f32} e_g={=f32} rate_hz={=u16} unit={=str} method={=str}",
+                settings.config.capacity_g,
+                settings.config.scale_interval_g,
+                settings.console_rate_hz,
+                settings.unit.name(),
+                spec.as_str()
+            );
+            settings.unit
+        }
+        Err(error) => {
+            defmt::println!("settings compiled-in (stored ones refused: {})", error);
             Unit::G
         }
+    }
+}
+
+/// Log a method change asked for on the console: `method sample=… spec=… outcome=ok` or
+/// `… outcome=refused (<reason>)` (an accepted change restarts the run).
+pub fn log_method(sample: u32, method: &WeighingMethod, result: &Result<(), MethodRefusal>) {
+    let mut spec = heapless::String::<64>::new();
+    let _ = write!(spec, "{}", method.spec());
+    match result {
+        Ok(()) => defmt::println!(
+            "method sample={=u32} spec={=str} outcome=ok",
+            sample,
+            spec.as_str()
+        ),
+        Err(refusal) => defmt::println!(
+            "method sample={=u32} spec={=str} outcome=refused ({})",
+            sample,
+            spec.as_str(),
+            refusal
+        ),
     }
 }
 

@@ -230,6 +230,10 @@ pub enum Scene {
     /// Boot and weigh the empty pan of the demo for 0.5 s: what a reset keeps, shown in
     /// the boot log (with a flash image file from an earlier run).
     Boot,
+    /// Three drops of one mass on the settled empty pan, the harness arming `record`
+    /// before each (`qemu_scenes::record_scene`): the recordings `host-sim calibrate`
+    /// chooses a method from.
+    Record,
 }
 
 impl Scene {
@@ -253,6 +257,7 @@ impl Scene {
             Some(b"stall") => Ok(Self::Stall),
             Some(b"stack-overflow") => Ok(Self::StackOverflow),
             Some(b"boot") => Ok(Self::Boot),
+            Some(b"record") => Ok(Self::Record),
             Some(_) => Err(UnknownScene),
         }
     }
@@ -265,6 +270,7 @@ impl Scene {
             }
             Self::Commands => qemu_scenes::command_scene(),
             Self::CheckedDemo => qemu_scenes::checked_demo_scene(),
+            Self::Record => qemu_scenes::record_scene(),
         }
     }
 }

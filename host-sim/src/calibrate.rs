@@ -67,6 +67,9 @@ pub struct Options {
     pub precision: Precision,
     /// Score every candidate.
     pub evaluate_all: bool,
+    /// Also score least squares with forgetting (λ < 1). Off by default: its readings
+    /// state no uncertainty, so a board running it never shows a reading final.
+    pub forgetting: bool,
     /// Largest order n tried.
     pub max_order: usize,
     /// The lightest load the target must hold at, g; `None`: the core's default (0.3× the
@@ -99,6 +102,7 @@ impl Options {
             seed: 1,
             precision: Precision::F32,
             evaluate_all: false,
+            forgetting: false,
             max_order: 8,
             min_load_g: None,
             max_load_g: None,
@@ -210,6 +214,20 @@ pub fn read_drop(path: &Path, layout: &Layout) -> Result<Vec<f64>> {
     Ok(recording::read(path, layout)?.every_sample()?)
 }
 
+/// The candidates calibration scores: the core's standard grid up to `max_order`, least
+/// squares with forgetting only with [`Options::forgetting`]. A reading with λ < 1 states
+/// no uncertainty (the core's `u` covers the growing window only), so it is never final:
+/// a QEMU board uploaded with `step:n=5,D=16,lambda=0.923`, which calibration had chosen
+/// from three of its recorded drops, showed no final reading on any drop.
+pub fn grid(options: &Options) -> CandidateGrid<'static> {
+    let standard = CandidateGrid::standard(options.readout_s);
+    CandidateGrid {
+        max_order: options.max_order,
+        forgetting_memory_s: standard.forgetting_memory_s.filter(|_| options.forgetting),
+        ..standard
+    }
+}
+
 /// Calibrate on drops already in memory (raw codes), `names` naming them in errors.
 pub fn calibrate_samples(
     drops: &[Vec<f64>],
@@ -218,10 +236,7 @@ pub fn calibrate_samples(
     mut progress: impl FnMut(&CandidateScore),
 ) -> Result<Outcome> {
     let settings = options.settings();
-    let grid = CandidateGrid {
-        max_order: options.max_order,
-        ..CandidateGrid::standard(options.readout_s)
-    };
+    let grid = grid(options);
     // `runs` synthetic drops at each scene.
     let mut runs = vec![RunSlot::EMPTY; options.runs * settings.max_scenes()];
     let mut scores = Vec::new();

@@ -101,6 +101,41 @@ pub fn command_scene_with_seed(seed: u64) -> LoadCell {
     SimulatedAdc::new(chain, script, reference_disturbances(), seed)
 }
 
+/// Noise seed of the record scene (its own cell session: the drops a method is chosen
+/// from are not the demo's that judge it).
+pub const RECORD_SEED: u64 = 0x2ec0_4d5e;
+/// The record scene's mass, dropped three times (the mass `host-sim calibrate` is told).
+pub const RECORD_SCENE_MASS_G: f64 = 138.32;
+/// The record scene's drops land at these times; each is lifted off 1.6 s later, so a
+/// recording (1.25 s from 0.25 s before the landing) holds the mass alone.
+pub const RECORD_SCENE_DROPS_S: [f64; 3] = [1.0, 4.0, 7.0];
+/// How long each drop stays on.
+pub const RECORD_SCENE_HOLD_S: f64 = 1.6;
+/// The record scene ends 2 s after its last drop: the last recording complete (1 s after
+/// the landing) and written out (0.5 s on QEMU), with time to spare.
+pub const RECORD_SCENE_END_S: f64 = 9.0;
+
+/// The record scene: the reference chain and the demo's noise level, empty for 1 s, then
+/// [`RECORD_SCENE_MASS_G`] dropped at each of [`RECORD_SCENE_DROPS_S`] and lifted off
+/// [`RECORD_SCENE_HOLD_S`] later (the last stays on). The harness arms `record` on the
+/// settled empty pan before each drop (`tests::recording`).
+pub fn record_scene() -> LoadCell {
+    let mut script = Script::new(RECORD_SCENE_END_S);
+    for (index, drop_s) in RECORD_SCENE_DROPS_S.into_iter().enumerate() {
+        // Five events in time order fit in sixteen slots.
+        let _ = script.push(LoadEvent::step(drop_s, RECORD_SCENE_MASS_G));
+        if index + 1 < RECORD_SCENE_DROPS_S.len() {
+            let _ = script.push(LoadEvent::step(drop_s + RECORD_SCENE_HOLD_S, 0.0));
+        }
+    }
+    SimulatedAdc::new(
+        SensorChain::reference(),
+        script,
+        reference_disturbances(),
+        RECORD_SEED,
+    )
+}
+
 /// The demo scene: empty 0.3 s, 138.32 g, removed at 2.0 s, 250 g at 2.5 s, end at 4.0 s,
 /// 50 dB SNR. Built as `SimulatedAdc::reference_demo` builds it, in the larger script
 /// (`tests::commands` checks that the codes are the same).

@@ -14,7 +14,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use estimator_core::tuning::{summarise_drop, CandidateGrid, TuningError};
+use estimator_core::tuning::{summarise_drop, CandidateGrid, TuningError, STANDARD_DECIMATIONS};
 
 use estimator_core::sensor::LoadCellModel;
 use estimator_core::weighing::{
@@ -83,10 +83,13 @@ fn calibration_drops(scene: &Scene) -> (Vec<Vec<f64>>, Vec<String>) {
     (drops, names)
 }
 
+/// With least squares with forgetting scored too (`--forgetting`), as the README's
+/// calibration table and the choices these tests pin down were made.
 fn options(readout_s: f64, target_relative: f64) -> Options {
     Options {
         readout_s,
         target_relative,
+        forgetting: true,
         ..Options::new(Vec::new(), MASS_G)
     }
 }
@@ -608,8 +611,27 @@ fn an_impossible_target_names_the_best_candidate() {
     let error = calibrate::calibrate_samples(&drops, &names, &options, |s| scores.push(*s))
         .expect_err("nothing meets 0.001% at 20 ms");
     let message = format!("{error:#}");
-    let grid = CandidateGrid::standard(0.02);
-    assert_eq!(scores.len(), grid.len(), "every candidate was scored");
+    assert_eq!(
+        scores.len(),
+        calibrate::grid(&options).len(),
+        "every candidate was scored"
+    );
+    // Without `--forgetting`, no method whose readings state no uncertainty is scored.
+    let plain = Options {
+        forgetting: false,
+        ..options.clone()
+    };
+    assert_eq!(
+        calibrate::grid(&plain).len(),
+        calibrate::grid(&options).len() - 8 * STANDARD_DECIMATIONS.len()
+    );
+    for index in 0..calibrate::grid(&plain).len() {
+        let method = calibrate::grid(&plain).get(index, 4000.0).unwrap();
+        assert!(
+            !matches!(method, WeighingMethod::Step { forgetting, .. } if forgetting < 1.0),
+            "{method}"
+        );
+    }
     let best = scores
         .iter()
         .min_by(|a, b| a.prediction.p95_g.total_cmp(&b.prediction.p95_g))
@@ -985,7 +1007,7 @@ fn the_firmware_constants_size_the_method_and_refuse_by_key() {
     assert!(source
         .contains("method: WeighingMethod::Step { order: 5, decimation: 24, forgetting: 1.0 }"));
     assert!(
-        source.contains("pub const ORDER_CAPACITY: usize = 5;"),
+        source.contains("pub const ORDER_CAPACITY: usize = 8;"),
         "{source}"
     );
     assert!(
@@ -1005,7 +1027,7 @@ fn the_firmware_constants_size_the_method_and_refuse_by_key() {
     let bank_text = calibrate::config_toml(&config_with(bank), Precision::F32);
     let source = calibrate::firmware_constants(path, &bank_text).unwrap();
     assert!(
-        source.contains("pub const ORDER_CAPACITY: usize = 1;"),
+        source.contains("pub const ORDER_CAPACITY: usize = 8;"),
         "{source}"
     );
     assert!(

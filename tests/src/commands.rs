@@ -22,9 +22,10 @@ use std::fmt::Write as _;
 
 use estimator_core::weighing::{self, console, CalibrationStore, FlashStore, RamFlash};
 use estimator_core::weighing::{
-    Calibration, CalibrationFailure, CalibrationSource, CommandConfig, Commands, ScaleConfig,
-    ScaleEstimator,
+    Calibration, CalibrationFailure, CalibrationSource, CommandConfig, Commands, MethodRefusal,
+    ScaleConfig, ScaleEstimator, WeighingConfig, WeighingMethod, UPLOAD_ORDER_CAPACITY,
 };
+use estimator_core::ConfigError;
 
 use crate::e2e::{self, ReadoutLine, RunLog, Scene, READOUT_HZ, SAMPLE_RATE_HZ};
 use crate::firmware_log;
@@ -96,10 +97,18 @@ fn settle_samples() -> u32 {
 }
 
 /// The console lines typed first, on the empty pan before the drop: every console
-/// command that does not touch the load (a unit, a rate, a refused rate, a configuration
-/// change that leaves this scene's weighing as it is, the configuration listed).
-pub const SETUP_LINES: &str =
-    "help\nunit kg\nrate 50\nrate 3\nconfig set capacity_g 620\nconfig show\n";
+/// command that does not touch the load (a unit, a rate, a refused rate, a method too
+/// large for the board's estimator and one outside the valid region, both refused, then
+/// [`UPLOADED_METHOD`], a configuration change that leaves this scene's weighing as it is,
+/// the configuration listed).
+pub const SETUP_LINES: &str = concat!(
+    "help\nunit kg\nrate 50\nrate 3\n",
+    "method step:n=12,D=16\nmethod step:n=7,D=1\nmethod step:n=7,D=16\n",
+    "config set capacity_g 620\nconfig show\n"
+);
+/// The method the setup lines upload (the firmware ships n = 5, D = 24): the rest of the
+/// scene, and the run after the reset, weigh with it.
+pub const UPLOADED_METHOD: &str = "step:n=7,D=16";
 /// The tare command's line.
 pub const TARE_LINE: &str = "tare\n";
 /// The calibration command's line, with [`REFERENCE_MASS_G`].
@@ -182,6 +191,16 @@ impl CommandScript {
         };
         self.sent += 1;
         Some(typed)
+    }
+}
+
+impl crate::recording::ConsoleScript for CommandScript {
+    fn respond(&mut self, line: &ReadoutLine) -> Option<String> {
+        CommandScript::respond(self, line).map(str::to_string)
+    }
+
+    fn record_console(&mut self, lines: Vec<String>) {
+        CommandScript::record_console(self, lines);
     }
 }
 
@@ -648,6 +667,24 @@ pub fn host_replay(seed: u64) -> RunLog {
         for line in typed.take().iter().flat_map(|text| text.lines()) {
             // What the board's console does with the line, on the host's scale.
             match console::parse_line(line.as_bytes()).expect("the script types valid lines") {
+                console::Request::Method { spec: Some(spec) } => {
+                    let method =
+                        WeighingMethod::parse_spec(spec).expect("the script's specs parse");
+                    // The firmware's estimator holds orders up to this (its generated
+                    // ORDER_CAPACITY); host-sim's holds more.
+                    let capacity = UPLOAD_ORDER_CAPACITY.max(weighing.method.order().unwrap_or(1));
+                    if method.order().unwrap_or(1) <= capacity {
+                        let uploaded = WeighingConfig { method, ..weighing };
+                        let result = scale.set_method(&uploaded);
+                        lines.push(firmware_log::method(index, &method, &result));
+                    } else {
+                        let refusal = MethodRefusal::Estimator(ConfigError::Order {
+                            requested: method.order().unwrap_or(1),
+                            capacity,
+                        });
+                        lines.push(firmware_log::method(index, &method, &Err(refusal)));
+                    }
+                }
                 console::Request::ConfigSet { key, value } => {
                     let field = ScaleConfig::field(key).expect("a configuration key");
                     let changed = field.set(scale.config(), value).expect("a valid value");

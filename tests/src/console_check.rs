@@ -4,8 +4,11 @@
 //!
 //! What the transcript must show:
 //! - the banner, then one answer per typed line, in the order typed: `help` (its `H` lines),
-//!   `OK unit kg`, `OK rate 50`, `ERR rate bad_value; …` (3 Hz is not offered),
-//!   `OK config set capacity_g 620`, `config show` (every key once, capacity_g=620), the
+//!   `OK unit kg`, `OK rate 50`, `ERR rate bad_value; …` (3 Hz is not offered), two
+//!   methods refused (`too_large`: n = 12 is more than the board's estimator holds;
+//!   `outside_valid_region`: D = 1), `OK method step:n=7,D=16`,
+//!   `OK config set capacity_g 620`, `config show` (every key once, capacity_g=620, the
+//!   method uploaded), the
 //!   tare (`OK tare <mass> kg`, the log's tare to the display's resolution), the tare
 //!   refused while the load moves (`ERR tare unstable; …`), the calibration
 //!   (`OK cal zero_taken; …`, then `OK cal done …` with the values the log says were
@@ -21,11 +24,20 @@ use crate::commands::{CommandLine, CommandReport};
 use crate::e2e::{ReadoutLine, RunLog, SAMPLE_RATE_HZ};
 
 /// The answers expected, in order: (what the line starts with, what it stands for).
-const ANSWERS: [(&str, &str); 10] = [
+const ANSWERS: [(&str, &str); 13] = [
     ("OK help", "help"),
     ("OK unit kg", "unit kg"),
     ("OK rate 50", "rate 50"),
     ("ERR rate bad_value; expected", "rate 3 (refused)"),
+    (
+        "ERR method too_large; expected n from 1 to 8",
+        "method step:n=12,D=16 (refused)",
+    ),
+    (
+        "ERR method outside_valid_region; expected D of at least",
+        "method step:n=7,D=1 (refused)",
+    ),
+    ("OK method step:n=7,D=16", "method step:n=7,D=16"),
     ("OK config set capacity_g 620", "config set capacity_g 620"),
     ("OK config show", "config show"),
     ("OK tare ", "tare (stable)"),
@@ -109,9 +121,9 @@ fn check_help(transcript: &[String], ok: Option<usize>, failures: &mut Vec<Strin
         .take_while(|line| line.starts_with("H ") || line.starts_with("R "))
         .filter(|line| line.starts_with("H "))
         .count();
-    if listed < 10 {
+    if listed < 11 {
         failures.push(format!(
-            "help listed {listed} commands before OK help, expected 10"
+            "help listed {listed} commands before OK help, expected 11"
         ));
     }
 }
@@ -139,6 +151,12 @@ fn check_config_show(transcript: &[String], ok: Option<usize>, failures: &mut Ve
     }
     if !shown.contains(&"capacity_g=620") {
         failures.push("config show does not list capacity_g=620 after config set".into());
+    }
+    let method = format!("method={}", crate::commands::UPLOADED_METHOD);
+    if !shown.contains(&method.as_str()) {
+        failures.push(format!(
+            "config show does not list {method} after the method was uploaded"
+        ));
     }
 }
 
@@ -298,7 +316,7 @@ fn check_readings(
 
 /// What a reset must keep: a run booting on the flash the command-scene run `before` left
 /// (`after`, the `boot` scene) finds the calibration that run stored and the settings its
-/// console changed (`unit kg`, `rate 50`, `config set capacity_g 620`), and does not
+/// console changed (`unit kg`, `rate 50`, the uploaded method, `config set capacity_g 620`), and does not
 /// calibrate at "the factory" over them; `before` itself booted on the compiled-in settings.
 pub fn check_reset(before: &RunLog, after: &RunLog) -> CommandReport {
     let mut report = CommandReport::default();
@@ -335,10 +353,12 @@ pub fn check_reset(before: &RunLog, after: &RunLog) -> CommandReport {
         && number("capacity_g") == Some(620.0)
         && number("e_g").is_some_and(|e| (e - 0.1).abs() < 1e-6)
         && number("rate_hz") == Some(50.0)
-        && field("unit").as_deref() == Some("kg");
+        && field("unit").as_deref() == Some("kg")
+        && field("method").as_deref() == Some(crate::commands::UPLOADED_METHOD);
     if !kept {
         failures.push(format!(
-            "the run after the reset logs `{settings}`, expected the settings stored capacity_g=620 e_g=0.1 rate_hz=50 unit=kg"
+            "the run after the reset logs `{settings}`, expected the settings stored capacity_g=620 e_g=0.1 rate_hz=50 unit=kg method={}",
+            crate::commands::UPLOADED_METHOD
         ));
     }
     let stored = logged(before, "calibrate", "done")
@@ -454,7 +474,8 @@ mod tests {
             lines: vec![
                 "factory calibration: the flash image holds a record already".into(),
                 "calibration counts_per_gram=73.97919 zero_counts=16853.697 source=Stored".into(),
-                "settings stored capacity_g=620.0 e_g=0.1 rate_hz=50 unit=kg".into(),
+                "settings stored capacity_g=620.0 e_g=0.1 rate_hz=50 unit=kg method=step:n=7,D=16"
+                    .into(),
                 "readout sample=200 mass_g=0.01 u_g=0.02 state=Empty since=200 dropped=0 changes=0 cal=stored final=0".into(),
             ],
             exited_successfully: true,

@@ -14,7 +14,7 @@ use std::fmt::Write as _;
 use anyhow::{anyhow, Context, Result};
 use estimator_core::weighing::{
     Calibration, CalibrationFailure, CalibrationSource, Command, CommandOutcome, CommandRefusal,
-    ScaleReading,
+    MethodRefusal, ScaleReading, WeighingMethod,
 };
 
 /// `pipeline::log_readout` with a mass and its standard uncertainty.
@@ -50,11 +50,15 @@ pub const CALIBRATION_DONE: &str = "command sample={=u32} calibrate=done counts_
 /// `pipeline::log_calibration`: the calibration booted with.
 pub const BOOT_CALIBRATION: &str =
     "calibration counts_per_gram={=f32} zero_counts={=f32} source={}";
+/// `pipeline::log_method`, a method the console set.
+pub const METHOD_SET: &str = "method sample={=u32} spec={=str} outcome=ok";
+/// `pipeline::log_method`, a method the console asked for and the board refused.
+pub const METHOD_REFUSED: &str = "method sample={=u32} spec={=str} outcome=refused ({})";
 /// The QEMU board's end of the scene.
 pub const END: &str = "end samples={=u32} dropped={=u32}";
 
 /// Every format string above.
-pub const ALL: [&str; 15] = [
+pub const ALL: [&str; 17] = [
     READOUT,
     FINAL,
     READOUT_NO_UNCERTAINTY,
@@ -69,6 +73,8 @@ pub const ALL: [&str; 15] = [
     STORE_FAILED,
     CALIBRATION_DONE,
     BOOT_CALIBRATION,
+    METHOD_SET,
+    METHOD_REFUSED,
     END,
 ];
 
@@ -241,6 +247,18 @@ pub fn boot_calibration(calibration: &Calibration, source: &CalibrationSource) -
             Arg::Format(format!("{source:?}")),
         ],
     )
+}
+
+/// `pipeline::log_method`: a method asked for on the console, set or refused.
+pub fn method(sample: u32, method: &WeighingMethod, result: &Result<(), MethodRefusal>) -> String {
+    let spec = Arg::Format(method.spec().to_string());
+    match result {
+        Ok(()) => render(METHOD_SET, &[Arg::U32(sample), spec]),
+        Err(refusal) => render(
+            METHOD_REFUSED,
+            &[Arg::U32(sample), spec, Arg::Format(format!("{refusal:?}"))],
+        ),
+    }
 }
 
 /// The end of the scene.

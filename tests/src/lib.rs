@@ -6,5 +6,6 @@ pub mod core_check;
 pub mod e2e;
 pub mod firmware_log;
 pub mod qemu;
+pub mod recording;
 pub mod replay_check;
 pub mod weighing_constants;

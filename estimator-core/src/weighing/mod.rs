@@ -14,6 +14,7 @@ mod command;
 pub mod console;
 mod key;
 mod method;
+mod recorder;
 mod scale;
 mod sequence;
 mod settings;
@@ -32,13 +33,16 @@ pub use key::{KeyDebouncer, KeyPress};
 pub(crate) use method::cover_ratios;
 pub(crate) use method::readout_samples;
 pub use method::{
-    BankCandidate, LoadCoverage, LoadScene, LoadScore, OnsetConfig, Prediction, RegionError,
-    WeighingConfig, WeighingEstimator, WeighingMethod, MAX_LOADS, MAX_NYQUIST_OVER_BANDWIDTH,
-    MAX_SCENES, MIN_DATA_DRIVEN_ORDER, MIN_REFERENCE_SAMPLES, UNCERTAINTY_ORDERS,
+    BankCandidate, LoadCoverage, LoadScene, LoadScore, OnsetConfig, Prediction, RegionError, Spec,
+    SpecError, WeighingConfig, WeighingEstimator, WeighingMethod, MAX_LOADS,
+    MAX_NYQUIST_OVER_BANDWIDTH, MAX_SCENES, MIN_DATA_DRIVEN_ORDER, MIN_REFERENCE_SAMPLES,
+    UNCERTAINTY_ORDERS, UPLOAD_ORDER_CAPACITY,
 };
+pub use recorder::{CaptureInfo, RecordRefusal, Recorder};
 pub use scale::{
-    CountsScale, RawSample, Scale, ScaleConfig, ScaleEstimator, ScaleFault, ScaleReading,
-    ScaleState, StepScale, TareError, ZeroError, TARE_ACCURACY_E, ZERO_SETTING_RANGE_OF_MAX,
+    ConfiguredEstimator, CountsScale, MethodRefusal, RawSample, Scale, ScaleConfig, ScaleEstimator,
+    ScaleFault, ScaleReading, ScaleState, StepScale, TareError, ZeroError, TARE_ACCURACY_E,
+    ZERO_SETTING_RANGE_OF_MAX,
 };
 pub use sequence::SampleSequence;
 pub use settings::{load_settings, Settings, SettingsStore, SETTINGS_LEN, SETTINGS_VERSION};

@@ -1,22 +1,29 @@
 //! The operator's settings kept across a reset: the weighing decisions' configuration as
-//! changed with the console's `config set`, and the console's rate and unit. One record,
+//! changed with the console's `config set`, the console's rate and unit, and the weighing
+//! method (the console's `method`, which an upload from `host-sim calibrate` types). One record,
 //! versioned and CRC-checked like the calibration record, stored beside it
 //! ([`SettingsStore`]; the flash store keeps both under their own keys).
 //!
 //! Layout (little-endian): magic `WSET`, version (u16), length (u16), every
 //! [`ScaleConfig::FIELDS`] value as an `f32` in that order, the console's rate (u16) and
-//! unit (u8), one zero byte, and a CRC-32 of everything before it. A record that fails any
+//! unit (u8), one zero byte, the method (family u8: 0 step, 1 bias-compensated, 2
+//! instrumental variables, 3 model bank; order u8; D u16; λ f64; candidates u16; two zero
+//! bytes; lowest and highest ratio f64: exact, as typed), and a CRC-32 of everything before it. A version 1
+//! record (no method) is refused as an unsupported version. A record that fails any
 //! check is refused with its reason and nothing of it is used: the board then runs on the
 //! compiled-in configuration and says so.
 
 use super::calibration::{check_frame, crc32, CalibrationError};
 use super::console::Unit;
+use super::method::WeighingMethod;
 use super::scale::ScaleConfig;
 
 /// Bytes of a settings record.
-pub const SETTINGS_LEN: usize = 8 + 4 * ScaleConfig::FIELDS.len() + 4 + 4;
+pub const SETTINGS_LEN: usize = 8 + 4 * ScaleConfig::FIELDS.len() + 4 + METHOD_LEN + 4;
 /// The layout this firmware writes and reads.
-pub const SETTINGS_VERSION: u16 = 1;
+pub const SETTINGS_VERSION: u16 = 2;
+/// Bytes of the method in a settings record.
+const METHOD_LEN: usize = 32;
 const MAGIC: [u8; 4] = *b"WSET";
 
 /// What a board keeps of the operator's settings.
@@ -28,6 +35,8 @@ pub struct Settings {
     pub console_rate_hz: u16,
     /// The console's unit.
     pub unit: Unit,
+    /// The weighing method (checked against the board's model and estimator when applied).
+    pub method: WeighingMethod,
 }
 
 impl Settings {
@@ -43,6 +52,7 @@ impl Settings {
         let tail = 8 + 4 * ScaleConfig::FIELDS.len();
         bytes[tail..tail + 2].copy_from_slice(&self.console_rate_hz.to_le_bytes());
         bytes[tail + 2] = unit_code(self.unit);
+        encode_method(&self.method, &mut bytes[tail + 4..tail + 4 + METHOD_LEN]);
         let crc = crc32(&bytes[..SETTINGS_LEN - 4]);
         bytes[SETTINGS_LEN - 4..].copy_from_slice(&crc.to_le_bytes());
         bytes
@@ -51,7 +61,8 @@ impl Settings {
     /// The settings in `bytes`, each field set on `base` and checked as `config set` checks
     /// it, or why the record is refused: `Missing` (erased or short), `BadMagic`,
     /// `UnsupportedVersion`, `BadCrc` (or a wrong length), `OutOfDomain` (a field, the rate
-    /// or the unit outside its domain).
+    /// or the unit outside its domain, a method family unknown or a number of the method
+    /// out of its domain: a spec [`WeighingMethod::parse_spec`] would refuse).
     pub fn decode(bytes: &[u8], base: &ScaleConfig) -> Result<Self, CalibrationError> {
         check_frame(bytes, MAGIC, SETTINGS_VERSION, SETTINGS_LEN)?;
         let mut config = *base;
@@ -67,12 +78,78 @@ impl Settings {
         if !(1..=1000).contains(&console_rate_hz) {
             return Err(CalibrationError::OutOfDomain);
         }
+        let method = decode_method(&bytes[tail + 4..tail + 4 + METHOD_LEN])
+            .ok_or(CalibrationError::OutOfDomain)?;
         Ok(Self {
             config,
             console_rate_hz,
             unit,
+            method,
         })
     }
+}
+
+fn encode_method(method: &WeighingMethod, bytes: &mut [u8]) {
+    let (family, order, forgetting, candidates, span) = match *method {
+        WeighingMethod::Step {
+            order, forgetting, ..
+        } => (0, order, forgetting, 0, (0.0, 0.0)),
+        WeighingMethod::BiasCompensated { order, .. } => (1, order, 1.0, 0, (0.0, 0.0)),
+        WeighingMethod::InstrumentalVariable { order, .. } => (2, order, 1.0, 0, (0.0, 0.0)),
+        WeighingMethod::ModelBank {
+            candidates,
+            ratio_min,
+            ratio_max,
+            ..
+        } => (3, 0, 1.0, candidates, (ratio_min, ratio_max)),
+    };
+    bytes[0] = family;
+    bytes[1] = u8::try_from(order).unwrap_or(u8::MAX);
+    bytes[2..4].copy_from_slice(&method.decimation().to_le_bytes());
+    bytes[4..12].copy_from_slice(&forgetting.to_le_bytes());
+    let candidates = u16::try_from(candidates).unwrap_or(u16::MAX);
+    bytes[12..14].copy_from_slice(&candidates.to_le_bytes());
+    bytes[16..24].copy_from_slice(&span.0.to_le_bytes());
+    bytes[24..32].copy_from_slice(&span.1.to_le_bytes());
+}
+
+/// The method in `bytes`, if it is well formed (what its spec would need).
+fn decode_method(bytes: &[u8]) -> Option<WeighingMethod> {
+    let f64_at = |at: usize| {
+        let mut word = [0u8; 8];
+        word.copy_from_slice(&bytes[at..at + 8]);
+        f64::from_le_bytes(word)
+    };
+    let order = usize::from(bytes[1]);
+    let decimation = u16::from_le_bytes([bytes[2], bytes[3]]);
+    let forgetting = f64_at(4);
+    let candidates = usize::from(u16::from_le_bytes([bytes[12], bytes[13]]));
+    let (ratio_min, ratio_max) = (f64_at(16), f64_at(24));
+    let data_driven = order >= 1 && decimation >= 1;
+    let method = match bytes[0] {
+        0 if data_driven && forgetting > 0.0 && forgetting <= 1.0 => WeighingMethod::Step {
+            order,
+            decimation,
+            forgetting,
+        },
+        1 if data_driven => WeighingMethod::BiasCompensated { order, decimation },
+        2 if data_driven => WeighingMethod::InstrumentalVariable { order, decimation },
+        3 if decimation >= 1
+            && candidates >= 1
+            && ratio_min > 0.0
+            && ratio_min < ratio_max
+            && ratio_max.is_finite() =>
+        {
+            WeighingMethod::ModelBank {
+                decimation,
+                candidates,
+                ratio_min,
+                ratio_max,
+            }
+        }
+        _ => return None,
+    };
+    Some(method)
 }
 
 fn unit_code(unit: Unit) -> u8 {
@@ -129,6 +206,47 @@ mod tests {
             },
             console_rate_hz: 50,
             unit: Unit::Kg,
+            method: WeighingMethod::Step {
+                order: 7,
+                decimation: 16,
+                forgetting: 0.999,
+            },
+        }
+    }
+
+    /// Every family of method reads back exactly as written.
+    #[test]
+    fn every_method_reads_back() {
+        let base = ScaleConfig::weighing_default(4000.0);
+        for method in [
+            WeighingMethod::Step {
+                order: 5,
+                decimation: 24,
+                forgetting: 1.0,
+            },
+            WeighingMethod::BiasCompensated {
+                order: 6,
+                decimation: 20,
+            },
+            WeighingMethod::InstrumentalVariable {
+                order: 4,
+                decimation: 32,
+            },
+            WeighingMethod::ModelBank {
+                decimation: 8,
+                candidates: 33,
+                ratio_min: 0.68,
+                ratio_max: 1.3,
+            },
+        ] {
+            let written = Settings {
+                method,
+                ..settings()
+            };
+            assert_eq!(
+                Settings::decode(&written.encode(), &base).map(|s| s.method),
+                Ok(method)
+            );
         }
     }
 
@@ -174,5 +292,32 @@ mod tests {
             Settings::decode(&bad.encode(), &base),
             Err(CalibrationError::OutOfDomain)
         );
+        for method in [
+            WeighingMethod::Step {
+                order: 5,
+                decimation: 24,
+                forgetting: 1.5,
+            },
+            WeighingMethod::InstrumentalVariable {
+                order: 0,
+                decimation: 24,
+            },
+            WeighingMethod::ModelBank {
+                decimation: 8,
+                candidates: 33,
+                ratio_min: 1.3,
+                ratio_max: 0.68,
+            },
+        ] {
+            let bad = Settings {
+                method,
+                ..settings()
+            };
+            assert_eq!(
+                Settings::decode(&bad.encode(), &base),
+                Err(CalibrationError::OutOfDomain),
+                "{method}"
+            );
+        }
     }
 }

@@ -20,8 +20,8 @@ mod app {
     use firmware::fault;
     use firmware::mps2_an386::{CmsdkTimer, CmsdkUart, CmsdkWatchdog, Interrupt, SYSTEM_CLOCK_HZ};
     use firmware::pipeline::{
-        self, EstimatorStorage, Lines, Pipeline, SampleMessage, SampleQueue, SampleWatchdog,
-        SAMPLE_RATE_HZ,
+        self, EstimatorStorage, FirmwareRecorder, Lines, Pipeline, SampleMessage, SampleQueue,
+        SampleWatchdog, SAMPLE_RATE_HZ,
     };
     use firmware::qemu::{self, QemuCalibrationStore, Scene, SimulatedConverter};
     use heapless::spsc::{Consumer, Producer};
@@ -36,6 +36,10 @@ mod app {
 
     /// The console's baud rate (QEMU ignores it; real CMSDK silicon would not).
     const CONSOLE_BAUD: u32 = 115_200;
+    /// `D` lines of a recording written per readout tick: 3.4 KB, faster than the 115,200
+    /// baud the UART is set to (QEMU does not pace it), so a 1.25 s recording is out in
+    /// 0.5 s; faster, the console socket fills while the harness's reader waits for a core.
+    const RECORD_LINES_PER_TICK: usize = 32;
     /// Bytes taken per receive interrupt: the UART holds one, and one more may land while
     /// the first is decided.
     const BYTES_PER_INTERRUPT: usize = 4;
@@ -66,6 +70,7 @@ mod app {
     #[init(local = [
         queue: SampleQueue = SampleQueue::new(),
         estimator: EstimatorStorage = EstimatorStorage::uninit(),
+        recorder: FirmwareRecorder = FirmwareRecorder::new(),
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         // The stack `idle` will run on: what `main` and this function's entry took.
@@ -105,7 +110,7 @@ mod app {
             }
         };
         pipeline::log_config();
-        let mut pipeline = Pipeline::new(scale, limits, source);
+        let mut pipeline = Pipeline::new(scale, limits, source, cx.local.recorder);
         let unit = pipeline::load_settings(&mut store, &mut pipeline);
 
         // The benchmarks replay a scene through the application's own pipeline and then
@@ -230,10 +235,12 @@ mod app {
             .pipeline
             .lock(|pipeline| (pipeline.samples(), pipeline.scale_config().scale_interval_g));
         cx.local.watchdog.service(samples);
+        let shared_pipeline = &mut cx.shared.pipeline;
         cx.shared.console.lock(|console| {
             for line in [lines.final_reading, lines.console].into_iter().flatten() {
                 console.reading(&line, e);
             }
+            console.pump_record(shared_pipeline, RECORD_LINES_PER_TICK);
         });
         let Some(readout) = lines.log() else {
             return;

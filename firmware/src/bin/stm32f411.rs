@@ -18,8 +18,8 @@ mod app {
     use firmware::console::Console;
     use firmware::fault;
     use firmware::pipeline::{
-        self, EstimatorStorage, Lines, Pipeline, SampleMessage, SampleQueue, SampleWatchdog,
-        QUEUE_CAPACITY, SAMPLE_RATE_HZ,
+        self, EstimatorStorage, FirmwareRecorder, Lines, Pipeline, SampleMessage, SampleQueue,
+        SampleWatchdog, QUEUE_CAPACITY, SAMPLE_RATE_HZ,
     };
     use firmware::stm32f411::{
         self as board, CalibrationFlashStore, UsbConsolePort, DMA_BLOCK, FRONT_END,
@@ -55,6 +55,11 @@ mod app {
     const READOUT: pac::Interrupt = pac::Interrupt::EXTI2;
     /// Words of the OTG FS endpoint memory the USB driver works in.
     const USB_ENDPOINT_WORDS: usize = 1024;
+    /// `D` lines of a recording written per readout tick: about 430 bytes, which the 1 KiB
+    /// USB transmit buffer holds beside reading lines and what the host has not yet taken
+    /// (a line the buffer cannot take whole abandons the recording); a 1.25 s recording
+    /// takes 4 s at 20 ticks a second.
+    const RECORD_LINES_PER_TICK: usize = 4;
     /// Reads of the USB port per interrupt (64 bytes each): bounded, and more than its
     /// receive buffer holds.
     const USB_READS_PER_INTERRUPT: usize = 4;
@@ -135,6 +140,7 @@ mod app {
         second: [u16; DMA_BLOCK] = [0; DMA_BLOCK],
         third: [u16; DMA_BLOCK] = [0; DMA_BLOCK],
         estimator: EstimatorStorage = EstimatorStorage::uninit(),
+        recorder: FirmwareRecorder = FirmwareRecorder::new(),
         usb_endpoints: [u32; USB_ENDPOINT_WORDS] = [0; USB_ENDPOINT_WORDS],
         usb_bus: Option<UsbBusAllocator<UsbBusType>> = None,
         usb_tx: [u8; USB_TX_BUFFER] = [0; USB_TX_BUFFER],
@@ -247,7 +253,12 @@ mod app {
         watchdog.stop_on_debug(&device.DBGMCU, true);
         watchdog.start(board::WATCHDOG_TIMEOUT_MS.millis());
 
-        let mut pipeline = Pipeline::new(scale, FRONT_END.calibration_limits(), source);
+        let mut pipeline = Pipeline::new(
+            scale,
+            FRONT_END.calibration_limits(),
+            source,
+            cx.local.recorder,
+        );
         console.set_unit(pipeline::load_settings(&mut store, &mut pipeline));
 
         let (producer, consumer) = cx.local.queue.split();
@@ -329,10 +340,12 @@ mod app {
             .pipeline
             .lock(|pipeline| (pipeline.samples(), pipeline.scale_config().scale_interval_g));
         cx.local.watchdog.service(samples);
+        let shared_pipeline = &mut cx.shared.pipeline;
         cx.shared.console.lock(|console| {
             for line in [lines.final_reading, lines.console].into_iter().flatten() {
                 console.reading(&line, e);
             }
+            console.pump_record(shared_pipeline, RECORD_LINES_PER_TICK);
         });
         if lines.log().is_none() {
             return;

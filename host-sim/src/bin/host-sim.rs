@@ -73,6 +73,24 @@ enum Command {
     /// plots mass with its ±2u band and logs every reading as CSV. On a terminal it is
     /// interactive (q quits); otherwise it prints the last frame as text.
     Monitor(MonitorArgs),
+    /// The recordings a board wrote on its serial console (`record`: RECORD begin, D lines,
+    /// RECORD end) as CSVs `t,y` that `calibrate`, `estimate` and `replay` read: one file
+    /// per recording, `<out-dir>/<prefix>-<n>.csv`. A recording cut short or with a line
+    /// lost on the way is refused with its line.
+    Records(RecordsArgs),
+}
+
+#[derive(Args)]
+struct RecordsArgs {
+    /// The console transcript (what a terminal or `cat /dev/ttyACM0` saved); `-` for stdin.
+    #[arg(long)]
+    console: PathBuf,
+    /// Where the CSVs go (created if missing).
+    #[arg(long, default_value = ".")]
+    out_dir: PathBuf,
+    /// The files' name before `-<n>.csv`.
+    #[arg(long, default_value = "record")]
+    prefix: String,
 }
 
 #[derive(Args)]
@@ -298,6 +316,10 @@ struct CalibrateArgs {
     /// Score every candidate, not only up to the first that meets the target.
     #[arg(long)]
     all: bool,
+    /// Also score least squares with forgetting (λ < 1). Its readings state no uncertainty,
+    /// so a board running it never shows a reading final.
+    #[arg(long)]
+    forgetting: bool,
     /// Also print the configuration as a Rust constant (for a firmware build script).
     #[arg(long)]
     rust: bool,
@@ -478,7 +500,47 @@ fn main() -> Result<()> {
         Command::Torture(args) => torture(args),
         Command::Replay(args) => replay(args),
         Command::Monitor(args) => monitor(args),
+        Command::Records(args) => records(args),
     }
+}
+
+/// `records`: a console transcript's recordings as CSV files.
+fn records(args: RecordsArgs) -> Result<()> {
+    let text = if args.console.as_os_str() == "-" {
+        let mut text = String::new();
+        std::io::Read::read_to_string(&mut std::io::stdin(), &mut text)?;
+        text
+    } else {
+        std::fs::read_to_string(&args.console)
+            .with_context(|| format!("{}: cannot read it", args.console.display()))?
+    };
+    let recordings = host_sim::recording::console::unpack(text.lines())
+        .with_context(|| format!("{}", args.console.display()))?;
+    if recordings.is_empty() {
+        anyhow::bail!(
+            "{}: no recording (RECORD begin … RECORD end) in it; type `record` on the board's console, then put the load on",
+            args.console.display()
+        );
+    }
+    std::fs::create_dir_all(&args.out_dir)
+        .with_context(|| format!("{}: cannot create it", args.out_dir.display()))?;
+    for (index, recording) in recordings.iter().enumerate() {
+        let path = args
+            .out_dir
+            .join(format!("{}-{}.csv", args.prefix, index + 1));
+        std::fs::write(&path, recording.to_csv())
+            .with_context(|| format!("{}: cannot write it", path.display()))?;
+        println!(
+            "{}: {} samples at {} Hz, the load change at sample {}, {} lost, {} saturated",
+            path.display(),
+            recording.samples.len(),
+            recording.rate_hz,
+            recording.before,
+            recording.lost,
+            recording.saturated
+        );
+    }
+    Ok(())
 }
 
 /// `simulate`: a scene's ADC codes and truth as CSV.
@@ -561,6 +623,7 @@ fn calibration_options(args: &CalibrateArgs) -> calibrate::Options {
         seed: args.seed,
         precision: args.precision,
         evaluate_all: args.all,
+        forgetting: args.forgetting,
         max_order: args.max_order,
         layout: args.recording.layout(),
         ..calibrate::Options::new(args.drops.clone(), args.mass_g)

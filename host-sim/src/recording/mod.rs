@@ -9,6 +9,7 @@
 //! is a lost sample ([`Row::sample`] is `None`); `NaN` and `inf` parse as numbers and are
 //! passed on, for the command to flag or refuse as it does any non-finite sample.
 
+pub mod console;
 mod error;
 mod separator;
 #[cfg(test)]

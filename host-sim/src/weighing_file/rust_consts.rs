@@ -6,7 +6,7 @@ use std::path::Path;
 
 use anyhow::{bail, Result};
 use estimator_core::weighing::{
-    LoadCoverage, LoadScore, Prediction, WeighingConfig, WeighingMethod,
+    LoadCoverage, LoadScore, Prediction, WeighingConfig, WeighingMethod, UPLOAD_ORDER_CAPACITY,
 };
 
 use super::{method_keys, model_keys, onset_keys, parse_config, precision_name};
@@ -15,9 +15,10 @@ use crate::montecarlo::Precision;
 /// What the firmware's build script (`firmware/build.rs`) generates from the text of its
 /// weighing config `path`: the parsed, checked configuration as [`rust_const`], and the
 /// sizes the firmware's estimator type takes from it (`ORDER_CAPACITY`: the configured
-/// order, 1 for the bank; `MODEL_STATES`: the identified model's states; `BANK_CANDIDATES`:
-/// the bank's K, 1 for the data-driven methods), so the image holds exactly the configured
-/// method.
+/// order or [`UPLOAD_ORDER_CAPACITY`], the larger, so a data-driven method of up to that
+/// order can be uploaded over the console without a rebuild; `MODEL_STATES`: the identified
+/// model's states; `BANK_CANDIDATES`: the bank's K, 1 for the data-driven methods), so the
+/// image holds the configured method and the methods a console may choose.
 ///
 /// One parser: this is [`parse_config`], the same that `estimate --config` uses, so the
 /// file the firmware accepts is the file host-sim accepts. On top of it the firmware asks
@@ -34,8 +35,8 @@ pub fn firmware_constants(path: &Path, text: &str) -> Result<String> {
         );
     }
     let (order_capacity, bank_candidates) = match config.method {
-        WeighingMethod::ModelBank { candidates, .. } => (1, candidates),
-        method => (method.order().unwrap_or(1), 1),
+        WeighingMethod::ModelBank { candidates, .. } => (UPLOAD_ORDER_CAPACITY, candidates),
+        method => (method.order().unwrap_or(1).max(UPLOAD_ORDER_CAPACITY), 1),
     };
     let model_states = usize::from(config.model.filter_order) + 2;
     let mut out = String::new();
@@ -51,7 +52,7 @@ pub fn firmware_constants(path: &Path, text: &str) -> Result<String> {
     out.push_str(&rust_const(&config));
     let sizes = [
         (
-            "Largest model order the estimator holds: the configured order (1 for the bank).",
+            "Largest model order the estimator holds: the configured one or the largest a console may upload.",
             "ORDER_CAPACITY",
             order_capacity,
         ),

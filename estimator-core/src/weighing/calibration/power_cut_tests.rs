@@ -262,6 +262,7 @@ fn settings_record(index: u32) -> [u8; crate::weighing::SETTINGS_LEN] {
         },
         console_rate_hz: 20,
         unit: crate::weighing::console::Unit::G,
+        method: crate::weighing::ScaleConfig::DEFAULT_METHOD,
     }
     .encode()
 }

@@ -20,6 +20,7 @@
 //! | `raw on\|off` | also stream raw samples |
 //! | `record` | dump the raw samples around the last load change |
 //! | `config show` / `config set <key> <value>` | the weighing configuration |
+//! | `method` / `method <spec>` | the weighing method in use / run another (`step:n=5,D=24`, the `spec` of `weighing.toml`) |
 //! | `help` | list the commands |
 //!
 //! ## Board → host
@@ -40,6 +41,8 @@ mod unit;
 
 pub use format::{fault_name, write_error, write_reading, ReadingLine, StateWord};
 pub use line::{LineBuffer, LineEnd, MAX_LINE};
-pub use outcome::{write_calibration_failure, write_outcome, write_refusal};
+pub use outcome::{
+    write_calibration_failure, write_method_refusal, write_outcome, write_refusal, write_spec_error,
+};
 pub use parse::{parse_line, ConsoleError, Request};
 pub use unit::Unit;

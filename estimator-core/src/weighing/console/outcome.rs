@@ -7,6 +7,9 @@ use super::format::fault_name;
 use super::unit::Unit;
 use crate::weighing::calibration::CalibrationError;
 use crate::weighing::command::{CalibrationFailure, CommandOutcome, CommandRefusal};
+use crate::weighing::method::{RegionError, SpecError};
+use crate::weighing::scale::MethodRefusal;
+use crate::ConfigError;
 
 /// `OK …` for an accepted command; masses in `unit` with `decimals`.
 pub fn write_outcome(
@@ -113,6 +116,49 @@ fn write_calibration_error(out: &mut impl Write, error: &CalibrationError) -> fm
     }
 }
 
+/// `ERR method bad_spec; expected …` for a spec that does not parse.
+pub fn write_spec_error(out: &mut impl Write, error: &SpecError) -> fmt::Result {
+    write!(
+        out,
+        "ERR method bad_spec; expected {}\r\n",
+        error.expected()
+    )
+}
+
+/// `ERR method <reason>; expected …` for a method the board cannot run: outside the valid
+/// region of its model (`outside_valid_region`), or more than its estimator holds
+/// (`too_large`, `not_built`).
+pub fn write_method_refusal(out: &mut impl Write, refusal: &MethodRefusal) -> fmt::Result {
+    out.write_str("ERR method ")?;
+    match *refusal {
+        MethodRefusal::Region(RegionError::Decimation { minimum, .. }) => write!(
+            out,
+            "outside_valid_region; expected D of at least {minimum} (below it least squares is biased by errors in variables)"
+        ),
+        MethodRefusal::Region(RegionError::Order { minimum, .. }) => write!(
+            out,
+            "outside_valid_region; expected n of at least {minimum} (the cell with its filter)"
+        ),
+        MethodRefusal::Region(RegionError::BankSpan { needed, .. }) => write!(
+            out,
+            "outside_valid_region; expected a span covering ratios {:.3}-{:.3} with a candidate to spare",
+            needed.0, needed.1
+        ),
+        MethodRefusal::Region(RegionError::Model) => out.write_str(
+            "outside_valid_region; expected a board model with a finite, positive rate and bandwidth",
+        ),
+        MethodRefusal::Estimator(ConfigError::Order { capacity, .. }) => write!(
+            out,
+            "too_large; expected n from 1 to {capacity} (what this board's estimator holds)"
+        ),
+        MethodRefusal::Estimator(ConfigError::Model) => out.write_str(
+            "not_built; expected the model bank of the size this board was built with",
+        ),
+        MethodRefusal::Estimator(error) => write!(out, "refused; expected {error}"),
+    }?;
+    out.write_str("\r\n")
+}
+
 #[cfg(test)]
 mod tests {
     extern crate std;
@@ -168,5 +214,38 @@ mod tests {
             "{out}"
         );
         assert!(out.ends_with("\r\n") && out.matches("\r\n").count() == 1);
+    }
+
+    #[test]
+    fn a_refused_method_says_what_the_board_takes() {
+        let mut out = String::new();
+        write_method_refusal(
+            &mut out,
+            &MethodRefusal::Region(RegionError::Decimation {
+                decimation: 2,
+                minimum: 9,
+            }),
+        )
+        .unwrap();
+        assert!(
+            out.starts_with("ERR method outside_valid_region; expected D of at least 9 "),
+            "{out}"
+        );
+        out.clear();
+        let too_large = MethodRefusal::Estimator(ConfigError::Order {
+            requested: 12,
+            capacity: 8,
+        });
+        write_method_refusal(&mut out, &too_large).unwrap();
+        assert_eq!(
+            out,
+            "ERR method too_large; expected n from 1 to 8 (what this board's estimator holds)\r\n"
+        );
+        out.clear();
+        write_spec_error(&mut out, &SpecError::Missing { key: "D" }).unwrap();
+        assert_eq!(
+            out,
+            "ERR method bad_spec; expected the block length D (D=24)\r\n"
+        );
     }
 }

@@ -39,6 +39,12 @@ pub enum Request<'a> {
         /// The value (finite).
         value: f32,
     },
+    /// `method` (show the method in use) or `method <spec>` (run this one: a spec as
+    /// [`crate::weighing::WeighingMethod::parse_spec`] reads, e.g. `step:n=5,D=24`).
+    Method {
+        /// The spec as typed; `None` asks for the method in use.
+        spec: Option<&'a str>,
+    },
     /// `help`.
     Help,
 }
@@ -92,7 +98,7 @@ impl ConsoleError {
         match self {
             ConsoleError::NotText => "a line of ASCII text",
             ConsoleError::UnknownCommand => {
-                "one of tare, untare, zero, cal, cancel, unit, rate, raw, record, config, help"
+                "one of tare, untare, zero, cal, cancel, unit, rate, raw, record, config, method, help"
             }
             ConsoleError::Missing { expected }
             | ConsoleError::BadValue { expected }
@@ -174,6 +180,8 @@ pub fn parse_line(line: &[u8]) -> Result<Request<'_>, ConsoleError> {
         } else {
             return Err(ConsoleError::BadValue { expected: ON_OFF });
         }
+    } else if is("method") {
+        Request::Method { spec: words.next() }
     } else if is("config") {
         let word = words
             .next()
@@ -245,6 +253,13 @@ mod tests {
             })
         );
         assert_eq!(parse_line(b"help"), Ok(Request::Help));
+        assert_eq!(parse_line(b"method"), Ok(Request::Method { spec: None }));
+        assert_eq!(
+            parse_line(b"METHOD step:n=5,D=24"),
+            Ok(Request::Method {
+                spec: Some("step:n=5,D=24")
+            })
+        );
     }
 
     #[test]
@@ -287,6 +302,10 @@ mod tests {
             Err(ConsoleError::Missing { expected: VALUE })
         );
         assert_eq!(parse_line(b"tare now"), Err(ConsoleError::Extra));
+        assert_eq!(
+            parse_line(b"method step:n=5, D=24"),
+            Err(ConsoleError::Extra)
+        );
         assert_eq!(parse_line(&[0xff, 0xfe]), Err(ConsoleError::NotText));
         assert!(ConsoleError::UnknownCommand.expected().contains("tare"));
     }

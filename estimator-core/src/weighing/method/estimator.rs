@@ -15,6 +15,11 @@ use super::{WeighingConfig, WeighingMethod};
 /// no `u`.
 pub const UNCERTAINTY_ORDERS: usize = 8;
 
+/// The largest data-driven order a board's estimator is built to hold whatever its
+/// configured method: a method uploaded over the console up to this order runs without a
+/// rebuild, and states its `u` ([`UNCERTAINTY_ORDERS`]).
+pub const UPLOAD_ORDER_CAPACITY: usize = UNCERTAINTY_ORDERS;
+
 /// The configured method as one estimator over samples with the zero removed, answering in
 /// grams. Capacity `N` for the data-driven methods, `S` states and `K` candidates for the
 /// bank (`K` must equal the configured candidate count).

@@ -35,11 +35,13 @@ mod coverage;
 mod estimator;
 mod kind;
 mod onset;
+mod spec;
 
 pub use coverage::{LoadCoverage, LoadScene, LoadScore, MAX_LOADS, MAX_SCENES};
-pub use estimator::{WeighingEstimator, UNCERTAINTY_ORDERS};
+pub use estimator::{WeighingEstimator, UNCERTAINTY_ORDERS, UPLOAD_ORDER_CAPACITY};
 pub use kind::{BankCandidate, WeighingMethod};
 pub use onset::{OnsetConfig, MIN_REFERENCE_SAMPLES};
+pub use spec::{Spec, SpecError};
 
 /// What the Monte Carlo of calibration predicts for a method at the readout time.
 /// `Default`: no runs and every figure zero (a configuration calibration did not score).

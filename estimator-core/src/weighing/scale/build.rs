@@ -1,12 +1,14 @@
 //! The scales the firmware and the tests build: around the step estimator, or around the
 //! configured method (what tuning chose), owned or in storage of its own.
 
+use core::fmt;
 use core::mem::MaybeUninit;
 
-use super::{CountsScale, Scale, ScaleConfig};
+use super::noise::NoiseMetering;
+use super::{CountsScale, Scale, ScaleConfig, ScaleEstimator};
 use crate::estimators::step::{StepConfig, StepEstimator};
 use crate::reading::ConfigError;
-use crate::weighing::method::{WeighingConfig, WeighingEstimator};
+use crate::weighing::method::{RegionError, WeighingConfig, WeighingEstimator};
 
 impl<const N: usize> Scale<StepEstimator<f32, N, N>> {
     /// The step estimator of `order`, `decimation` and `forgetting` in counts (gain 1, no
@@ -70,6 +72,76 @@ impl<'a, const N: usize, const S: usize, const K: usize>
         let config = decisions_for(weighing)?;
         let estimator = storage.write(WeighingEstimator::in_counts(weighing)?);
         Self::new(config, estimator, calibration)
+    }
+}
+
+/// An estimator that can become another configured method where it stands (the console's
+/// `method`): what [`WeighingEstimator::in_counts`] builds, written over the old one.
+pub trait ConfiguredEstimator: ScaleEstimator {
+    /// Become the method of `weighing` in counts, or refuse (this type cannot hold it) and
+    /// stay as it was.
+    fn rebuild(&mut self, weighing: &WeighingConfig) -> Result<(), ConfigError>;
+}
+
+impl<const N: usize, const S: usize, const K: usize> ConfiguredEstimator
+    for WeighingEstimator<f32, N, S, K>
+{
+    fn rebuild(&mut self, weighing: &WeighingConfig) -> Result<(), ConfigError> {
+        *self = Self::in_counts(weighing)?;
+        Ok(())
+    }
+}
+
+impl<E: ConfiguredEstimator + ?Sized> ConfiguredEstimator for &mut E {
+    fn rebuild(&mut self, weighing: &WeighingConfig) -> Result<(), ConfigError> {
+        (**self).rebuild(weighing)
+    }
+}
+
+/// Why a scale refused a method; it runs the one it had.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum MethodRefusal {
+    /// Outside the valid region of the configured model ([`WeighingConfig::check_region`]).
+    Region(RegionError),
+    /// The estimator this board was built with cannot hold it (an order above its
+    /// capacity, a model bank of another size).
+    Estimator(ConfigError),
+}
+
+impl fmt::Display for MethodRefusal {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            MethodRefusal::Region(error) => write!(f, "outside the valid region: {error}"),
+            MethodRefusal::Estimator(ConfigError::Order { capacity, .. }) => {
+                write!(f, "this board's estimator holds orders 1 to {capacity}")
+            }
+            MethodRefusal::Estimator(ConfigError::Model) => {
+                f.write_str("this board's estimator holds no model bank of that size")
+            }
+            MethodRefusal::Estimator(error) => write!(f, "{error}"),
+        }
+    }
+}
+
+impl<E: ConfiguredEstimator> Scale<E> {
+    /// Run the method of `weighing` from now on (its other fields as the board was built
+    /// with), or refuse it and keep the one in use. The run restarts as after a load
+    /// change; the calibration, the zero and the tare stay; the noise metered on the empty
+    /// pan is forgotten (it was metered at the old method's `D`) until the pan is metered
+    /// again; the decisions' residual drift becomes the new method's
+    /// ([`ScaleConfig::for_method`]), every other decision field stays.
+    pub fn set_method(&mut self, weighing: &WeighingConfig) -> Result<(), MethodRefusal> {
+        weighing.check_region().map_err(MethodRefusal::Region)?;
+        self.estimator
+            .rebuild(weighing)
+            .map_err(MethodRefusal::Estimator)?;
+        self.samples_per_update = self.estimator.samples_per_update().max(1);
+        self.config.residual_drift_g =
+            ScaleConfig::for_method(&weighing.method, self.config.sample_rate_hz).residual_drift_g;
+        self.noise = NoiseMetering::new(self.samples_per_update, self.config.noise_window_samples);
+        self.restart_as_load_change();
+        Ok(())
     }
 }
 
@@ -200,6 +272,113 @@ mod tests {
         assert!(
             Scale::<WeighingEstimator<f32, 8, 5, 1>>::configured(&too_big, calibration()).is_err()
         );
+    }
+
+    /// A scale changes method where it stands (the console's `method`): after the change
+    /// it reads exactly as a scale built with the new method from the start would, over
+    /// the same samples after a load change; a method it cannot run is refused with the
+    /// reason and changes nothing (the readings stay those of a scale never asked).
+    #[test]
+    fn a_scale_changes_method_in_place_or_refuses_and_keeps_its_own() {
+        type Built = Scale<WeighingEstimator<f32, 8, 5, 1>>;
+        let first = weighing(ScaleConfig::DEFAULT_METHOD);
+        let second = weighing(WeighingMethod::Step {
+            order: 5,
+            decimation: 24,
+            forgetting: 1.0,
+        });
+        let mut changed = Built::configured(&first, calibration()).unwrap();
+        let mut asked_wrong = Built::configured(&first, calibration()).unwrap();
+        let mut untouched = Built::configured(&first, calibration()).unwrap();
+        let mut built_new = Built::configured(&second, calibration()).unwrap();
+        // What the empty pan's first second leaves behind depends on the method that ran
+        // it (the zero tracked while it read empty, the noise metered at its `D`): without
+        // either, the scales' futures may be compared sample by sample.
+        let decisions = ScaleConfig {
+            zero_tracking_rate_g_per_s: 0.0,
+            consistency_check: false,
+            ..*changed.config()
+        };
+        for scale in [
+            &mut changed,
+            &mut asked_wrong,
+            &mut untouched,
+            &mut built_new,
+        ] {
+            scale.reconfigure(decisions).unwrap();
+        }
+        let mut cell = Cell::new(0.4);
+        for _ in 0..4000 {
+            let sample = cell.sample();
+            for scale in [
+                &mut changed,
+                &mut asked_wrong,
+                &mut untouched,
+                &mut built_new,
+            ] {
+                scale.push(sample);
+            }
+        }
+        changed.set_method(&second).unwrap();
+        assert_eq!(changed.estimator().samples_per_update(), 24);
+        let too_big = weighing(WeighingMethod::Step {
+            order: 9,
+            decimation: 16,
+            forgetting: 1.0,
+        });
+        assert_eq!(
+            asked_wrong.set_method(&too_big),
+            Err(MethodRefusal::Estimator(ConfigError::Order {
+                requested: 9,
+                capacity: 8
+            }))
+        );
+        let biased = weighing(WeighingMethod::Step {
+            order: 7,
+            decimation: 1,
+            forgetting: 1.0,
+        });
+        assert!(matches!(
+            asked_wrong.set_method(&biased),
+            Err(MethodRefusal::Region(RegionError::Decimation { .. }))
+        ));
+        assert_eq!(asked_wrong.estimator().samples_per_update(), 16);
+        // The change restarted `changed`'s run: its raw tests re-arm once the pan has
+        // settled again (1.5 s), as `built_new`'s did at boot.
+        for _ in 0..8000 {
+            let sample = cell.sample();
+            for scale in [
+                &mut changed,
+                &mut asked_wrong,
+                &mut untouched,
+                &mut built_new,
+            ] {
+                scale.push(sample);
+            }
+        }
+        // A load change restarts the run of the scale built with the new method too.
+        cell.load_g = 138.32;
+        let mut last = None;
+        for k in 0..8000 {
+            let sample = cell.sample();
+            let reading = changed.push(sample);
+            let reference = built_new.push(sample);
+            assert_eq!(
+                asked_wrong.push(sample),
+                untouched.push(sample),
+                "sample {k}"
+            );
+            // From the new run on (the drop is seen within 100 ms; before it, each scale's
+            // empty-pan run started at its own sample).
+            if k > 400 {
+                assert_eq!(reading.mass_g, reference.mass_g, "sample {k}");
+                assert_eq!(reading.state, reference.state, "sample {k}");
+            }
+            last = Some(reading);
+        }
+        let last = last.unwrap();
+        assert_eq!(last.state, ScaleState::Stable, "{last:?}");
+        assert!((last.mass_g.unwrap() - 138.32).abs() < 0.14, "{last:?}");
     }
 
     /// Max and e of the weighing configuration reach the scale: a 300 g scale with

@@ -64,6 +64,7 @@ mod reading;
 pub(crate) mod test_scene;
 mod zero;
 
+pub use build::{ConfiguredEstimator, MethodRefusal};
 pub use config::ScaleConfig;
 pub use estimator::ScaleEstimator;
 pub use reading::{

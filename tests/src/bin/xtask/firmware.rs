@@ -23,6 +23,7 @@ use tests::console_check;
 use tests::e2e::{self, RunLog, Scene};
 use tests::firmware_log;
 use tests::qemu::{MACHINE_ARGS, QEMU};
+use tests::recording::{self, ConsoleScript, RecordScript, UploadScript};
 use tests::replay_check;
 
 use crate::util::{cargo, run_checked, target_dir, THUMB_TARGET};
@@ -138,6 +139,7 @@ pub fn e2e_test() -> Result<()> {
     check_replay_formats(&elf)?;
     e2e_demo(&elf)?;
     e2e_commands(&elf)?;
+    e2e_record_loop(&elf)?;
     e2e_checked_demo(&elf)?;
     e2e_faults(&elf)
 }
@@ -316,6 +318,153 @@ fn e2e_commands(elf: &Path) -> Result<()> {
         "a reset does not keep the calibration and settings stored before it",
     )?;
     println!("firmware command path end-to-end: all criteria met");
+    Ok(())
+}
+
+/// Record → calibrate → upload on the QEMU board (`tests::recording`): the record scene's
+/// three drops recorded over the console and checked against the scene's codes,
+/// `host-sim records` and `host-sim calibrate` on them as a user runs them, the chosen
+/// method typed as `method <spec>` in the next run (on the same flash), which must weigh
+/// the demo's drops within the demo's criteria.
+fn e2e_record_loop(elf: &Path) -> Result<()> {
+    println!(
+        "record loop: `record` before each of 3 drops of {} g, host-sim records + calibrate, `method <spec>` in the next run",
+        host_sim::qemu_scenes::RECORD_SCENE_MASS_G
+    );
+    let dir = crate::util::target_dir().join("record-loop");
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let image = std::env::temp_dir().join(format!(
+        "fast-weighing-record-flash-{}.bin",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_file(&image);
+    let image_arg = image.to_string_lossy().into_owned();
+    let mut script = RecordScript::new();
+    let scene = [recording::SCENE_NAME, image_arg.as_str()];
+    let run = run_firmware_scene(elf, &ICOUNT_FAST, false, &scene, Some(&mut script), None)?;
+    if !run.exited_successfully {
+        bail!(
+            "the record scene did not end with status 0:\n  {}",
+            run.lines.join("\n  ")
+        );
+    }
+    let transcript = dir.join("console.txt");
+    std::fs::write(&transcript, script.transcript().join("\n") + "\n")
+        .with_context(|| format!("writing {}", transcript.display()))?;
+    let recordings = recording::check_recordings(script.transcript(), &recording::scene_codes())
+        .map_err(|failures| {
+            anyhow!(
+                "the board's recordings ({}) fail their criteria:\n  - {}",
+                transcript.display(),
+                failures.join("\n  - ")
+            )
+        })?;
+    println!(
+        "  {} recordings of {} samples, each the scene's codes from 0.25 s before the detected landing",
+        recordings.len(),
+        recording::RECORD_SAMPLES
+    );
+    let host_sim = |args: &[&str]| -> Result<String> {
+        let output = crate::util::cargo()
+            .args(["run", "--quiet", "-p", "host-sim", "--"])
+            .args(args)
+            .output()
+            .context("cannot start cargo run -p host-sim")?;
+        let stdout = String::from_utf8_lossy(&output.stdout).into_owned();
+        if !output.status.success() {
+            bail!(
+                "host-sim {} failed ({}):\n{stdout}{}",
+                args.join(" "),
+                output.status,
+                String::from_utf8_lossy(&output.stderr)
+            );
+        }
+        Ok(stdout)
+    };
+    let dir_arg = dir.to_string_lossy().into_owned();
+    let transcript_arg = transcript.to_string_lossy().into_owned();
+    print!(
+        "{}",
+        host_sim(&[
+            "records",
+            "--console",
+            &transcript_arg,
+            "--out-dir",
+            &dir_arg,
+            "--prefix",
+            "drop"
+        ])?
+    );
+    let drops: Vec<String> = (1..=recordings.len())
+        .map(|n| {
+            dir.join(format!("drop-{n}.csv"))
+                .to_string_lossy()
+                .into_owned()
+        })
+        .collect();
+    let config = dir.join("weighing.toml");
+    let config_arg = config.to_string_lossy().into_owned();
+    let mass = host_sim::qemu_scenes::RECORD_SCENE_MASS_G.to_string();
+    let mut calibrate = vec!["calibrate"];
+    for drop in &drops {
+        calibrate.extend(["--drop", drop.as_str()]);
+    }
+    calibrate.extend([
+        "--mass-g",
+        &mass,
+        "--target-pct",
+        "0.05",
+        "--min-load-g",
+        &mass,
+        "--out",
+        &config_arg,
+    ]);
+    let started = Instant::now();
+    let chosen = host_sim(&calibrate)?;
+    println!(
+        "  host-sim calibrate ({:.1} s): {}",
+        started.elapsed().as_secs_f64(),
+        chosen.lines().next().unwrap_or("")
+    );
+    let toml = std::fs::read_to_string(&config)
+        .with_context(|| format!("reading {}", config.display()))?;
+    let spec = recording::method_spec(&toml)
+        .ok_or_else(|| anyhow!("{} has no method.spec", config.display()))?;
+    // Uploaded on a short run, then a reset: the demo weighs from boot with the method the
+    // board stored (typed during the demo, the change would restart its first run).
+    let mut upload = UploadScript::new(&spec);
+    let boot = ["boot", image_arg.as_str()];
+    let uploaded = run_firmware_scene(elf, &ICOUNT_FAST, false, &boot, Some(&mut upload), None);
+    let demo = ["demo", image_arg.as_str()];
+    let weighed =
+        uploaded.and_then(|_| run_firmware_scene(elf, &ICOUNT_FAST, false, &demo, None, None));
+    let _ = std::fs::remove_file(&image);
+    let weighed = weighed?;
+    let answer = upload.answer().unwrap_or("no answer").to_string();
+    println!("  typed `method {spec}`: {answer}");
+    if !answer.starts_with("OK method") || answer.contains("not stored") {
+        bail!("the board did not take and store the calibrated method: {answer}");
+    }
+    let uploaded_spec = estimator_core::weighing::WeighingMethod::parse_spec(&spec)
+        .map(|method| method.spec().to_string())
+        .map_err(|error| anyhow!("{spec}: {error}"))?;
+    let settings = weighed
+        .lines
+        .iter()
+        .find(|line| line.starts_with("settings "))
+        .cloned()
+        .unwrap_or_default();
+    println!("  after the reset: {settings}");
+    if !settings.ends_with(&format!(" method={uploaded_spec}")) {
+        bail!("the run after the upload logs `{settings}`, expected the settings stored with method={uploaded_spec}");
+    }
+    let report = e2e::check(&Scene::demo(), &weighed);
+    require_passed(
+        &report.summary(),
+        &report.failures,
+        "the demo weighed with the uploaded method fails its criteria",
+    )?;
+    println!("firmware record -> calibrate -> upload loop: all criteria met");
     Ok(())
 }
 
@@ -679,7 +828,7 @@ fn run_firmware(
     elf: &Path,
     icount: &[&str],
     live: bool,
-    script: Option<&mut CommandScript>,
+    script: Option<&mut dyn ConsoleScript>,
 ) -> Result<RunLog> {
     let scene: &[&str] = if script.is_some() {
         &[commands::SCENE_NAME]
@@ -697,7 +846,7 @@ fn run_firmware_scene(
     icount: &[&str],
     live: bool,
     scene: &[&str],
-    mut script: Option<&mut CommandScript>,
+    mut script: Option<&mut dyn ConsoleScript>,
     tap: Option<mpsc::Sender<String>>,
 ) -> Result<RunLog> {
     let elf_bytes = std::fs::read(elf).with_context(|| format!("reading {}", elf.display()))?;
@@ -898,10 +1047,10 @@ fn decode_lines(
 
 /// Print `line` when `live`; after a readout line, type the lines the script asks for on
 /// the console.
-fn answer_line(
+fn answer_line<'s>(
     line: &str,
     live: bool,
-    script: Option<&mut CommandScript>,
+    script: Option<&mut (dyn ConsoleScript + 's)>,
     console: Option<&mut UnixStream>,
 ) {
     if live {
