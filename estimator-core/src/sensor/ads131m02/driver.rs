@@ -90,6 +90,32 @@ pub enum Error<E> {
     },
 }
 
+impl<E> Error<E> {
+    /// The same error with the bus's error mapped (to log it where `E` cannot be).
+    pub fn map_spi<F>(self, map: impl FnOnce(E) -> F) -> Error<F> {
+        match self {
+            Self::Spi(error) => Error::Spi(map(error)),
+            Self::Crc { computed, received } => Error::Crc { computed, received },
+            Self::ResetNotAcknowledged { response } => Error::ResetNotAcknowledged { response },
+            Self::WrongId { id } => Error::WrongId { id },
+            Self::WriteNotAcknowledged { register, response } => {
+                Error::WriteNotAcknowledged { register, response }
+            }
+            Self::ReadBack {
+                register,
+                written,
+                read,
+            } => Error::ReadBack {
+                register,
+                written,
+                read,
+            },
+            Self::NotReady { status } => Error::NotReady { status },
+            Self::UnexpectedReset { status } => Error::UnexpectedReset { status },
+        }
+    }
+}
+
 /// An ADS131M02 on an SPI device (mode 1, CS framing each 12-byte frame).
 #[derive(Debug)]
 pub struct Ads131m02<SPI> {
