@@ -294,6 +294,70 @@ mod tests {
         }
     }
 
+    /// Figures for each chain (README): the firmware's default method (`step:n=5,D=24`, f64
+    /// here) on a 138.32 g drop, started at the drop with the zero known, read 100 ms later,
+    /// with only each chain's own noise: the INA114's through the 100 Hz Butterworth into the
+    /// 16-bit converter, or the ADS131M02's. Prints the raw noise per sample and the RMS error.
+    /// `cargo test --release -p host-sim --lib ads131m02::tests::chain_figures -- --ignored --nocapture`
+    #[test]
+    #[ignore = "prints figures (a few seconds)"]
+    fn chain_figures() {
+        use crate::sensor::SensorChain;
+        use estimator_core::{Estimator, StepConfig, StepEstimator};
+        extern crate std;
+        const RUNS: u64 = 400;
+        const DROP_G: f64 = 138.32;
+        const READOUT: usize = 400;
+        fn error_at_readout(adc: &mut impl AdcSource, counts_per_gram: f64, zero_code: f64) -> f64 {
+            let config = StepConfig::new(5, counts_per_gram).with_decimation(24);
+            let mut estimator = StepEstimator::<f64, 8>::new(config).unwrap();
+            let mut reading = None;
+            for _ in 0..READOUT {
+                let code = f64::from(adc.read().unwrap());
+                reading = estimator.push(code - zero_code).estimate;
+            }
+            reading.unwrap() - DROP_G
+        }
+        let script = || {
+            let mut script = Script::<2>::new(1.0);
+            script.push(LoadEvent::step(0.0, DROP_G)).unwrap();
+            script
+        };
+        let rms = |errors: &[f64]| {
+            libm::sqrt(errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64)
+        };
+
+        let reference = SensorChain::reference();
+        let mut amplifier_only = Disturbances::none();
+        amplifier_only.amplifier_noise = true;
+        let errors: std::vec::Vec<f64> = (0..RUNS)
+            .map(|seed| {
+                let mut adc = SimulatedAdc::new(reference, script(), amplifier_only, seed);
+                error_at_readout(&mut adc, reference.counts_per_gram(), reference.zero_code())
+            })
+            .collect();
+        std::println!(
+            "16-bit chain (INA114, 100 Hz Butterworth, its noise only): {:.1} counts/g, raw noise {:.4} g before the filter, RMS error at 100 ms {:.5} g",
+            reference.counts_per_gram(),
+            reference.amplifier_noise_g(),
+            rms(&errors)
+        );
+
+        let chain = Ads131m02Chain::reference();
+        let errors: std::vec::Vec<f64> = (0..RUNS)
+            .map(|seed| {
+                let mut adc = Ads131m02Adc::new(chain, script(), Disturbances::none(), seed);
+                error_at_readout(&mut adc, chain.counts_per_gram(), chain.zero_code())
+            })
+            .collect();
+        std::println!(
+            "ADS131M02 chain (gain 128, OSR 1024, its noise only): {:.1} counts/g, raw noise {:.4} g per sample, RMS error at 100 ms {:.5} g",
+            chain.counts_per_gram(),
+            chain.noise_g(),
+            rms(&errors)
+        );
+    }
+
     /// The sinc3 settles in 3 output samples: a step in its input at an output boundary
     /// gives a partial output twice, the new level exactly on the third.
     #[test]
