@@ -92,6 +92,19 @@ fn crc_is_ccitt_false() {
     assert_eq!(crc16_ccitt(&[]), 0xFFFF);
 }
 
+/// A frame written out byte for byte, its CRC from an independent implementation (Python's
+/// `binascii.crc_hqx(frame, 0xFFFF)`, D322h), not from this crate: the codes come out signed.
+#[test]
+fn a_literal_frame_is_read() {
+    let reply = vec![
+        0x01, 0x03, 0x00, 0x12, 0x34, 0x56, 0xFE, 0xDC, 0xBA, 0xD3, 0x22, 0x00,
+    ];
+    let mut adc = initialised(&frame(0x0000, 0, reply));
+    let frame = adc.read_frame().unwrap();
+    assert_eq!(frame.codes, [0x12_3456, 0xFE_DCBA - 0x100_0000]);
+    adc.release().done();
+}
+
 /// The init sequence sends exactly the data sheet's frames (the mock fails on any other
 /// byte) and consumes every one of them.
 #[test]
