@@ -420,6 +420,9 @@ pub fn bench() -> Result<()> {
 
 /// The variable a user names another weighing configuration (TOML) with.
 const WEIGHING_CONFIG_VAR: &str = "FIRMWARE_WEIGHING_CONFIG";
+/// The weighing configuration of the ADS131M02 image (calibrated on drops of the simulated
+/// 24-bit chain), relative to `firmware/`.
+const ADS131M02_CONFIG: &str = "weighing-ads131m02.toml";
 
 /// The constants of the weighing configuration `config`, generated into the target
 /// directory; their path.
@@ -651,11 +654,20 @@ fn build_with_config(board: Board, bench: bool, config: Option<&Path>) -> Result
     let mut command = cargo();
     let chosen = match config {
         Some(config) => Some(config.to_path_buf()),
-        None => std::env::var_os(WEIGHING_CONFIG_VAR).map(|relative| {
-            crate::util::workspace_root()
-                .join("firmware")
-                .join(relative)
-        }),
+        None => std::env::var_os(WEIGHING_CONFIG_VAR)
+            .map(|relative| {
+                crate::util::workspace_root()
+                    .join("firmware")
+                    .join(relative)
+            })
+            // The 24-bit chain's codes are outside the shipped (16-bit) config's rails.
+            .or_else(|| {
+                (board == Board::Stm32f411Ads131m02).then(|| {
+                    crate::util::workspace_root()
+                        .join("firmware")
+                        .join(ADS131M02_CONFIG)
+                })
+            }),
     };
     match chosen {
         Some(config) => {
