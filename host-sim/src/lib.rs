@@ -39,6 +39,7 @@
 /// The matrix exponential lives in the core (one implementation); re-exported for the
 /// simulator's exact ZOH and its tests.
 pub use estimator_core::numerics::expm;
+pub mod ads131m02;
 pub mod qemu_scenes;
 pub mod sensor;
 pub mod simulated;

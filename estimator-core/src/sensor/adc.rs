@@ -12,6 +12,9 @@ pub enum AdcError {
     Overrun,
     /// No conversion was ready when one was expected.
     NotReady,
+    /// The conversion did not arrive intact: the bus failed, the frame's check failed, or
+    /// the converter lost its configuration (an external converter on SPI).
+    Transfer,
 }
 
 /// A source of raw ADC codes, one per sample period.

@@ -6,6 +6,9 @@
 //! operator's commands too: a short press tares, a long press (2 s or more) calibrates with
 //! the reference mass, a short press during a calibration cancels it; the record goes to
 //! flash sectors 6–7 (power-fail safe).
+//!
+//! Built with feature `ads131m02`, an external ADS131M02 on SPI1 converts instead: its DRDY
+//! edge (EXTI3) runs the hand-off, which reads one frame and queues its sample the same way.
 #![no_std]
 #![no_main]
 
@@ -14,32 +17,43 @@ use defmt_rtt as _;
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
 mod app {
     use cortex_m::peripheral::DWT;
-    use estimator_core::weighing::{Command, KeyDebouncer, KeyPress, RawSample, SampleSequence};
+    #[cfg(not(feature = "ads131m02"))]
+    use estimator_core::weighing::RawSample;
+    use estimator_core::weighing::{Command, KeyDebouncer, KeyPress, SampleSequence};
     use firmware::console::Console;
     use firmware::fault;
     use firmware::pipeline::{
         self, EstimatorStorage, FirmwareRecorder, Lines, Pipeline, SampleMessage, SampleQueue,
         SampleWatchdog, QUEUE_CAPACITY, SAMPLE_RATE_HZ,
     };
+    #[cfg(feature = "ads131m02")]
+    use firmware::stm32f411::ads131m02 as external;
     use firmware::stm32f411::{
-        self as board, CalibrationFlashStore, UsbConsolePort, DMA_BLOCK, FRONT_END,
+        self as board, CalibrationFlashStore, DrdyHandoff, UsbConsolePort, DMA_BLOCK, FRONT_END,
         KEY_DEBOUNCE_MS, KEY_LONG_PRESS_MS, KEY_POLL_HZ, REFERENCE_MASS_G, SYSCLK_HZ,
         USB_RX_BUFFER, USB_TX_BUFFER,
     };
     use heapless::spsc::{Consumer, Producer};
+    // The internal converter's types name resources RTIC declares in either build.
+    #[cfg(not(feature = "ads131m02"))]
     use stm32f4xx_hal::{
-        adc::{
-            config::{
-                AdcConfig, Dma, ExternalTrigger, Resolution, SampleTime, Sequence, TriggerMode,
-            },
-            Adc,
+        adc::config::{
+            AdcConfig, Dma, ExternalTrigger, Resolution, SampleTime, Sequence, TriggerMode,
         },
-        dma::{config::DmaConfig, DMAError, PeripheralToMemory, Stream0, StreamsTuple, Transfer},
+        dma::{config::DmaConfig, DMAError, StreamsTuple},
+    };
+    use stm32f4xx_hal::{
+        adc::Adc,
+        dma::{PeripheralToMemory, Stream0, Transfer},
+        pac::{ADC1, DMA2},
+    };
+    use stm32f4xx_hal::{
         gpio::{gpioa::PA0, Edge, Input},
         otg_fs::{UsbBus, UsbBusType, USB},
-        pac::{self, ADC1, DMA2, EXTI},
+        pac::{self, EXTI},
         prelude::*,
         rcc::{Config, Rcc},
+        syscfg::SysCfg,
         timer::{CounterHz, Event, Flag},
         watchdog::IndependentWatchdog,
     };
@@ -50,6 +64,7 @@ mod app {
         Transfer<Stream0<DMA2>, 0, Adc<ADC1>, PeripheralToMemory, &'static mut [u16; DMA_BLOCK]>;
 
     /// The 12-bit converter's rails.
+    #[cfg(not(feature = "ads131m02"))]
     const MAX_CODE: u16 = 4095;
     /// The readout task's vector, pended by the estimator task after each readout.
     const READOUT: pac::Interrupt = pac::Interrupt::EXTI2;
@@ -79,13 +94,12 @@ mod app {
         fn new(
             pin: PA0,
             mut exti: EXTI,
-            syscfg: pac::SYSCFG,
+            syscfg: &mut SysCfg,
             tim3: pac::TIM3,
             rcc: &mut Rcc,
         ) -> Self {
-            let mut syscfg = syscfg.constrain(rcc);
             let mut pin = pin.into_pull_up_input();
-            pin.make_interrupt_source(&mut syscfg);
+            pin.make_interrupt_source(syscfg);
             pin.trigger_on_edge(&mut exti, Edge::Falling);
             pin.enable_interrupt(&mut exti);
             let mut poll_timer = tim3.counter_hz(rcc);
@@ -100,7 +114,7 @@ mod app {
     }
 
     /// The config's counts (noise variance, rails) are those of the chain it was calibrated
-    /// on; this board's converter is 12 bits. The method and the model carry over, the
+    /// on; this board's converter is 12 bits (24 with the ADS131M02). The method and the model carry over, the
     /// bias-compensated method's noise variance does not: say so when they differ.
     fn note_config_converter() {
         let config_max_code = pipeline::config::WEIGHING.onset.rail_high;
@@ -124,20 +138,30 @@ mod app {
 
     #[local]
     struct Local {
+        #[cfg(not(feature = "ads131m02"))]
         transfer: AdcTransfer,
+        #[cfg(not(feature = "ads131m02"))]
         spare: Option<&'static mut [u16; DMA_BLOCK]>,
+        #[cfg(feature = "ads131m02")]
+        external: DrdyHandoff,
+        #[cfg(not(feature = "ads131m02"))]
         producer: Producer<'static, SampleMessage>,
         consumer: Consumer<'static, SampleMessage>,
+        #[cfg(not(feature = "ads131m02"))]
         sequence: u32,
         watchdog: SampleWatchdog<IndependentWatchdog>,
         usb_device: UsbDevice<'static, UsbBusType>,
+        #[cfg(not(feature = "ads131m02"))]
         _trigger: CounterHz<pac::TIM2>,
     }
 
     #[init(local = [
         queue: SampleQueue = SampleQueue::new(),
+        #[cfg(not(feature = "ads131m02"))]
         first: [u16; DMA_BLOCK] = [0; DMA_BLOCK],
+        #[cfg(not(feature = "ads131m02"))]
         second: [u16; DMA_BLOCK] = [0; DMA_BLOCK],
+        #[cfg(not(feature = "ads131m02"))]
         third: [u16; DMA_BLOCK] = [0; DMA_BLOCK],
         estimator: EstimatorStorage = EstimatorStorage::uninit(),
         recorder: FirmwareRecorder = FirmwareRecorder::new(),
@@ -171,42 +195,69 @@ mod app {
         pipeline::log_config();
         note_config_converter();
 
+        let gpioa = device.GPIOA.split(&mut rcc);
+        let mut syscfg = device.SYSCFG.constrain(&mut rcc);
+        #[cfg(feature = "ads131m02")]
+        let mut exti = device.EXTI;
+        #[cfg(not(feature = "ads131m02"))]
+        let exti = device.EXTI;
+
+        // The ADS131M02 on SPI1, each conversion announced on DRDY (PA3, EXTI3).
+        #[cfg(feature = "ads131m02")]
+        let (adc, drdy) = external::external_adc(
+            device.SPI1,
+            external::AdcPins {
+                sck: gpioa.pa5,
+                miso: gpioa.pa6,
+                mosi: gpioa.pa7,
+                cs: gpioa.pa4,
+                drdy: gpioa.pa3,
+            },
+            &mut syscfg,
+            &mut exti,
+            &mut rcc,
+        );
+
         // INA114 output on PA1 (ADC1_IN1), converted on every TIM2 update. (PA0 is the
         // Black Pill's KEY button.)
-        let gpioa = device.GPIOA.split(&mut rcc);
+        #[cfg(not(feature = "ads131m02"))]
         let load_cell = gpioa.pa1.into_analog();
-        let adc_config = AdcConfig::default()
-            .resolution(Resolution::Twelve)
-            .external_trigger(TriggerMode::RisingEdge, ExternalTrigger::Tim_2_trgo)
-            .dma(Dma::Continuous);
-        let mut adc = Adc::new(device.ADC1, true, adc_config, &mut rcc);
-        adc.configure_channel(&load_cell, Sequence::One, SampleTime::Cycles_144);
-        adc.enable();
+        #[cfg(not(feature = "ads131m02"))]
+        let (transfer, trigger) = {
+            let adc_config = AdcConfig::default()
+                .resolution(Resolution::Twelve)
+                .external_trigger(TriggerMode::RisingEdge, ExternalTrigger::Tim_2_trgo)
+                .dma(Dma::Continuous);
+            let mut adc = Adc::new(device.ADC1, true, adc_config, &mut rcc);
+            adc.configure_channel(&load_cell, Sequence::One, SampleTime::Cycles_144);
+            adc.enable();
 
-        let streams = StreamsTuple::new(device.DMA2, &mut rcc);
-        let dma_config = DmaConfig::default()
-            .memory_increment(true)
-            .double_buffer(true)
-            .transfer_complete_interrupt(true);
-        let mut transfer = Transfer::init_peripheral_to_memory(
-            streams.0,
-            adc,
-            cx.local.first,
-            Some(cx.local.second),
-            dma_config,
-        );
-        transfer.start(|_adc| {});
+            let streams = StreamsTuple::new(device.DMA2, &mut rcc);
+            let dma_config = DmaConfig::default()
+                .memory_increment(true)
+                .double_buffer(true)
+                .transfer_complete_interrupt(true);
+            let mut transfer = Transfer::init_peripheral_to_memory(
+                streams.0,
+                adc,
+                cx.local.first,
+                Some(cx.local.second),
+                dma_config,
+            );
+            transfer.start(|_adc| {});
 
-        // TIM2 at 4 kHz with its update event as TRGO: the ADC trigger, no CPU involved.
-        let mut trigger = device.TIM2.counter_hz(&mut rcc);
-        if trigger.start(SAMPLE_RATE_HZ.Hz()).is_err() {
-            defmt::panic!("TIM2 cannot run at {=u32} Hz", SAMPLE_RATE_HZ);
-        }
-        // Safety: TIM2 is owned by `trigger`; this only selects its master mode (TRGO =
-        // update), a field the HAL's counter does not use.
-        unsafe { (*pac::TIM2::ptr()).cr2().modify(|_, w| w.mms().update()) };
+            // TIM2 at 4 kHz with its update event as TRGO: the ADC trigger, no CPU involved.
+            let mut trigger = device.TIM2.counter_hz(&mut rcc);
+            if trigger.start(SAMPLE_RATE_HZ.Hz()).is_err() {
+                defmt::panic!("TIM2 cannot run at {=u32} Hz", SAMPLE_RATE_HZ);
+            }
+            // Safety: TIM2 is owned by `trigger`; this only selects its master mode (TRGO =
+            // update), a field the HAL's counter does not use.
+            unsafe { (*pac::TIM2::ptr()).cr2().modify(|_, w| w.mms().update()) };
+            (transfer, trigger)
+        };
 
-        let key = Key::new(gpioa.pa0, device.EXTI, device.SYSCFG, device.TIM3, &mut rcc);
+        let key = Key::new(gpioa.pa0, exti, &mut syscfg, device.TIM3, &mut rcc);
 
         // The console on USB (PA11/PA12, the board's USB-C connector): a CDC ACM serial port.
         let usb = USB::new(
@@ -271,13 +322,20 @@ mod app {
                 store,
             },
             Local {
+                #[cfg(not(feature = "ads131m02"))]
                 transfer,
+                #[cfg(not(feature = "ads131m02"))]
                 spare: Some(cx.local.third),
+                #[cfg(feature = "ads131m02")]
+                external: DrdyHandoff::new(adc, drdy, producer),
+                #[cfg(not(feature = "ads131m02"))]
                 producer,
                 consumer,
+                #[cfg(not(feature = "ads131m02"))]
                 sequence: 0,
                 watchdog: SampleWatchdog::new(watchdog, 0),
                 usb_device,
+                #[cfg(not(feature = "ads131m02"))]
                 _trigger: trigger,
             },
         )
@@ -286,6 +344,7 @@ mod app {
     /// The sample hand-off: swap the finished DMA buffer for the spare one and queue its
     /// samples. A DMA overrun loses the block: its sequence numbers are skipped, so the
     /// estimator task counts every lost sample.
+    #[cfg(not(feature = "ads131m02"))]
     #[task(binds = DMA2_STREAM0, priority = 3, local = [transfer, spare, producer, sequence])]
     fn sample_handoff(cx: sample_handoff::Context) {
         let Some(spare) = cx.local.spare.take() else {
@@ -315,6 +374,15 @@ mod app {
                 *cx.local.spare = Some(buffer);
             }
         }
+        rtic::pend(pac::Interrupt::EXTI1);
+    }
+
+    /// The sample hand-off of the ADS131M02 build, at its DRDY edge: one frame read through
+    /// the converter seam and queued (`DrdyHandoff::hand_off`).
+    #[cfg(feature = "ads131m02")]
+    #[task(binds = EXTI3, priority = 3, local = [external])]
+    fn drdy_handoff(cx: drdy_handoff::Context) {
+        cx.local.external.hand_off();
         rtic::pend(pac::Interrupt::EXTI1);
     }
 
