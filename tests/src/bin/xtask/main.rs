@@ -160,6 +160,26 @@ fn test(scope: Scope) -> Result<()> {
         steps.run("cargo clippy (host crates, -D warnings)", || {
             run_checked(cargo().args(["clippy", "--all-targets", "--", "-D", "warnings"]))
         });
+        // The external converter's driver is behind a feature no default member enables:
+        // its clippy and its embedded-hal-mock tests run here, explicitly.
+        steps.run(
+            "ADS131M02 driver: clippy and mock tests (estimator-core --features ads131m02)",
+            || {
+                let feature = ["-p", "estimator-core", "--features", "ads131m02"];
+                run_checked(cargo().arg("clippy").args(feature).args([
+                    "--all-targets",
+                    "--",
+                    "-D",
+                    "warnings",
+                ]))?;
+                run_checked(
+                    cargo()
+                        .arg("test")
+                        .args(feature)
+                        .args(["--lib", "sensor::ads131m02"]),
+                )
+            },
+        );
     }
     let mut on_target_elf_dir = None;
     if target {
