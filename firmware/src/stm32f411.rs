@@ -119,6 +119,14 @@ pub const SYSCLK_HZ: u32 = 84_000_000;
 /// 128 KiB erase pages, as offsets from the start of flash (`0x0804_0000..0x0808_0000`).
 pub const CALIBRATION_FLASH: Range<u32> = 0x4_0000..0x8_0000;
 
+/// Codes at each rail of ADC1 its front end cannot reach (`AdcSource::rail_guard_codes`):
+/// a code within 40 codes (32 mV) of 0 or 4095 reads saturated. The INA114 does not swing
+/// to its supply rails; with REF at 0.5 V and 600 g spanning 2.55 V its output for every
+/// load up to Max lies at codes 620–3784, far inside the band, so the band only catches
+/// an output clipped at a rail (or short of it by up to 32 mV). A placeholder until the
+/// board's own clip levels are measured: a larger measured margin goes here.
+pub const ADC_RAIL_GUARD_CODES: u32 = 40;
+
 /// Samples per DMA buffer: the DMA fills one buffer while the hand-off drains the other.
 pub const DMA_BLOCK: usize = 8;
 

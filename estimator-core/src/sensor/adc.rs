@@ -1,8 +1,11 @@
 //! The one seam between the estimators and the converter behind the INA114.
 //!
 //! embedded-hal 1.0 has no ADC trait, so this small one is ours. The real board implements
-//! it over its HAL (timer-triggered conversions, DMA); the simulator and the QEMU board
-//! implement it with the sensor model; tests implement it with scripted fakes.
+//! it over its HAL (timer-triggered conversions into DMA blocks, read through
+//! [`CodeBlock`]; an external converter's frames), the simulator and the QEMU board
+//! with the sensor model, tests with scripted fakes. A signed converter (the 24-bit
+//! ADS131M02) reports offset binary, `code + 2^(bits−1)`, so every board's rails are `0`
+//! and [`AdcSource::max_code`].
 
 /// Why a conversion produced no usable code.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -42,9 +45,76 @@ pub trait AdcSource {
     }
 }
 
+/// A block of conversions a DMA stream already wrote, read through the seam one code at a
+/// time: the STM32's ADC1 fills a buffer of codes, and the hand-off takes each through
+/// [`crate::weighing::RawSample::read`] exactly as a converter read one by one, with the
+/// same rails and guard band. Reading past the block's end is [`AdcError::NotReady`].
+#[derive(Clone, Debug)]
+pub struct CodeBlock<'a, C> {
+    codes: &'a [C],
+    next: usize,
+    max_code: u32,
+    rail_guard_codes: u32,
+}
+
+impl<'a, C: Copy + Into<u32>> CodeBlock<'a, C> {
+    /// The `codes` of a converter whose largest code is `max_code`, its front end clipping
+    /// `rail_guard_codes` short of each rail ([`AdcSource::rail_guard_codes`]).
+    pub fn new(codes: &'a [C], max_code: u32, rail_guard_codes: u32) -> Self {
+        Self {
+            codes,
+            next: 0,
+            max_code,
+            rail_guard_codes,
+        }
+    }
+}
+
+impl<C: Copy + Into<u32>> AdcSource for CodeBlock<'_, C> {
+    fn max_code(&self) -> u32 {
+        self.max_code
+    }
+
+    #[inline]
+    fn read(&mut self) -> Result<u32, AdcError> {
+        let code = self.codes.get(self.next).ok_or(AdcError::NotReady)?;
+        self.next += 1;
+        Ok((*code).into())
+    }
+
+    fn rail_guard_codes(&self) -> u32 {
+        self.rail_guard_codes
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A DMA block of 12-bit codes read through the seam: each code in order, the guard
+    /// band saturated as for any converter (the hand-off checked only the rails before,
+    /// `code == 0 || code >= 4095`), and nothing past the block's end.
+    #[test]
+    fn a_dma_block_reads_through_the_seam_with_its_guard_band() {
+        use crate::weighing::RawSample;
+        let codes: [u16; 6] = [620, 0, 39, 40, 4055, 3784];
+        let mut block = CodeBlock::new(&codes, 4095, 40);
+        let read: [RawSample; 7] = core::array::from_fn(|_| RawSample::read(&mut block));
+        assert_eq!(
+            read,
+            [
+                RawSample::Counts(620),
+                RawSample::Saturated,
+                RawSample::Saturated,
+                RawSample::Saturated,
+                RawSample::Saturated,
+                RawSample::Counts(3784),
+                RawSample::Lost,
+            ]
+        );
+        let mut unguarded = CodeBlock::new(&codes[2..3], 4095, 0);
+        assert_eq!(RawSample::read(&mut unguarded), RawSample::Counts(39));
+    }
 
     /// A 16-bit converter behind a front end that clips 40 codes short of each rail.
     struct ClippingFrontEnd;

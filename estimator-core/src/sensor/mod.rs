@@ -13,7 +13,7 @@ pub mod ads131m02;
 mod identify;
 mod loadcell;
 
-pub use adc::{AdcError, AdcSource};
+pub use adc::{AdcError, AdcSource, CodeBlock};
 pub use identify::{identify, Identified, IdentifyConfig, IdentifyError};
 #[cfg(test)]
 pub(crate) use loadcell::reference_cell;

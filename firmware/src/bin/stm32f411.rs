@@ -17,9 +17,10 @@ use defmt_rtt as _;
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
 mod app {
     use cortex_m::peripheral::DWT;
-    #[cfg(not(feature = "ads131m02"))]
-    use estimator_core::weighing::RawSample;
     use estimator_core::weighing::{Command, KeyDebouncer, KeyPress, SampleSequence};
+    #[cfg(not(feature = "ads131m02"))]
+    #[cfg(not(feature = "ads131m02"))]
+    use estimator_core::{sensor::CodeBlock, weighing::RawSample};
     use firmware::console::Console;
     use firmware::fault;
     use firmware::pipeline::{
@@ -352,12 +353,15 @@ mod app {
         };
         match cx.local.transfer.next_transfer(spare) {
             Ok((filled, _)) => {
-                for &code in filled.iter() {
-                    let sample = if code == 0 || code >= MAX_CODE {
-                        RawSample::Saturated
-                    } else {
-                        RawSample::Counts(code as i32)
-                    };
+                // The block through the converter seam: rails and guard band as for any
+                // converter.
+                let mut block = CodeBlock::new(
+                    &filled[..],
+                    u32::from(MAX_CODE),
+                    board::ADC_RAIL_GUARD_CODES,
+                );
+                for _ in 0..DMA_BLOCK {
+                    let sample = RawSample::read(&mut block);
                     let sequence = *cx.local.sequence;
                     let _ = cx
                         .local
