@@ -70,6 +70,8 @@ pub struct Console<P> {
     line: LineBuffer,
     unit: Unit,
     lost_bytes: u32,
+    /// `lost_bytes` when it was last reported.
+    reported_lost_bytes: u32,
     dump: Option<Dump>,
 }
 
@@ -96,6 +98,7 @@ impl<P: SerialPort> Console<P> {
             line: LineBuffer::new(),
             unit: Unit::G,
             lost_bytes: 0,
+            reported_lost_bytes: 0,
             dump: None,
         }
     }
@@ -113,6 +116,15 @@ impl<P: SerialPort> Console<P> {
     /// Bytes the port gave up since boot.
     pub fn lost_bytes(&self) -> u32 {
         self.lost_bytes
+    }
+
+    /// The bytes given up since boot, when more were given up since the last call: the
+    /// readout task logs them, so a port that drops lines is said in the board's log.
+    pub fn newly_lost_bytes(&mut self) -> Option<u32> {
+        (self.lost_bytes != self.reported_lost_bytes).then(|| {
+            self.reported_lost_bytes = self.lost_bytes;
+            self.lost_bytes
+        })
     }
 
     fn count_lost(&mut self, bytes: usize) {

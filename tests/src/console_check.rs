@@ -93,6 +93,13 @@ pub fn check(transcript: &[String], run: &RunLog) -> CommandReport {
             .find(|(_, line)| line.starts_with(start))
             .map(|&(position, _)| position)
     };
+    if let Some(line) = run
+        .lines
+        .iter()
+        .find(|line| line.contains("console lost_bytes="))
+    {
+        failures.push(format!("the board's console port gave bytes up: {line}"));
+    }
     check_help(transcript, position("OK help"), failures);
     check_config_show(transcript, position("OK config show"), failures);
     check_tare(transcript, run, failures);

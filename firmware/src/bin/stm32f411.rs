@@ -418,6 +418,9 @@ mod app {
                 console.reading(&line, e);
             }
             console.pump_record(shared_pipeline, RECORD_LINES_PER_TICK);
+            if let Some(lost) = console.newly_lost_bytes() {
+                defmt::warn!("console lost_bytes={=u32} (the port gave them up)", lost);
+            }
         });
         if lines.log().is_none() {
             return;

@@ -35,18 +35,12 @@ impl<E: ScaleEstimator> Scale<E> {
     /// and known to within ±[`TARE_ACCURACY_E`] e (its error would stay in every net
     /// reading after it; its `u` goes into theirs).
     pub fn tare(&mut self) -> Result<(), TareError> {
-        let (ScaleState::Stable | ScaleState::Empty, Some(gross)) = (self.state, self.gross_g)
-        else {
-            return Err(TareError::NotStable);
-        };
-        let (u, bound) = match (self.gross_u_g, self.gross_u_bound_g) {
-            (None, _) => (0.0, 0.0),
-            (Some(u), Some(bound)) => (u, bound),
-            (Some(_), None) => return Err(TareError::Uncertain),
-        };
-        if 2.0 * bound > TARE_ACCURACY_E * self.config.scale_interval_g {
-            return Err(TareError::Uncertain);
-        }
+        let (gross, u, bound) = self
+            .settled_reading()
+            .map_err(|unsettled| match unsettled {
+                Unsettled::NotStable => TareError::NotStable,
+                Unsettled::Uncertain => TareError::Uncertain,
+            })?;
         self.tare_g = gross;
         self.tare_u_g = u;
         self.tare_u_bound_g = bound;
@@ -62,16 +56,12 @@ impl<E: ScaleEstimator> Scale<E> {
         if self.tare_g != 0.0 {
             return Err(ZeroError::Tared);
         }
-        let (ScaleState::Stable | ScaleState::Empty, Some(gross)) = (self.state, self.gross_g)
-        else {
-            return Err(ZeroError::NotStable);
-        };
-        match (self.gross_u_g, self.gross_u_bound_g) {
-            (None, _) => {}
-            (Some(_), Some(bound))
-                if 2.0 * bound <= TARE_ACCURACY_E * self.config.scale_interval_g => {}
-            (Some(_), _) => return Err(ZeroError::Uncertain),
-        }
+        let (gross, _, _) = self
+            .settled_reading()
+            .map_err(|unsettled| match unsettled {
+                Unsettled::NotStable => ZeroError::NotStable,
+                Unsettled::Uncertain => ZeroError::Uncertain,
+            })?;
         let zero_counts = self.zero_counts + gross * self.counts_per_gram;
         let offset_g = (zero_counts - self.calibrated_zero_counts) * self.grams_per_count;
         if !(offset_g.abs() <= ZERO_SETTING_RANGE_OF_MAX * self.config.capacity_g) {
@@ -81,6 +71,26 @@ impl<E: ScaleEstimator> Scale<E> {
         self.zero_tracked_counts = 0.0;
         self.zero_counts = zero_counts;
         Ok(())
+    }
+
+    /// What tare and zero setting both need of the reading: stable (or empty) with a gross
+    /// mass, and known to within ±[`TARE_ACCURACY_E`] e (twice its `u`'s upper bound); the
+    /// gross mass, its `u` and that bound (both zero for a method that states no `u`).
+    fn settled_reading(&self) -> Result<(f32, f32, f32), Unsettled> {
+        let (ScaleState::Stable | ScaleState::Empty, Some(gross)) = (self.state, self.gross_g)
+        else {
+            return Err(Unsettled::NotStable);
+        };
+        let (u, bound) = match (self.gross_u_g, self.gross_u_bound_g) {
+            (None, _) => (0.0, 0.0),
+            (Some(u), Some(bound)) => (u, bound),
+            (Some(_), None) => return Err(Unsettled::Uncertain),
+        };
+        // Written so a NaN bound is refused (the tare's own test, `>`, let one through).
+        if !(2.0 * bound <= TARE_ACCURACY_E * self.config.scale_interval_g) {
+            return Err(Unsettled::Uncertain);
+        }
+        Ok((gross, u, bound))
     }
 
     /// Remove the tare.
@@ -122,6 +132,12 @@ pub(super) fn round_to_i32(value: f32) -> i32 {
     shifted as i32
 }
 
+/// Why a reading cannot be taken as tare or zero.
+enum Unsettled {
+    NotStable,
+    Uncertain,
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::test_scene::{run, scene, Cell, CPG, ZERO};
@@ -151,6 +167,20 @@ mod tests {
         assert!((before - 10.0).abs() < 0.1, "{before}");
         assert_eq!(scale.tare(), Ok(()));
         assert_eq!(scale.set_zero(), Err(ZeroError::Tared));
+    }
+
+    /// A stable reading whose `u` bound is not a number is not known to a quarter of e:
+    /// tare and zero setting refuse it (the tare's own test, `2u > 0.25 e`, took it).
+    #[test]
+    fn a_reading_of_unknown_uncertainty_is_neither_tare_nor_zero() {
+        let (mut scale, mut cell) = scene(0.2);
+        cell.load_g = 3.0;
+        run(&mut scale, &mut cell, 12_000);
+        assert_eq!(scale.reading().state, ScaleState::Stable);
+        scale.gross_u_g = Some(f32::NAN);
+        scale.gross_u_bound_g = Some(f32::NAN);
+        assert_eq!(scale.tare(), Err(TareError::Uncertain));
+        assert_eq!(scale.set_zero(), Err(ZeroError::Uncertain));
     }
 
     #[test]
