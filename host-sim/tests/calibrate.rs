@@ -1027,7 +1027,7 @@ fn the_firmware_constants_size_the_method_and_refuse_by_key() {
     let bank_text = calibrate::config_toml(&config_with(bank), Precision::F32);
     let source = calibrate::firmware_constants(path, &bank_text).unwrap();
     assert!(
-        source.contains("pub const ORDER_CAPACITY: usize = 8;"),
+        source.contains("pub const ORDER_CAPACITY: usize = 1;"),
         "{source}"
     );
     assert!(

@@ -16,7 +16,7 @@ use crate::montecarlo::Precision;
 /// weighing config `path`: the parsed, checked configuration as [`rust_const`], and the
 /// sizes the firmware's estimator type takes from it (`ORDER_CAPACITY`: the configured
 /// order or [`UPLOAD_ORDER_CAPACITY`], the larger, so a data-driven method of up to that
-/// order can be uploaded over the console without a rebuild; `MODEL_STATES`: the identified
+/// order can be uploaded over the console without a rebuild; 1 for the bank; `MODEL_STATES`: the identified
 /// model's states; `BANK_CANDIDATES`: the bank's K, 1 for the data-driven methods), so the
 /// image holds the configured method and the methods a console may choose.
 ///
@@ -35,7 +35,9 @@ pub fn firmware_constants(path: &Path, text: &str) -> Result<String> {
         );
     }
     let (order_capacity, bank_candidates) = match config.method {
-        WeighingMethod::ModelBank { candidates, .. } => (UPLOAD_ORDER_CAPACITY, candidates),
+        // A bank image keeps order 1: building its bank at boot takes 95 of its 102 KB of
+        // stack, and room for order 8 beside it overflowed that (cargo xtask bench).
+        WeighingMethod::ModelBank { candidates, .. } => (1, candidates),
         method => (method.order().unwrap_or(1).max(UPLOAD_ORDER_CAPACITY), 1),
     };
     let model_states = usize::from(config.model.filter_order) + 2;
@@ -52,7 +54,7 @@ pub fn firmware_constants(path: &Path, text: &str) -> Result<String> {
     out.push_str(&rust_const(&config));
     let sizes = [
         (
-            "Largest model order the estimator holds: the configured one or the largest a console may upload.",
+            "Largest model order the estimator holds: the configured one or the largest a console may upload (1 for the bank).",
             "ORDER_CAPACITY",
             order_capacity,
         ),

@@ -8,7 +8,7 @@ use super::noise::NoiseMetering;
 use super::{CountsScale, Scale, ScaleConfig, ScaleEstimator};
 use crate::estimators::step::{StepConfig, StepEstimator};
 use crate::reading::ConfigError;
-use crate::weighing::method::{RegionError, WeighingConfig, WeighingEstimator};
+use crate::weighing::method::{RegionError, WeighingConfig, WeighingEstimator, WeighingMethod};
 
 impl<const N: usize> Scale<StepEstimator<f32, N, N>> {
     /// The step estimator of `order`, `decimation` and `forgetting` in counts (gain 1, no
@@ -81,6 +81,13 @@ pub trait ConfiguredEstimator: ScaleEstimator {
     /// Become the method of `weighing` in counts, or refuse (this type cannot hold it) and
     /// stay as it was.
     fn rebuild(&mut self, weighing: &WeighingConfig) -> Result<(), ConfigError>;
+
+    /// Whether `method` may be built while the board runs: not a model bank, whose build
+    /// takes most of a board's stack (95 of 102 KB on the QEMU board's bank image) and is
+    /// done once, at boot.
+    fn rebuilds(method: &WeighingMethod) -> bool
+    where
+        Self: Sized;
 }
 
 impl<const N: usize, const S: usize, const K: usize> ConfiguredEstimator
@@ -90,11 +97,19 @@ impl<const N: usize, const S: usize, const K: usize> ConfiguredEstimator
         *self = Self::in_counts(weighing)?;
         Ok(())
     }
+
+    fn rebuilds(method: &WeighingMethod) -> bool {
+        !matches!(method, WeighingMethod::ModelBank { .. })
+    }
 }
 
-impl<E: ConfiguredEstimator + ?Sized> ConfiguredEstimator for &mut E {
+impl<E: ConfiguredEstimator> ConfiguredEstimator for &mut E {
     fn rebuild(&mut self, weighing: &WeighingConfig) -> Result<(), ConfigError> {
         (**self).rebuild(weighing)
+    }
+
+    fn rebuilds(method: &WeighingMethod) -> bool {
+        E::rebuilds(method)
     }
 }
 
@@ -107,6 +122,8 @@ pub enum MethodRefusal {
     /// The estimator this board was built with cannot hold it (an order above its
     /// capacity, a model bank of another size).
     Estimator(ConfigError),
+    /// A model bank: built only at boot (from the compiled-in configuration).
+    BankAtBootOnly,
 }
 
 impl fmt::Display for MethodRefusal {
@@ -120,6 +137,9 @@ impl fmt::Display for MethodRefusal {
                 f.write_str("this board's estimator holds no model bank of that size")
             }
             MethodRefusal::Estimator(error) => write!(f, "{error}"),
+            MethodRefusal::BankAtBootOnly => f.write_str(
+                "a model bank is built only at boot, from the compiled-in configuration",
+            ),
         }
     }
 }
@@ -132,6 +152,9 @@ impl<E: ConfiguredEstimator> Scale<E> {
     /// again; the decisions' residual drift becomes the new method's
     /// ([`ScaleConfig::for_method`]), every other decision field stays.
     pub fn set_method(&mut self, weighing: &WeighingConfig) -> Result<(), MethodRefusal> {
+        if !E::rebuilds(&weighing.method) {
+            return Err(MethodRefusal::BankAtBootOnly);
+        }
         weighing.check_region().map_err(MethodRefusal::Region)?;
         self.estimator
             .rebuild(weighing)
@@ -342,6 +365,16 @@ mod tests {
             asked_wrong.set_method(&biased),
             Err(MethodRefusal::Region(RegionError::Decimation { .. }))
         ));
+        let bank = weighing(WeighingMethod::ModelBank {
+            decimation: 8,
+            candidates: 1,
+            ratio_min: 0.9,
+            ratio_max: 1.1,
+        });
+        assert_eq!(
+            asked_wrong.set_method(&bank),
+            Err(MethodRefusal::BankAtBootOnly)
+        );
         assert_eq!(asked_wrong.estimator().samples_per_update(), 16);
         // The change restarted `changed`'s run: its raw tests re-arm once the pan has
         // settled again (1.5 s), as `built_new`'s did at boot.
