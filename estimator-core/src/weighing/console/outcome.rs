@@ -155,8 +155,8 @@ pub fn write_method_refusal(out: &mut impl Write, refusal: &MethodRefusal) -> fm
             "not_built; expected the model bank of the size this board was built with",
         ),
         MethodRefusal::Estimator(error) => write!(out, "refused; expected {error}"),
-        MethodRefusal::BankAtBootOnly => out.write_str(
-            "bank_at_boot_only; expected a data-driven method (a model bank is built at boot, from the compiled-in weighing.toml)",
+        MethodRefusal::Fixed => out.write_str(
+            "fixed; expected a data-driven method, on an image built with one (a model bank is built at boot only, from the compiled-in weighing.toml)",
         ),
     }?;
     out.write_str("\r\n")

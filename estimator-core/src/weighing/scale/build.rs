@@ -84,7 +84,7 @@ pub trait ConfiguredEstimator: ScaleEstimator {
 
     /// Whether `method` may be built while the board runs: not a model bank, whose build
     /// takes most of a board's stack (95 of 102 KB on the QEMU board's bank image) and is
-    /// done once, at boot.
+    /// done once, at boot; and nothing on an image built with a bank.
     fn rebuilds(method: &WeighingMethod) -> bool
     where
         Self: Sized;
@@ -94,12 +94,18 @@ impl<const N: usize, const S: usize, const K: usize> ConfiguredEstimator
     for WeighingEstimator<f32, N, S, K>
 {
     fn rebuild(&mut self, weighing: &WeighingConfig) -> Result<(), ConfigError> {
+        // A bank image's method is fixed (`rebuilds`); with this branch the rebuild is
+        // compiled out of it, and the boot's build stays the only one (inlined, in place: a
+        // second caller outlined it and its 20 KB copy overflowed the bank image's stack).
+        if K > 1 {
+            return Err(ConfigError::Model);
+        }
         *self = Self::in_counts(weighing)?;
         Ok(())
     }
 
     fn rebuilds(method: &WeighingMethod) -> bool {
-        !matches!(method, WeighingMethod::ModelBank { .. })
+        K == 1 && !matches!(method, WeighingMethod::ModelBank { .. })
     }
 }
 
@@ -122,8 +128,9 @@ pub enum MethodRefusal {
     /// The estimator this board was built with cannot hold it (an order above its
     /// capacity, a model bank of another size).
     Estimator(ConfigError),
-    /// A model bank: built only at boot (from the compiled-in configuration).
-    BankAtBootOnly,
+    /// A model bank, or any method on an image built with one: a bank is built only at
+    /// boot, from the compiled-in configuration.
+    Fixed,
 }
 
 impl fmt::Display for MethodRefusal {
@@ -137,8 +144,8 @@ impl fmt::Display for MethodRefusal {
                 f.write_str("this board's estimator holds no model bank of that size")
             }
             MethodRefusal::Estimator(error) => write!(f, "{error}"),
-            MethodRefusal::BankAtBootOnly => f.write_str(
-                "a model bank is built only at boot, from the compiled-in configuration",
+            MethodRefusal::Fixed => f.write_str(
+                "a model bank is built only at boot, from the compiled-in configuration, and an image built with one runs only it",
             ),
         }
     }
@@ -153,7 +160,7 @@ impl<E: ConfiguredEstimator> Scale<E> {
     /// ([`ScaleConfig::for_method`]), every other decision field stays.
     pub fn set_method(&mut self, weighing: &WeighingConfig) -> Result<(), MethodRefusal> {
         if !E::rebuilds(&weighing.method) {
-            return Err(MethodRefusal::BankAtBootOnly);
+            return Err(MethodRefusal::Fixed);
         }
         weighing.check_region().map_err(MethodRefusal::Region)?;
         self.estimator
@@ -371,10 +378,7 @@ mod tests {
             ratio_min: 0.9,
             ratio_max: 1.1,
         });
-        assert_eq!(
-            asked_wrong.set_method(&bank),
-            Err(MethodRefusal::BankAtBootOnly)
-        );
+        assert_eq!(asked_wrong.set_method(&bank), Err(MethodRefusal::Fixed));
         assert_eq!(asked_wrong.estimator().samples_per_update(), 16);
         // The change restarted `changed`'s run: its raw tests re-arm once the pan has
         // settled again (1.5 s), as `built_new`'s did at boot.
