@@ -45,7 +45,7 @@ pub const WEIGHING: WeighingConfig = WeighingConfig {
     scale_interval_g: 0.1,
     final_target_g: 0.05,
 };
-/// Largest model order the estimator holds: the configured one or the largest a console may upload.
+/// Largest model order the estimator holds: the configured one or the largest a console may upload (1 for the bank).
 pub const ORDER_CAPACITY: usize = 8;
 /// States of the identified model (the bank's candidates): 2 + the filter's order.
 pub const MODEL_STATES: usize = 5;
