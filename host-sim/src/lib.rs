@@ -43,6 +43,7 @@ pub mod ads131m02;
 pub mod qemu_scenes;
 pub mod sensor;
 pub mod simulated;
+pub mod stm32_board;
 
 pub use sensor::{Adc, DiscreteSensor, Ina114, LoadCell, SensorChain, SAMPLE_RATE_HZ};
 pub use simulated::{
