@@ -576,3 +576,36 @@ fn version_negative_values_and_plain_decimals() {
     }
     assert!(valid > 1000, "only {valid} valid estimates");
 }
+
+/// A moved or installed binary finds the shipped scenes and the firmware's configuration
+/// (they are in it, not read from the source tree it was built in): a copy of it in a
+/// directory of its own, run from there, simulates a shipped scene and replays it with the
+/// built-in configuration.
+#[test]
+fn a_moved_binary_needs_nothing_from_its_source_tree() {
+    let dir = temp("moved-binary");
+    std::fs::create_dir_all(&dir).unwrap();
+    let moved = dir.join("host-sim");
+    std::fs::copy(env!("CARGO_BIN_EXE_host-sim"), &moved).unwrap();
+    let run = |args: &[&str]| {
+        run_ok(
+            std::process::Command::new(&moved)
+                .args(args)
+                .current_dir(&dir)
+                .env_remove("CARGO_MANIFEST_DIR"),
+        )
+    };
+    run(&[
+        "simulate",
+        "calibration-drop",
+        "--seed",
+        "5",
+        "--out",
+        "drop.csv",
+    ]);
+    let csv = std::fs::read_to_string(dir.join("drop.csv")).unwrap();
+    assert!(csv.starts_with("t,y,truth\n") && csv.lines().count() > 1000);
+    let replay = run(&["replay", "--input", "drop.csv"]);
+    assert!(replay.starts_with("t_s,mass_g,u_g,state,final"), "{replay}");
+    assert!(replay.lines().count() > 10, "{replay}");
+}
