@@ -317,38 +317,30 @@ mod tests {
             decimation: 24,
             forgetting: 1.0,
         });
-        let mut changed = Built::configured(&first, calibration()).unwrap();
-        let mut asked_wrong = Built::configured(&first, calibration()).unwrap();
-        let mut untouched = Built::configured(&first, calibration()).unwrap();
-        let mut built_new = Built::configured(&second, calibration()).unwrap();
+        let mut all = [&first, &first, &first, &second]
+            .map(|config| Built::configured(config, calibration()).unwrap());
         // What the empty pan's first second leaves behind depends on the method that ran
         // it (the zero tracked while it read empty, the noise metered at its `D`): without
         // either, the scales' futures may be compared sample by sample.
         let decisions = ScaleConfig {
             zero_tracking_rate_g_per_s: 0.0,
             consistency_check: false,
-            ..*changed.config()
+            ..*all[0].config()
         };
-        for scale in [
-            &mut changed,
-            &mut asked_wrong,
-            &mut untouched,
-            &mut built_new,
-        ] {
+        for scale in all.iter_mut() {
             scale.reconfigure(decisions).unwrap();
         }
         let mut cell = Cell::new(0.4);
-        for _ in 0..4000 {
-            let sample = cell.sample();
-            for scale in [
-                &mut changed,
-                &mut asked_wrong,
-                &mut untouched,
-                &mut built_new,
-            ] {
-                scale.push(sample);
+        let feed = |scales: &mut [Built; 4], cell: &mut Cell, samples: usize| {
+            for _ in 0..samples {
+                let sample = cell.sample();
+                for scale in scales.iter_mut() {
+                    scale.push(sample);
+                }
             }
-        }
+        };
+        feed(&mut all, &mut cell, 4000);
+        let [mut changed, mut asked_wrong, untouched, built_new] = all;
         changed.set_method(&second).unwrap();
         assert_eq!(changed.estimator().samples_per_update(), 24);
         let too_big = weighing(WeighingMethod::Step {
@@ -382,17 +374,9 @@ mod tests {
         assert_eq!(asked_wrong.estimator().samples_per_update(), 16);
         // The change restarted `changed`'s run: its raw tests re-arm once the pan has
         // settled again (1.5 s), as `built_new`'s did at boot.
-        for _ in 0..8000 {
-            let sample = cell.sample();
-            for scale in [
-                &mut changed,
-                &mut asked_wrong,
-                &mut untouched,
-                &mut built_new,
-            ] {
-                scale.push(sample);
-            }
-        }
+        let mut all = [changed, asked_wrong, untouched, built_new];
+        feed(&mut all, &mut cell, 8000);
+        let [mut changed, mut asked_wrong, mut untouched, mut built_new] = all;
         // A load change restarts the run of the scale built with the new method too.
         cell.load_g = 138.32;
         let mut last = None;
