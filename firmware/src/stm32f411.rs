@@ -71,35 +71,14 @@ pub use ads131m02::DrdyHandoff;
 #[cfg(not(feature = "ads131m02"))]
 pub type DrdyHandoff = core::convert::Infallible;
 
-/// The INA114 front end as wired in `firmware/README.md`: a 600 g, 2 mV/V cell excited
-/// with 3.3 V, R_G = 130 Ω (gain 385.6), REF at 0.5 V, into the 12-bit ADC (3.3 V ref).
+/// The INA114 front end as wired in `firmware/README.md` (`FrontEnd::STM32F411_INA114`).
 #[cfg(not(feature = "ads131m02"))]
-pub const FRONT_END: FrontEnd = FrontEnd {
-    excitation_v: 3.3,
-    rated_output_mv_per_v: 2.0,
-    capacity_g: 600.0,
-    gain_resistor_ohm: 130.0,
-    reference_pin_v: 0.5,
-    adc_reference_v: 3.3,
-    adc_bits: 12,
-};
+pub const FRONT_END: FrontEnd = FrontEnd::STM32F411_INA114;
 
-/// The ADS131M02 chain (`ads131m02` build): the same cell into the converter's PGA at gain
-/// 128 with its 1.2 V internal reference, read as offset binary (code + 2^23). In the
-/// fields of the INA114 chain: the PGA's gain as the amplifier's (R_G = 50 kΩ / 127 makes
-/// 1 + 50 kΩ / R_G = 128), the converter's span ±1.2 V as a 2.4 V reference over 24 bits,
-/// and the zero at mid-scale (2^23 codes) as a 1.2 V REF. Nominal: 9,842.6 counts/g, the
-/// zero at 8,388,608; a full 600 g spans 5.9 M of the 8.4 M codes above it.
+/// The ADS131M02 chain (`ads131m02` build, `FrontEnd::ADS131M02`): the same cell into the
+/// converter's PGA at gain 128, read as offset binary.
 #[cfg(feature = "ads131m02")]
-pub const FRONT_END: FrontEnd = FrontEnd {
-    excitation_v: 3.3,
-    rated_output_mv_per_v: 2.0,
-    capacity_g: 600.0,
-    gain_resistor_ohm: 50_000.0 / 127.0,
-    reference_pin_v: 1.2,
-    adc_reference_v: 2.4,
-    adc_bits: 24,
-};
+pub const FRONT_END: FrontEnd = FrontEnd::ADS131M02;
 
 /// The reference mass a long press calibrates with: a 200 g class M1 weight (±10 mg, far
 /// inside the 0.1 % the scale is judged by). Edit it for another weight.

@@ -249,15 +249,7 @@ mod tests {
     #[test]
     fn counts_per_gram_and_saturation() {
         let mut chain = Ads131m02Chain::reference();
-        let firmware = FrontEnd {
-            excitation_v: 3.3,
-            rated_output_mv_per_v: 2.0,
-            capacity_g: 600.0,
-            gain_resistor_ohm: 50_000.0 / 127.0,
-            reference_pin_v: 1.2,
-            adc_reference_v: 2.4,
-            adc_bits: 24,
-        };
+        let firmware = FrontEnd::ADS131M02;
         let nominal = firmware.nominal_calibration().counts_per_gram as f64;
         assert!((chain.counts_per_gram() - 9_842.6).abs() < 0.1);
         assert!((chain.counts_per_gram() / nominal - 1.0).abs() < 1e-6);

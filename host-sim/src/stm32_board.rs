@@ -152,15 +152,7 @@ mod tests {
     use estimator_core::weighing::{FrontEnd, RawSample};
 
     /// The firmware's `stm32f411::FRONT_END` (the internal-ADC build).
-    const FRONT_END: FrontEnd = FrontEnd {
-        excitation_v: 3.3,
-        rated_output_mv_per_v: 2.0,
-        capacity_g: 600.0,
-        gain_resistor_ohm: 130.0,
-        reference_pin_v: 0.5,
-        adc_reference_v: 3.3,
-        adc_bits: 12,
-    };
+    const FRONT_END: FrontEnd = FrontEnd::STM32F411_INA114;
 
     /// The chain's gain is the firmware's nominal one (5.265 counts/g, within 0.5 %); a
     /// static load reads it above the zero once the cell has rung down; the empty pan sits

@@ -11,16 +11,7 @@ use super::{load_or_default, Calibration, CalibrationLimits, CalibrationSource, 
 
 /// The STM32F411 board's window (`FrontEnd::calibration_limits` of its front end).
 fn limits() -> CalibrationLimits {
-    super::FrontEnd {
-        excitation_v: 3.3,
-        rated_output_mv_per_v: 2.0,
-        capacity_g: 600.0,
-        gain_resistor_ohm: 130.0,
-        reference_pin_v: 0.5,
-        adc_reference_v: 3.3,
-        adc_bits: 12,
-    }
-    .calibration_limits()
+    super::FrontEnd::STM32F411_INA114.calibration_limits()
 }
 
 /// What must hold for whatever the store gave back: the stored calibration only if the

@@ -31,6 +31,36 @@ pub struct FrontEnd {
 }
 
 impl FrontEnd {
+    /// The STM32F411 board's INA114 front end as wired in `firmware/README.md`: a 600 g,
+    /// 2 mV/V cell excited with 3.3 V, R_G = 130 Ω (gain 385.6), REF at 0.5 V, into the
+    /// 12-bit ADC (3.3 V reference). The firmware's internal-ADC build, and the host's model
+    /// of that chain, use this one constant.
+    pub const STM32F411_INA114: Self = Self {
+        excitation_v: 3.3,
+        rated_output_mv_per_v: 2.0,
+        capacity_g: 600.0,
+        gain_resistor_ohm: 130.0,
+        reference_pin_v: 0.5,
+        adc_reference_v: 3.3,
+        adc_bits: 12,
+    };
+
+    /// The same cell into the external ADS131M02's PGA at gain 128 with its 1.2 V internal
+    /// reference, read as offset binary (code + 2^23). In the fields of the INA114 chain:
+    /// the PGA's gain as the amplifier's (R_G = 50 kΩ / 127 makes 1 + 50 kΩ / R_G = 128),
+    /// the converter's span ±1.2 V as a 2.4 V reference over 24 bits, and the zero at
+    /// mid-scale (2^23 codes) as a 1.2 V REF. Nominal: 9,842.6 counts/g, the zero at
+    /// 8,388,608; a full 600 g spans 5.9 M of the 8.4 M codes above it.
+    pub const ADS131M02: Self = Self {
+        excitation_v: 3.3,
+        rated_output_mv_per_v: 2.0,
+        capacity_g: 600.0,
+        gain_resistor_ohm: 50_000.0 / 127.0,
+        reference_pin_v: 1.2,
+        adc_reference_v: 2.4,
+        adc_bits: 24,
+    };
+
     /// How far (relative) a working chain's gain can be from [`Self::nominal_calibration`],
     /// either way. The gain is excitation × rated output / capacity × INA114 gain × ADC
     /// counts per volt; its worst-case error is the sum of the parts' tolerances:
@@ -162,15 +192,7 @@ mod tests {
     use super::*;
 
     /// The STM32F411 board's front end (`firmware/src/stm32f411.rs`).
-    const BOARD: FrontEnd = FrontEnd {
-        excitation_v: 3.3,
-        rated_output_mv_per_v: 2.0,
-        capacity_g: 600.0,
-        gain_resistor_ohm: 130.0,
-        reference_pin_v: 0.5,
-        adc_reference_v: 3.3,
-        adc_bits: 12,
-    };
+    const BOARD: FrontEnd = FrontEnd::STM32F411_INA114;
 
     #[test]
     fn front_end_gain_and_counts_follow_the_data_sheet_formulas() {
