@@ -132,6 +132,10 @@ pub struct Tallies {
     pub by_act: BTreeMap<ActKind, Tally>,
     /// The silent wrong readings with the largest error ratio (at most [`Self::KEEP`]).
     pub worst: Vec<Wrong>,
+    /// Silent wrong readings by their error over the `u` shown with them: below 2, 2–3,
+    /// 3–5, 5 and more, no `u` stated. Below 3 the stated `u` covered the error and the
+    /// stability rule let it through; far above, `u` did not describe the data.
+    pub silent_by_z: [u64; 5],
     /// Runs tallied.
     pub runs: u64,
 }
@@ -175,6 +179,7 @@ impl Tallies {
         tally.worst_ratio = tally.worst_ratio.max(ratio);
         if is_wrong {
             tally.silent_wrong += 1;
+            self.silent_by_z[z_bucket(error, line.u_g)] += 1;
             let (run, time_s, state) = at;
             self.worst.push(Wrong {
                 run,
@@ -196,6 +201,9 @@ impl Tallies {
             self.by_act.entry(*act).or_default().add(tally);
         }
         self.worst.extend(other.worst);
+        for (mine, theirs) in self.silent_by_z.iter_mut().zip(other.silent_by_z) {
+            *mine += theirs;
+        }
         self.keep_worst();
         self.runs += other.runs;
     }
@@ -223,6 +231,25 @@ impl Tallies {
     }
 }
 
+/// The bucket of [`Tallies::silent_by_z`] for an error of `error_g` shown with `u_g`.
+fn z_bucket(error_g: f64, u_g: Option<f64>) -> usize {
+    match u_g {
+        Some(u) if u > 0.0 => {
+            let z = error_g / u;
+            if z < 2.0 {
+                0
+            } else if z < 3.0 {
+                1
+            } else if z < 5.0 {
+                2
+            } else {
+                3
+            }
+        }
+        _ => 4,
+    }
+}
+
 /// One readout line as judged.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Line {
@@ -230,6 +257,8 @@ pub struct Line {
     pub mass_g: Option<f64>,
     /// Shown as settled (stable, empty or final).
     pub settled: bool,
+    /// The standard uncertainty shown with the mass, g (`None`: none stated).
+    pub u_g: Option<f64>,
     /// What was on the pan.
     pub truth: Truth,
 }
@@ -266,6 +295,7 @@ mod tests {
         let line = Line {
             mass_g: Some(660.0),
             settled: true,
+            u_g: None,
             truth: Truth {
                 low_g: 660.0,
                 high_g: 660.0,

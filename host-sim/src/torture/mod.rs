@@ -142,6 +142,15 @@ pub fn report(settings: &TortureSettings, tallies: &Tallies) -> String {
         total.no_mass,
         total.worst_ratio
     );
+    if total.silent_wrong > 0 {
+        let z = &tallies.silent_by_z;
+        let _ = writeln!(out);
+        let _ = writeln!(
+            out,
+            "silent wrong readings by error / u shown: below 2: {}, 2-3: {}, 3-5: {}, 5 and above: {}, no u: {}",
+            z[0], z[1], z[2], z[3], z[4]
+        );
+    }
     if !tallies.worst.is_empty() {
         let _ = writeln!(out);
         let _ = writeln!(

@@ -168,6 +168,7 @@ fn line_of(reading: &ScaleReading, low_g: f64, high_g: f64, tare_g: f64) -> Line
     Line {
         mass_g: reading.mass_g.map(f64::from),
         settled,
+        u_g: reading.uncertainty_g.map(f64::from),
         truth: Truth {
             low_g: low_g - tare_g,
             high_g: high_g - tare_g,
