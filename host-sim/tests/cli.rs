@@ -588,12 +588,30 @@ fn a_moved_binary_needs_nothing_from_its_source_tree() {
     let moved = dir.join("host-sim");
     std::fs::copy(env!("CARGO_BIN_EXE_host-sim"), &moved).unwrap();
     let run = |args: &[&str]| {
-        run_ok(
-            std::process::Command::new(&moved)
-                .args(args)
-                .current_dir(&dir)
-                .env_remove("CARGO_MANIFEST_DIR"),
-        )
+        let mut command = std::process::Command::new(&moved);
+        command
+            .args(args)
+            .current_dir(&dir)
+            .env_remove("CARGO_MANIFEST_DIR");
+        // A test thread that forks while the copy's file is still open for writing
+        // keeps it open in its child until that child execs: the copy cannot be
+        // executed for that moment ("Text file busy"). Wait it out; nothing else retries.
+        let mut tries = 0;
+        let output = loop {
+            match command.output() {
+                Err(e) if e.kind() == std::io::ErrorKind::ExecutableFileBusy && tries < 100 => {
+                    tries += 1;
+                    std::thread::sleep(std::time::Duration::from_millis(20));
+                }
+                result => break result.unwrap(),
+            }
+        };
+        assert!(
+            output.status.success(),
+            "{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        String::from_utf8(output.stdout).unwrap()
     };
     run(&[
         "simulate",
