@@ -167,6 +167,12 @@ pub(crate) struct ResidualCheck<T> {
 }
 
 impl<T: Real> ResidualCheck<T> {
+    /// The noise variance of one block mean the reference predicts, in the residuals'
+    /// unit².
+    pub(crate) fn block_variance(&self) -> T {
+        self.block_variance
+    }
+
     /// The check for residuals in a unit where one raw unit is `scale` (e.g. `1/G`), of
     /// block means of `decimation` raw samples, of a fit with forgetting factor `forgetting`.
     pub(crate) fn new(

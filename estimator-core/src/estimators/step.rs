@@ -331,7 +331,8 @@ impl<T: Real, const N: usize, const L: usize> StepEstimator<T, N, L> {
         }
         let (z, [z_level]) = self.factor.last_unknown_influence(n)?;
         let (lead, _) = self.factor.solution(n);
-        self.lags.uncertainty(n, &z, z_level, &lead)
+        let floor = self.check.as_ref().map(ResidualCheck::block_variance);
+        self.lags.uncertainty(n, &z, z_level, &lead, floor)
     }
 }
 

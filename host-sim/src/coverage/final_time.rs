@@ -1,5 +1,6 @@
 //! Time to a final reading: when, after the landing, twice the stated `u` first falls to
-//! the final target (the scale's `is_final`, `[scale] final_target_g`), per run, against
+//! the final target (`[scale] final_target_g`; the scale's `is_final` also needs four `u`
+//! within the permissible error, `VOUCHING_COVERAGE_FACTOR`), per run, against
 //! the fixed 100 ms readout, at each SNR; and how far those first final readings are from
 //! the truth. The estimator alone with the onset known, as the coverage table (the scale
 //! adds its onset detection's lag, a few samples).

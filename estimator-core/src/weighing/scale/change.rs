@@ -269,10 +269,8 @@ mod tests {
 }
 
 /// What the torture run found shown settled while wrong, each as a scene on the test cell:
-/// every reading shown stable or empty must lie within the permissible error of the truth
-/// of the last 50 ms (a display may lag one readout period), with twice its `u` within it.
-/// (A final reading is a 95 % claim, 2u within the target: one in twenty may lie outside
-/// it, so it is not held to this hard bound.)
+/// every reading shown stable, empty or final must lie within the permissible error of the
+/// truth of the last 50 ms (a display may lag one readout period), with twice its `u` within it.
 #[cfg(test)]
 mod shown_settled {
     extern crate std;
@@ -300,7 +298,8 @@ mod shown_settled {
                 recent.pop_front();
             }
             let reading = scale.push(cell.sample());
-            let settled = matches!(reading.state, ScaleState::Stable | ScaleState::Empty);
+            let settled =
+                matches!(reading.state, ScaleState::Stable | ScaleState::Empty) || reading.is_final;
             if let (true, Some(mass)) = (settled, reading.mass_g) {
                 let low = recent.iter().cloned().fold(f64::INFINITY, f64::min);
                 let high = recent.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
@@ -397,6 +396,50 @@ mod shown_settled {
             assert!(
                 readings.last().unwrap().load_changes > 1,
                 "{rate_g_per_s} g/s: the trickle went unseen"
+            );
+        }
+    }
+
+    /// Small loads (10 g: the permissible error is 0.5 e) dropped on a noisy pan, forty
+    /// times: no reading is shown stable, empty or final outside the permissible error.
+    /// With twice `u` within it (a 95 % interval) the first settled readings of some drops
+    /// lay 2–3 u off, beyond it (`host-sim torture`: 186 of 675 silent wrong readings).
+    #[test]
+    fn small_loads_on_a_noisy_pan_are_never_shown_settled_outside_the_permissible_error() {
+        for seed in 0..40u64 {
+            let (mut scale, _) = scene(1.0);
+            let mut cell = Cell::seeded(1.0, 100 + seed);
+            let mut recent = VecDeque::new();
+            let what = std::format!("seed {seed}");
+            checked((&mut scale, &mut cell, &mut recent), 4000, |_| 0.0, &what);
+            checked((&mut scale, &mut cell, &mut recent), 8000, |_| 10.0, &what);
+        }
+    }
+
+    /// A trickle (0.04 g/s) onto a small load on a noisy pan (1 g of raw noise), from the
+    /// moment it is put on, for 4 s: never shown settled behind the load. The scene of
+    /// `host-sim torture --runs 1000 --seed 1` run 72 (which `host-sim`'s torture tests
+    /// replay themselves), where the first certain reading of the fit was shown stable
+    /// 0.09 g behind the load before the block test had judged a block.
+    #[test]
+    fn a_trickle_onto_a_fresh_load_is_not_shown_stable_behind_it() {
+        for seed in 0..6u64 {
+            let (mut scale, _) = scene(1.0);
+            let mut cell = Cell::seeded(1.0, 200 + seed);
+            let mut recent = VecDeque::new();
+            // Long enough for the empty pan's noise to be metered.
+            checked(
+                (&mut scale, &mut cell, &mut recent),
+                10_000,
+                |_| 0.0,
+                "empty",
+            );
+            let trickle = |k: usize| 0.3 + 0.04 * k as f64 / 4000.0;
+            checked(
+                (&mut scale, &mut cell, &mut recent),
+                16_000,
+                trickle,
+                "trickle",
             );
         }
     }

@@ -193,8 +193,8 @@ impl ScaleConfig {
     /// (OIML R 76-1, class III, at initial verification, in the scale interval e: 0.5 e up
     /// to 500 e, 1 e up to 2,000 e, 1.5 e above), or the configured accuracy target where
     /// that is tighter (`accuracy_target_relative` of the load, or of
-    /// `accuracy_target_mass_g` below it). A reading is shown stable (or empty) only while
-    /// twice its standard uncertainty is within it.
+    /// `accuracy_target_mass_g` below it). A reading is shown stable, empty or final only
+    /// while [`super::VOUCHING_COVERAGE_FACTOR`] times its standard uncertainty is within it.
     pub fn permissible_error_g(&self, load_g: f32) -> f32 {
         let e = self.scale_interval_g;
         let intervals = load_g.abs() / e;

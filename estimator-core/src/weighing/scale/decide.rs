@@ -4,7 +4,7 @@
 //!
 //! Never a number the estimator flagged, never a number without its state.
 
-use super::{with_tare, RawSample, Scale, ScaleEstimator, ScaleFault, ScaleReading, ScaleState};
+use super::{RawSample, Scale, ScaleEstimator, ScaleFault, ScaleReading, ScaleState};
 use crate::reading::{InvalidReason, State};
 
 impl<E: ScaleEstimator> Scale<E> {
@@ -133,12 +133,9 @@ impl<E: ScaleEstimator> Scale<E> {
             self.stable_centre_g = estimate_g;
             self.stable_samples = 0;
         }
-        let permissible_g = self.config.permissible_error_g(estimate_g - self.tare_g);
-        // Judged on the upper confidence bound of `u` (`Reading::uncertainty_bound`), not on
-        // `u`: the first moment a fluctuating `u` meets a limit is biased.
         let certain = match (self.gross_u_g, self.gross_u_bound_g) {
             (None, _) => true,
-            (Some(_), Some(bound)) => 2.0 * with_tare(bound, self.tare_u_bound_g) <= permissible_g,
+            (Some(_), Some(bound)) => self.within_permissible(estimate_g - self.tare_g, bound),
             (Some(_), None) => false,
         };
         let in_band = self.stable_samples >= self.config.stable_hold_samples;
@@ -165,7 +162,10 @@ impl<E: ScaleEstimator> Scale<E> {
         // that see the creep.
         self.raw_armed |=
             held && self.samples_since_change >= u64::from(self.config.raw_arm_samples);
-        self.held_in_run |= held;
+        // The block test starts with the band, not with certainty: a trickle's fit took
+        // seconds to become certain, and its first certain reading was shown stable 0.09 g
+        // behind the load before the block test had judged one block.
+        self.held_in_run |= in_band;
         // After a change only the block test saw (a trickle, a creep, a small item), the
         // load may still be moving, and a fresh fit of a ramp reads the step model's
         // extrapolation of it: nothing is shown stable until the raw tests are armed again
