@@ -42,7 +42,7 @@ pub use recorder::{CaptureInfo, RecordRefusal, Recorder};
 pub use scale::{
     ConfiguredEstimator, CountsScale, MethodRefusal, RawSample, Scale, ScaleConfig, ScaleEstimator,
     ScaleFault, ScaleReading, ScaleState, StepScale, TareError, ZeroError, TARE_ACCURACY_E,
-    ZERO_SETTING_RANGE_OF_MAX,
+    VOUCHING_COVERAGE_FACTOR, ZERO_SETTING_RANGE_OF_MAX,
 };
 pub use sequence::SampleSequence;
 pub use settings::{load_settings, Settings, SettingsStore, SETTINGS_LEN, SETTINGS_VERSION};

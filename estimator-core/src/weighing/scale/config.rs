@@ -56,7 +56,9 @@ pub struct ScaleConfig {
     pub scale_interval_g: f32,
     /// A reading is final once twice its standard uncertainty (a 95 % interval), with the
     /// noise level at its upper 95 % confidence bound (`Reading::uncertainty_bound`), is at
-    /// or below this: the instrument vouches for it ([`super::ScaleReading::is_final`]).
+    /// or below this, and the scale could show it stable by its `u` (four of them within
+    /// the permissible error): the instrument vouches for it
+    /// ([`super::ScaleReading::is_final`]).
     /// `+∞`: every reading with a `u` is final; the default is 0.5 e, OIML R 76's maximum
     /// permissible error on the smallest loads at verification (class III, up to 500 e).
     pub final_target_g: f32,

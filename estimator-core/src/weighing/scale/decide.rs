@@ -116,8 +116,9 @@ impl<E: ScaleEstimator> Scale<E> {
     /// the raw test. True when the pan is empty and stable.
     ///
     /// Stable (and empty) are claims that the reading is right: they need the estimate to
-    /// have held its band for `stable_hold_samples`, twice its standard uncertainty (where
-    /// the estimator states one) within the permissible error of the net load, and no
+    /// have held its band for `stable_hold_samples`, [`super::VOUCHING_COVERAGE_FACTOR`]
+    /// times its standard uncertainty (where the estimator states one) within the
+    /// permissible error of the net load, and no
     /// motion building up in the block test. A fresh fit near zero with a `u` of grams is
     /// not an empty pan, and a reading creeping with a trickle is not stable.
     fn show(&mut self, estimate_g: f32) -> bool {

@@ -122,7 +122,7 @@ pub struct Scale<E> {
     settled_samples: u32,
     /// The raw tests are armed: the run has been settled for `raw_arm_samples` once.
     raw_armed: bool,
-    /// The run's reading has held its stability band once: the per-sample raw test runs,
+    /// The run's reading has held its stability band once (certain or not): the raw tests run,
     /// its drift widened by the ringing's envelope until `raw_armed`.
     held_in_run: bool,
     /// The last valid gross estimate shown, g (kept through faults).
@@ -143,7 +143,7 @@ pub struct Scale<E> {
     /// This run began at a change only the block test saw: nothing is stable before the
     /// raw tests are armed again.
     after_slow_change: bool,
-    /// Samples the reading held its band without becoming certain (2u above the
+    /// Samples the reading held its band without becoming certain (4u above the
     /// permissible error).
     uncertain_samples: u32,
     /// This load's run was restarted for that once already (cleared by a load change).
@@ -423,13 +423,12 @@ pub const TARE_ACCURACY_E: f32 = 0.25;
 /// R 76 (4.5.1) allows (tracking adds at most its `zero_tracking_range_g`, 2 e by default).
 pub const ZERO_SETTING_RANGE_OF_MAX: f32 = 0.02;
 
-/// `u` of a net reading: the gross reading's and the tare's in quadrature (the tare's is
-/// zero without one, and then `u` is returned as it is).
 /// How many standard uncertainties of a reading must fit in its permissible error before
 /// the scale vouches for it (stable, empty, final). Four: a normal error lies beyond 4u once
 /// in 16,000 independent readings; at two (a 95 % interval) one reading in twenty near the
 /// limit lay outside it (`host-sim torture --runs 1000 --seed 1`: 186 silent wrong readings
-/// within 2–3 u of the truth, 675 in all; 263 with four, none within 3 u).
+/// within 2–3 u of the truth, 675 in all; 263 with four and nothing else changed, none
+/// within 3 u).
 pub const VOUCHING_COVERAGE_FACTOR: f32 = 4.0;
 
 impl<E: ScaleEstimator> Scale<E> {
@@ -442,6 +441,8 @@ impl<E: ScaleEstimator> Scale<E> {
     }
 }
 
+/// `u` of a net reading: the gross reading's and the tare's in quadrature (the tare's is
+/// zero without one, and then `u` is returned as it is).
 pub(crate) fn with_tare(u_g: f32, tare_u_g: f32) -> f32 {
     if tare_u_g == 0.0 {
         u_g

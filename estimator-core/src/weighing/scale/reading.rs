@@ -75,7 +75,8 @@ pub struct ScaleReading {
     /// method states none. The tare's own uncertainty is not included.
     pub uncertainty_g: Option<f32>,
     /// The reading is final: a mass, estimating or stable, whose 95 % interval (±2u) is
-    /// within the configured target ([`super::ScaleConfig::final_target_g`]).
+    /// within the configured target ([`super::ScaleConfig::final_target_g`]) and four of
+    /// whose `u` are within the permissible error ([`super::VOUCHING_COVERAGE_FACTOR`]).
     pub is_final: bool,
     /// What the pan holds.
     pub state: ScaleState,
