@@ -245,7 +245,17 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
         if !block.is_finite() {
             return Err(ConfigError::Model);
         }
-        Ok(Self {
+        Ok(Self::started(config, block, true, true))
+    }
+
+    /// An estimator at its first sample, from a checked configuration and its block model.
+    fn started(
+        config: ModelConfig<T, S>,
+        block: BlockModel<T, S>,
+        flags_mismatch: bool,
+        states_uncertainty: bool,
+    ) -> Self {
+        Self {
             config,
             block,
             intake: Intake::new(
@@ -264,9 +274,9 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
                 // Raw units, no forgetting: the residual is a block mean's noise alone.
                 ResidualCheck::new(reference, T::ONE, config.decimation, T::ONE)
             }),
-            flags_mismatch: true,
-            states_uncertainty: true,
-        })
+            flags_mismatch,
+            states_uncertainty,
+        }
     }
 
     /// Check the runs after the next [`crate::Estimator::reset`] against `reference` (`None`: no
@@ -308,13 +318,17 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
         }
     }
 
-    /// A fresh estimator; a bank's candidate stays one that does not flag its own reading.
+    /// A fresh estimator: the configuration was checked (a noise reference set later by
+    /// `set_noise_reference` too) and its block model computed when this one was built, so
+    /// a reset costs no matrix powers; a bank's candidate stays one that neither flags its
+    /// own reading nor states its own `u`.
     fn fresh(&self) -> Result<Self, ConfigError> {
-        let fresh = Self::new(self.config)?;
-        Ok(Self {
-            flags_mismatch: self.flags_mismatch,
-            ..fresh
-        })
+        Ok(Self::started(
+            self.config,
+            self.block,
+            self.flags_mismatch,
+            self.states_uncertainty,
+        ))
     }
 
     /// Fold the block mean `y` of block m; `observability_row` and `step_response` hold
