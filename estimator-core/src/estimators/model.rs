@@ -53,19 +53,30 @@ impl<T: Real, const S: usize> SensorModel<T, S> {
     }
 }
 
-/// The model over one block of `D` raw samples, for regressors of block means:
-/// `transition = A^D`, `mean_map = (1/D)·Σ_{i<D} A^i`,
-/// `step_end = Σ_{j<D} A^j·B`, `step_mean = (1/D)·Σ_{i<D} Σ_{j<i} A^j·B`.
+/// The model over one block of `D` raw samples, for regressors of block means. With
+/// `transition = A^D`, `mean_map = (1/D)·Σ_{i<D} A^i`, `step_end = Σ_{j<D} A^j·B` and
+/// `step_mean = (1/D)·Σ_{i<D} Σ_{j<i} A^j·B`, block m's mean is
+/// `C·A^{mD}·mean_map·x₀ + (s(mD) + C·A^{mD}·step_mean)·u` and `s((m+1)D) = s(mD) +
+/// C·A^{mD}·step_end`.
+///
+/// The estimator propagates the initial state's regressor `r_m = C·A^{mD}·mean_map` itself:
+/// `mean_map` commutes with `A`, so `r_{m+1} = r_m·transition`, and `C·A^{mD}·v = r_m·w`
+/// with `w = mean_map⁻¹·v`. One row-matrix product per block instead of two.
 #[derive(Clone, Copy, Debug)]
 struct BlockModel<T, const S: usize> {
     transition: [[T; S]; S],
-    mean_map: [[T; S]; S],
-    step_end: [T; S],
-    step_mean: [T; S],
+    /// `r_0 = C·mean_map`.
+    first_row: [T; S],
+    /// `mean_map⁻¹·step_mean`: the step regressor's part from the state, `r_m·w`.
+    step_mean_weights: [T; S],
+    /// `mean_map⁻¹·step_end`: the step response's growth over the block, `r_m·w`.
+    step_end_weights: [T; S],
 }
 
 impl<T: Real, const S: usize> BlockModel<T, S> {
-    fn new(model: &SensorModel<T, S>, decimation: u16) -> Self {
+    /// The block model, or `None` when `mean_map` is singular (an eigenvalue of `A` a
+    /// `D`-th root of unity other than 1: a mode the block means cannot see).
+    fn new(model: &SensorModel<T, S>, decimation: u16) -> Option<Self> {
         let mut power = identity::<T, S>();
         let mut power_sum = [[T::ZERO; S]; S];
         let mut step_sum = [T::ZERO; S];
@@ -98,20 +109,63 @@ impl<T: Real, const S: usize> BlockModel<T, S> {
         for v in step_mean.iter_mut() {
             *v *= inv;
         }
-        Self {
-            transition: power,
-            mean_map,
-            step_end: step_partial,
-            step_mean,
+        let mut first_row = [T::ZERO; S];
+        for (j, v) in first_row.iter_mut().enumerate() {
+            for i in 0..S {
+                *v += model.c[i] * mean_map[i][j];
+            }
         }
+        let block = Self {
+            transition: power,
+            first_row,
+            step_mean_weights: solve(mean_map, step_mean)?,
+            step_end_weights: solve(mean_map, step_partial)?,
+        };
+        block.is_finite().then_some(block)
     }
 
     fn is_finite(&self) -> bool {
         self.transition.iter().flatten().all(|v| v.is_finite())
-            && self.mean_map.iter().flatten().all(|v| v.is_finite())
-            && self.step_end.iter().all(|v| v.is_finite())
-            && self.step_mean.iter().all(|v| v.is_finite())
+            && self.first_row.iter().all(|v| v.is_finite())
+            && self.step_mean_weights.iter().all(|v| v.is_finite())
+            && self.step_end_weights.iter().all(|v| v.is_finite())
     }
+}
+
+/// `x` with `m·x = v`, by Gaussian elimination with partial pivoting; `None` when `m` is
+/// singular.
+fn solve<T: Real, const S: usize>(mut m: [[T; S]; S], mut v: [T; S]) -> Option<[T; S]> {
+    for col in 0..S {
+        let mut pivot = col;
+        for r in col + 1..S {
+            if m[r][col].abs() > m[pivot][col].abs() {
+                pivot = r;
+            }
+        }
+        if !(m[pivot][col].abs() > T::ZERO) {
+            return None;
+        }
+        m.swap(col, pivot);
+        v.swap(col, pivot);
+        for r in col + 1..S {
+            let factor = m[r][col] / m[col][col];
+            for c in col..S {
+                let above = m[col][c];
+                m[r][c] -= factor * above;
+            }
+            let above = v[col];
+            v[r] -= factor * above;
+        }
+    }
+    let mut x = [T::ZERO; S];
+    for r in (0..S).rev() {
+        let mut value = v[r];
+        for c in r + 1..S {
+            value -= m[r][c] * x[c];
+        }
+        x[r] = value / m[r][r];
+    }
+    Some(x)
 }
 
 fn identity<T: Real, const S: usize>() -> [[T; S]; S] {
@@ -206,8 +260,9 @@ pub struct ModelEstimator<T: Real, const S: usize> {
     block: BlockModel<T, S>,
     /// Gain 1: the model is in raw units.
     intake: Intake<T>,
-    /// `C·A^k`: the regressor of the initial state.
-    observability_row: [T; S],
+    /// `C·A^{mD}·mean_map`: the regressor of the initial state in the next block (see
+    /// `BlockModel`).
+    state_row: [T; S],
     /// `s(k)`: the regressor of the step.
     step_response: T,
     factor: Factor<T, S, 1>,
@@ -241,10 +296,9 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
         if let Some(reference) = &config.noise_reference {
             reference.validate()?;
         }
-        let block = BlockModel::new(&config.model, config.decimation);
-        if !block.is_finite() {
+        let Some(block) = BlockModel::new(&config.model, config.decimation) else {
             return Err(ConfigError::Model);
-        }
+        };
         Ok(Self::started(config, block, true, true))
     }
 
@@ -264,7 +318,7 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
                 config.valid_max,
                 Decimator::new(config.decimation),
             ),
-            observability_row: config.model.c,
+            state_row: block.first_row,
             step_response: T::ZERO,
             factor: Factor::new(),
             rows: 0,
@@ -331,29 +385,28 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
         ))
     }
 
-    /// Fold the block mean `y` of block m; `observability_row` and `step_response` hold
-    /// `C·A^{mD}` and `s(mD)` at the block's first sample.
+    /// Fold the block mean `y` of block m; `state_row` and `step_response` hold
+    /// `C·A^{mD}·mean_map` and `s(mD)` at the block's first sample.
     fn update(&mut self, y: T) {
         let had_estimate = self.intake.estimate().is_some();
         let block = &self.block;
-        let mut row = [T::ZERO; S];
+        let row = self.state_row;
         let mut next = [T::ZERO; S];
         let mut step_mean = self.step_response;
         let mut step_next = self.step_response;
         for i in 0..S {
-            let ci = self.observability_row[i];
-            step_mean += ci * block.step_mean[i];
-            step_next += ci * block.step_end[i];
+            let ri = row[i];
+            step_mean += ri * block.step_mean_weights[i];
+            step_next += ri * block.step_end_weights[i];
             for j in 0..S {
-                row[j] += ci * block.mean_map[i][j];
-                next[j] += ci * block.transition[i][j];
+                next[j] += ri * block.transition[i][j];
             }
         }
         // At rest the initial-state columns are left out of the regression (zero active
         // leading columns): the same engine then solves the one-unknown problem.
         let determined_before = self.rows as usize > self.state_columns();
         let folded = self.factor.fold(self.state_columns(), row, [step_mean], y);
-        self.observability_row = next;
+        self.state_row = next;
         self.step_response = step_next;
         self.rows = self.rows.saturating_add(1);
         if had_estimate {
@@ -763,6 +816,23 @@ mod tests {
             b: [1.0 - pole],
             c: [1.0],
         })
+    }
+
+    #[test]
+    fn a_mode_the_block_means_cannot_see_is_refused() {
+        // A pole at -1 alternates sample by sample: blocks of two average it away, so its
+        // state is no regressor of the block means (`mean_map` singular); blocks of three
+        // see it.
+        let alternating = ModelConfig::new(SensorModel {
+            a: [[-1.0]],
+            b: [1.0],
+            c: [1.0],
+        });
+        assert_eq!(
+            ModelEstimator::new(alternating.with_decimation(2)).err(),
+            Some(ConfigError::Model)
+        );
+        assert!(ModelEstimator::new(alternating.with_decimation(3)).is_ok());
     }
 
     #[test]
