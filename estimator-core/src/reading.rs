@@ -17,9 +17,9 @@ pub enum InvalidReason {
     NonFiniteUpdate,
     /// A sample was reported missing by the caller; the Hankel structure is broken.
     MissingSample,
-    /// A bank of models fits best with a candidate on its edge: the sensor's dynamics (the
-    /// load) may lie outside the range the candidates cover, so the estimate would be
-    /// biased. Like ill-conditioning it is a property of the data so far and clears when the
+    /// A bank of models fits best with a candidate on its edge (or on the edge of the
+    /// candidates it still fits, see [`crate::ModelBank`]): the sensor's dynamics (the load)
+    /// may lie outside the range the candidates cover, so the estimate would be biased. Like ill-conditioning it is a property of the data so far and clears when the
     /// best fit moves inside.
     OutsideModelRange,
     /// The covariance form's inverse information matrix Ψ is no longer positive definite

@@ -77,6 +77,11 @@ impl<T: Real> Intake<T> {
         }
     }
 
+    /// Whether a fault is latched: nothing passes until the reset.
+    pub(crate) fn latched(&self) -> bool {
+        self.fault.is_some()
+    }
+
     /// The current estimate (`Some` only while estimating).
     pub(crate) fn estimate(&self) -> Option<T> {
         self.estimate
