@@ -72,15 +72,16 @@ impl Scene {
         }
     }
 
-    /// The demo after 2 s more of empty pan (the firmware's `checked-demo` scene,
-    /// `qemu::CHECKED_DEMO_EMPTY_S`): the scale meters the empty pan before the first drop,
-    /// so the consistency check is live on every run after it.
+    /// The demo after more empty pan (the firmware's `checked-demo` scene,
+    /// `host_sim::qemu_scenes::CHECKED_DEMO_EMPTY_S`): the scale meters the empty pan before
+    /// the first drop, so the consistency check is live on every run after it.
     pub fn checked_demo() -> Self {
+        let more_s = host_sim::qemu_scenes::CHECKED_DEMO_EMPTY_S;
         let mut scene = Self::demo();
         for (time_s, _) in scene.loads.iter_mut().skip(1) {
-            *time_s += 2.0;
+            *time_s += more_s;
         }
-        scene.end_s += 2.0;
+        scene.end_s += more_s;
         scene
     }
 
