@@ -727,7 +727,7 @@ fn bench_run(bench_elf: &Path, handoff: bool) -> Result<()> {
             );
         }
         println!(
-            "  with the consistency check live (the demo after 2 s more empty pan, from its first drop on): {:>7.1} instructions per 4 kHz sample ({} samples)",
+            "  with the consistency check live (the checked demo, from its first drop on): {:>7.1} instructions per 4 kHz sample ({} samples)",
             per_event(&checked)?,
             field(&checked, "events")?
         );
