@@ -27,8 +27,9 @@
 //!
 //! With few rows `s²` is itself uncertain: the stated `u` is multiplied by
 //! `t_{0.975}(ν)/2` where that exceeds 1 (ν = rows − (n + 1)), so that ±2u is a 95 %
-//! interval (GUM G.3); below [`MIN_DEGREES_OF_FREEDOM`] there is no `u` at all. Where the empty pan's noise has been metered (the consistency check's
-//! reference), the residuals' noise level is not taken below it.
+//! interval (GUM G.3); below [`MIN_DEGREES_OF_FREEDOM`] there is no `u` at all. Where the
+//! empty pan's noise has been metered (the consistency check's reference), the residuals'
+//! noise level is not taken below it.
 //!
 //! Only the growing window (λ = 1): with forgetting the lag-0 term needs `ΦᵀW²Φ` as well,
 //! which is not kept, and the estimator states no `u`.
@@ -183,7 +184,7 @@ impl<T: Real, const N: usize, const L: usize> LagSums<T, N, L> {
         // without a transient (a run restarted on a trickle) all but interpolated its
         // data, its residual level 170 times below the block means' noise, and stated
         // u = 0.0016 g on 1 g of raw noise, shown final 0.13 g off (test
-        // `a_trickle_onto_a_fresh_load_is_not_shown_stable_behind_it`).
+        // `a_fit_without_a_transient_is_not_overconfident_with_metered_noise`).
         let mut noise = mean_square / power;
         let mut mean_square = mean_square;
         if let Some(floor) = block_noise_floor {
@@ -326,18 +327,9 @@ mod tests {
         use crate::estimators::consistency::NoiseReference;
         use crate::estimators::step::{StepConfig, StepEstimator};
         use crate::reading::Estimator;
+        use crate::weighing::test_scene::unit_noise;
         let mut state = 0x9E37_79B9_7F4A_7C15u64;
-        let mut noise = move || {
-            // Sum of 4 uniforms: near-Gaussian, unit variance.
-            let mut sum = 0.0;
-            for _ in 0..4 {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                sum += (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
-            }
-            sum * 3.0f64.sqrt()
-        };
+        let mut noise = move || unit_noise(&mut state);
         let runs = 400;
         let mut outside = [0u32; 2];
         for (floor, outside) in [false, true].into_iter().zip(&mut outside) {

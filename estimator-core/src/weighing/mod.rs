@@ -16,6 +16,8 @@ mod key;
 mod method;
 mod recorder;
 mod scale;
+#[cfg(test)]
+pub(crate) use scale::test_scene;
 mod sequence;
 mod settings;
 

@@ -75,16 +75,7 @@ impl Cell {
     }
 
     fn noise(&mut self) -> f64 {
-        // Sum of 4 uniforms: near-Gaussian, unit variance.
-        let mut sum = 0.0;
-        for _ in 0..4 {
-            self.noise_state = self
-                .noise_state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            sum += (self.noise_state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
-        }
-        sum * (3.0f64).sqrt()
+        unit_noise(&mut self.noise_state)
     }
 
     pub(crate) fn sample(&mut self) -> RawSample {
@@ -101,6 +92,19 @@ impl Cell {
         let counts = self.offset_counts + grams * self.gain_factor * CPG as f64;
         RawSample::Counts(counts.round() as i32)
     }
+}
+
+/// Deterministic pseudo-noise from `state`: a sum of 4 uniforms, near-Gaussian, unit
+/// variance.
+pub(crate) fn unit_noise(state: &mut u64) -> f64 {
+    let mut sum = 0.0;
+    for _ in 0..4 {
+        *state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        sum += (*state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+    }
+    sum * (3.0f64).sqrt()
 }
 
 pub(crate) fn run<E: ScaleEstimator>(
