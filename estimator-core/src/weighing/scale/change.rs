@@ -6,6 +6,7 @@
 //!
 //! A NaN deviation must never poison the sums: it resets them.
 
+use super::trend::{TREND_LAG_OF_PERMISSIBLE, TREND_LAG_S, TREND_T};
 use super::{Scale, ScaleEstimator, ScaleReading, ScaleState};
 
 /// The ringing's amplitude over the step that set it off, at most: a load dropped from a
@@ -155,6 +156,29 @@ impl<E: ScaleEstimator> Scale<E> {
         self.restart_as_load_change();
         self.state = ScaleState::Estimating;
         self.reading()
+    }
+
+    /// One good sample into the trend test (`trend`): at the end of each block, a slope
+    /// that is significant and lags the reading by more than its part of the permissible
+    /// error is an alarm, taken at the next valid reading.
+    pub(super) fn push_trend(&mut self, counts: i32) {
+        let gross_g = (counts as f32 - self.calibrated_zero_counts) * self.grams_per_count;
+        let Some(slope) = self.trend.push(gross_g, self.config.block_samples) else {
+            return;
+        };
+        let blocks_per_s = self.config.sample_rate_hz / self.config.block_samples.max(1) as f32;
+        let run_s = self.samples_since_change as f32 / self.config.sample_rate_hz;
+        let lag_g = (slope.per_block_g * blocks_per_s).abs() * (0.5 * run_s).max(TREND_LAG_S);
+        let permissible = self
+            .config
+            .permissible_error_g(self.last_shown_gross_g - self.tare_g);
+        if slope.t.abs() > TREND_T && lag_g > TREND_LAG_OF_PERMISSIBLE * permissible {
+            // The blocks to come are judged against the line: a trickle goes on along it;
+            // one that stopped (or a ramp the CUSUM tests cut short) leaves it, and what
+            // came before is dropped instead of alarming until it leaves the window.
+            self.trend.changed(0);
+            self.trend_alarmed = true;
+        }
     }
 }
 
@@ -396,6 +420,36 @@ mod shown_settled {
             assert!(
                 readings.last().unwrap().load_changes > 1,
                 "{rate_g_per_s} g/s: the trickle went unseen"
+            );
+        }
+    }
+
+    /// Sand trickling onto the pan for 25 s (0.02–0.05 g/s) on a noisy pan (0.85 g of raw
+    /// noise: a block mean of 0.1 s scatters by 0.04 g, nearly the 0.05 g permissible): the
+    /// CUSUM tests' allowances hid a lag of 0.05–0.07 g for up to a second, and the reading
+    /// was shown stable or empty that far behind (`host-sim torture --runs 1000 --seed 1`:
+    /// 85 of 100 silent wrong readings were trickles, this scene its run 447). The trend
+    /// test sees the slope over the last 10 s instead.
+    ///
+    /// Not covered, and not claimed: a trickle that begins within about 3.5 s of power-up
+    /// (the window fills only once the ringing is over, 1.5 s, and judges from 2 s of
+    /// blocks). On this pan a 0.03 g/s trickle begun 1.5 s after power-up was shown
+    /// `Empty` 0.05 g behind after another 1.5 s: no test can see that slope yet (its t is
+    /// about 1), and the reading averages the 3 s run.
+    #[test]
+    fn a_trickle_on_a_noisy_pan_is_seen_by_its_slope() {
+        for (seed, rate_g_per_s) in [(11, 0.02), (12, 0.03), (13, 0.04), (14, 0.05)] {
+            let (mut scale, _) = scene(0.85);
+            let mut cell = Cell::seeded(0.85, seed);
+            let mut recent = VecDeque::new();
+            let what = std::format!("{rate_g_per_s} g/s");
+            checked((&mut scale, &mut cell, &mut recent), 32_000, |_| 0.0, &what);
+            let trickle = |k: usize| rate_g_per_s * k as f64 / 4000.0;
+            checked(
+                (&mut scale, &mut cell, &mut recent),
+                100_000,
+                trickle,
+                &what,
             );
         }
     }

@@ -24,6 +24,7 @@ impl<E: ScaleEstimator> Scale<E> {
             Err(fault) => return self.set_fault(fault),
         };
         self.start_sample();
+        self.push_trend(counts);
         // The zero is removed in integer arithmetic, so the conversion is exact (|counts| is
         // far below 2^24 for any converter this runs).
         let centred_counts = counts.saturating_sub(self.run_zero_counts);
@@ -31,10 +32,20 @@ impl<E: ScaleEstimator> Scale<E> {
         if let State::Invalid(reason) = reading.state {
             return self.flagged(reason);
         }
-        if self.residual_alarm(reading.residual) || self.raw_alarm(counts) {
-            let slow = self.block_alarmed;
+        let changed = self.residual_alarm(reading.residual) || self.raw_alarm(counts);
+        let trend = core::mem::take(&mut self.trend_alarmed);
+        if changed || trend {
+            // The trend test alone, or the block test alone, saw a slow change.
+            let slow = !changed || self.block_alarmed;
+            if changed {
+                // Maybe a step: the trend test judges it once blocks after it are in.
+                let ringing = if slow { 0 } else { self.config.raw_arm_samples };
+                self.trend
+                    .changed(ringing.div_ceil(self.config.block_samples.max(1)));
+            }
             let reading = self.load_changed();
             self.after_slow_change = slow;
+            self.after_trend_change = !changed;
             return reading;
         }
         let Some(estimate_counts) = reading.estimate else {
@@ -75,10 +86,12 @@ impl<E: ScaleEstimator> Scale<E> {
             RawSample::Counts(counts) => Ok(counts),
             RawSample::Saturated => {
                 self.restart_pending = true;
+                self.trend.clear(0);
                 Err(ScaleFault::Saturated)
             }
             RawSample::Lost => {
                 self.restart_pending = true;
+                self.trend.clear(0);
                 Err(ScaleFault::SampleLost)
             }
         }

@@ -15,8 +15,8 @@
 //! allocate, or panic on data.
 //!
 //! ## Load-change detection (`change`)
-//! Two two-sided CUSUM tests (Page 1954) decide that the load changed, and a change resets
-//! the estimator so that it only ever sees data of one load:
+//! Two two-sided CUSUM tests (Page 1954) and a trend test decide that the load changed,
+//! and a change resets the estimator so that it only ever sees data of one load:
 //! - on the estimator's a-priori residuals (grams, one per decimated update). The residual
 //!   is what the fitted sensor model cannot explain, so the ringing of a fresh load does
 //!   not trip it but a new step does, within one or two decimated updates. The residuals of
@@ -27,7 +27,11 @@
 //!   raw signal only sits still once the cell stopped ringing, so this test is armed only
 //!   after the reading has been stable (or empty) for `raw_arm_samples`.
 //!
-//! Neither test runs on a flagged reading (a flagged fit has no residual to trust, and no
+//! - a trend test (`trend`): a line through the last 10 s of block means, across load
+//!   changes; a significant slope that makes the reading lag is a (slow) change. A trickle
+//!   hides from both CUSUM tests on a noisy pan, the reading lagging behind it.
+//!
+//! Neither CUSUM test runs on a flagged reading (a flagged fit has no residual to trust, and no
 //! mass to compare with). So a flag that persists after the run showed a valid reading —
 //! the fit of one load broke down, typically because a new load arrived before the
 //! residual test alarmed (instrumental variables go ill-conditioned on the ringing of a
@@ -62,6 +66,7 @@ mod noise;
 mod reading;
 #[cfg(test)]
 pub(crate) mod test_scene;
+mod trend;
 mod zero;
 
 pub use build::{ConfiguredEstimator, MethodRefusal};
@@ -75,6 +80,7 @@ use crate::estimators::step::StepEstimator;
 use crate::reading::ConfigError;
 use change::TwoSidedCusum;
 use noise::NoiseMetering;
+use trend::Trend;
 use zero::round_to_i32;
 
 /// The weighing decisions around an estimator `E` (see [`ScaleEstimator`]).
@@ -168,6 +174,15 @@ pub struct Scale<E> {
     noise: NoiseMetering,
     /// This sample went into the noise meter (else the window in progress is dropped).
     noise_metered: bool,
+    /// The trend test's window of block means (`trend`): kept over load changes, started
+    /// over after a fault or a new calibration or configuration.
+    trend: Trend,
+    /// The trend test alarmed at its last block; taken as a slow change at the next
+    /// valid reading.
+    trend_alarmed: bool,
+    /// This run began at a change only the trend test saw: nothing is final before the raw
+    /// tests are armed again.
+    after_trend_change: bool,
 }
 
 /// The scale around the step estimator of capacity `N` (the firmware's method before the
@@ -232,6 +247,9 @@ impl<E: ScaleEstimator> Scale<E> {
             state: ScaleState::Estimating,
             noise: NoiseMetering::new(samples_per_update, config.noise_window_samples),
             noise_metered: false,
+            trend: Trend::new(0),
+            trend_alarmed: false,
+            after_trend_change: false,
         };
         scale.start_with(calibration);
         Ok(scale)
@@ -258,6 +276,11 @@ impl<E: ScaleEstimator> Scale<E> {
         self.zero_tracked_counts = 0.0;
         self.clear_tare();
         self.stable_centre_g = 0.0;
+        self.trend.clear(
+            self.config
+                .raw_arm_samples
+                .div_ceil(self.config.block_samples.max(1)),
+        );
         self.restart();
         (self.fault, self.state) = if calibrated {
             (None, ScaleState::Estimating)
@@ -295,8 +318,12 @@ impl<E: ScaleEstimator> Scale<E> {
         // were wrong a quarter of the time), and only when the scale could show it stable
         // by its `u` (a target looser than the permissible error does not let a final
         // reading lie outside it).
+        // Nor after a change only the trend test saw (a trickle) before the raw tests are
+        // armed again, as for stable: a fresh fit of a ramp's few hundred samples was
+        // final 0.09 g off with u = 0.004 g.
         let is_final = matches!(self.state, ScaleState::Estimating | ScaleState::Stable)
             && !self.moving
+            && (self.raw_armed || !self.after_trend_change)
             && mass_g
                 .zip(self.gross_u_bound_g)
                 .is_some_and(|(mass_g, bound)| {
@@ -352,6 +379,7 @@ impl<E: ScaleEstimator> Scale<E> {
         self.config = config;
         self.ringing_decay = ringing_decay(config.raw_arm_samples);
         self.noise = NoiseMetering::new(self.samples_per_update, config.noise_window_samples);
+        self.trend.clear(0);
         self.restart_as_load_change();
         Ok(())
     }
@@ -385,6 +413,8 @@ impl<E: ScaleEstimator> Scale<E> {
         self.flagged_samples = 0;
         self.gross_g = None;
         self.restart_pending = false;
+        self.trend_alarmed = false;
+        self.after_trend_change = false;
     }
 
     /// Count `samples` more raw samples in this run without pushing them (tests of runs
@@ -395,7 +425,9 @@ impl<E: ScaleEstimator> Scale<E> {
         self.samples_since_change += samples;
     }
 
-    /// A new run that counts as a load change.
+    /// A new run that counts as a load change. The trend test's window goes on: a trickle
+    /// goes on across the restarts it causes, and a step in the window is cut out of it
+    /// when the trend test or the block test sees it (`trend`).
     fn restart_as_load_change(&mut self) {
         self.restart();
         self.restarted_uncertain = false;
