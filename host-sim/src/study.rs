@@ -2,8 +2,10 @@
 //! (138.32 g dropped at t = 0) at 30–80 dB, with the same seeds for every method. For each
 //! method and SNR: the time to reach and stay within 0.1% (median and 95th percentile over
 //! the runs, "never" when a run is not within at the end of the 1.5 s window), the RMS error
-//! at 50, 100 and 200 ms and its ratio to the Cramér–Rao bound at that time. It writes a CSV
-//! and a markdown table, draws the two charts and prints the firmware default's goals.
+//! at 50, 100 and 200 ms and its ratio to the Cramér–Rao bound at that time. The baselines
+//! join at the tuning [`baselines`] searches first, on runs of its own. It writes a CSV and a
+//! markdown table, the search's report, draws the two charts and prints the firmware
+//! default's goals.
 //!
 //! What it must never do: pick a method's figures from a different run or seed than its
 //! rivals' (one Monte Carlo holds them all), or report an RMS over a subset of runs as if it
