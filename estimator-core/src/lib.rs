@@ -37,7 +37,10 @@ pub mod sensor;
 pub mod tuning;
 pub mod weighing;
 
-pub use estimators::baseline::{Baseline, BaselineConfig, BaselineMode};
+pub use estimators::baseline::{
+    Baseline, BaselineConfig, BaselineMode, CellMode, Compensator, CompensatorConfig, Prefilter,
+    Shaper, ShaperConfig, ShaperKind, Unfiltered,
+};
 pub use estimators::bias_compensated::{BiasCompensatedConfig, BiasCompensatedStepEstimator};
 pub use estimators::consistency::{NoiseReference, MISMATCH_ALLOWANCE, MISMATCH_FALSE_ALARM};
 pub use estimators::covariance::CovarianceStepEstimator;

@@ -160,6 +160,9 @@ pub enum ConfigError {
     /// A field of the weighing decisions' configuration (`ScaleConfig`, named here) is NaN,
     /// infinite where it must be finite, negative, or zero where it must be positive.
     ScaleField(&'static str),
+    /// A field of a baseline's pre-filter (named here: the cell's mode, the placed pair, the
+    /// delay line's capacity) is out of its domain.
+    Filter(&'static str),
 }
 
 impl core::fmt::Display for ConfigError {
@@ -181,6 +184,9 @@ impl core::fmt::Display for ConfigError {
             }
             ConfigError::OutsideValidRegion => {
                 f.write_str("configuration outside the valid region of the stability map")
+            }
+            ConfigError::Filter(field) => {
+                write!(f, "pre-filter field `{field}` is out of its domain")
             }
             ConfigError::ScaleField(field) => {
                 write!(

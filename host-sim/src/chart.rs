@@ -110,6 +110,11 @@ impl Chart {
                 .copied()
                 .filter(|(x, y)| x.is_finite() && y.is_finite() && *y > 0.0)
                 .collect();
+            // A series with nothing to draw takes neither a colour nor a legend entry: a
+            // legend names only what the reader can find on the chart.
+            if points.is_empty() {
+                continue;
+            }
             let style = if series.reference {
                 BLACK.mix(0.8).stroke_width(1)
             } else {
@@ -373,11 +378,7 @@ pub fn rms_against_readout(
                 .map(|k| (k as f64 / rate * 1e3, stats.rms(k) / result.truth_g))
                 .collect();
             Series {
-                name: if points.is_empty() {
-                    format!("{name}: not valid in every run by {:.0} ms", to_s * 1e3)
-                } else {
-                    name.clone()
-                },
+                name: name.clone(),
                 points,
                 reference: false,
             }
@@ -427,11 +428,7 @@ pub fn settle_against_snr(results: &[StudyResult], names: &[String]) -> Chart {
                 })
                 .collect();
             Series {
-                name: if points.iter().all(|(_, y)| !y.is_finite()) {
-                    format!("{name}: never within")
-                } else {
-                    name.clone()
-                },
+                name: name.clone(),
                 points,
                 reference: false,
             }

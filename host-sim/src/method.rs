@@ -7,6 +7,8 @@
 //! model[:D=8][,K=33][,span=0.7-1.3][,cal_g=200][,precision=..]  ModelBank over candidate resonances
 //! settled[:block=80][,K=10][,band_g=0.5][,precision=..]          wait until stable, then average
 //! moving[:block=80][,K=10][,band_g=0.5][,precision=..]           boxcar mean while stable
+//! compensated:fn_hz=25,zeta=0.03[,ratio=2][,placed_zeta=1][,average=moving][,block..]  pole-zero compensation first
+//! shaped:fn_hz=25,zeta=0.03[,shaper=zvd][,average=moving][,block..]                    input-shaper FIR first
 //! ramp:n=5,D=16[,lambda=..][,lag_s=0][,precision=..]            affine-input estimator
 //! iv:n=7,D=16[,delay=n+1][,lambda=..][,precision=..]            instrumental variables
 //! bc:n=7,D=16[,lambda=..][,noise_var=..][,precision=..]         bias-compensated LS, σ² from the tare
@@ -63,9 +65,14 @@ use estimator_core::weighing::UNCERTAINTY_ORDERS;
 use estimator_core::{
     max_instrument_delay, Baseline, BaselineConfig, BaselineMode, BiasCompensatedConfig,
     BiasCompensatedStepEstimator, CovarianceStepEstimator, Estimator, InitialState, IvConfig,
-    IvStepEstimator, ModelBank, ModelConfig, NoiseMeter, NoiseReference, RampConfig, RampEstimator,
-    Reading, Real, SensorModel, StepConfig, StepEstimator, MAX_DECIMATION,
+    IvStepEstimator, ModelBank, ModelConfig, NoiseMeter, NoiseReference, Prefilter, RampConfig,
+    RampEstimator, Reading, Real, SensorModel, ShaperKind, StepConfig, StepEstimator, Unfiltered,
+    MAX_DECIMATION,
 };
+
+mod filtered;
+
+pub use filtered::{FilteredSpec, Prefiltering, SHAPER_CAPACITY};
 
 use crate::montecarlo::{Precision, Setup, CAPACITY};
 use crate::sensor::{SensorChain, OUTPUT_STATE, STATES};
@@ -76,6 +83,9 @@ pub type BoxedEstimator = Box<dyn Estimator<f64> + Send>;
 /// Candidate counts a `model` bank may have (the bank's size is a const generic in the core;
 /// 2^j + 1 so that a grid can be refined by halving its steps).
 pub const MODEL_CANDIDATES: [usize; 7] = [1, 3, 5, 9, 17, 33, 65];
+/// The keys every baseline takes.
+const BASELINE_KEYS: [&str; 4] = ["block", "K", "band_g", "precision"];
+
 /// Block counts a `settled` or `moving` baseline may keep (a const generic in the core).
 pub const BASELINE_BLOCKS: [usize; 11] = [2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 32];
 
@@ -150,6 +160,18 @@ pub struct BaselineSpec {
     pub precision: Precision,
 }
 
+impl BaselineSpec {
+    /// `block=..,K=..,band_g=..[,precision=f32]`, as every baseline's spec ends.
+    fn write_fields(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "block={},K={},band_g={}",
+            self.block, self.blocks, self.band_g
+        )?;
+        write_precision(f, self.precision)
+    }
+}
+
 impl Default for BaselineSpec {
     /// What a scale maker would pick: blocks of 80 samples (20 ms, one 50 Hz mains period,
     /// so pickup averages out of every block), K = 10 (a 200 ms stability window, the usual
@@ -200,6 +222,8 @@ pub enum Method {
     Settled(BaselineSpec),
     /// `Baseline` in `MovingAverage` mode.
     Moving(BaselineSpec),
+    /// `Baseline` behind a pre-filter tuned to the cell (`compensated`, `shaped`).
+    Filtered(FilteredSpec),
     /// `RampEstimator`.
     Ramp(RampSpec),
     /// `IvStepEstimator`: instrumental variables, instruments delayed by `delay` decimated
@@ -300,6 +324,7 @@ impl Method {
             Method::Ramp(spec) => spec.setup.precision,
             Method::Model(spec) => spec.precision,
             Method::Settled(spec) | Method::Moving(spec) => spec.precision,
+            Method::Filtered(spec) => spec.baseline.precision,
         }
     }
 
@@ -332,6 +357,7 @@ impl Method {
             Method::Ramp(spec) => Some(spec.setup.decimation),
             Method::Model(spec) => Some(spec.decimation),
             Method::Settled(spec) | Method::Moving(spec) => Some(spec.block),
+            Method::Filtered(spec) => Some(spec.baseline.block),
         }
     }
 
@@ -407,12 +433,21 @@ impl Method {
                     .map_err(core)?,
                 )
             }
-            Method::Settled(spec) => {
-                baseline::<T>(spec, BaselineMode::SettledAverage, gain, reference)?
-            }
-            Method::Moving(spec) => {
-                baseline::<T>(spec, BaselineMode::MovingAverage, gain, reference)?
-            }
+            Method::Settled(spec) => baseline(
+                spec,
+                BaselineMode::SettledAverage,
+                gain,
+                reference,
+                Unfiltered,
+            )?,
+            Method::Moving(spec) => baseline(
+                spec,
+                BaselineMode::MovingAverage,
+                gain,
+                reference,
+                Unfiltered,
+            )?,
+            Method::Filtered(spec) => spec.build(gain, context.chain.sample_rate_hz, reference)?,
             Method::Model(spec) => build_model::<T>(spec, context)?,
         })
     }
@@ -513,11 +548,12 @@ macro_rules! dispatch_const {
     };
 }
 
-fn baseline<T: Real + Send + 'static>(
+fn baseline<T: Real + Send + 'static, F: Prefilter<T> + Send + 'static>(
     spec: &BaselineSpec,
     mode: BaselineMode,
     gain: T,
     noise_reference: Option<NoiseReference<T>>,
+    prefilter: F,
 ) -> Result<Box<dyn Estimator<T> + Send>> {
     let config = BaselineConfig {
         mode,
@@ -531,7 +567,7 @@ fn baseline<T: Real + Send + 'static>(
         spec.blocks,
         [2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 32],
         "block count K",
-        |K| Box::new(Baseline::<T, K>::new(config).map_err(core)?)
+        |K| Box::new(Baseline::<T, K, F>::with_prefilter(config, prefilter).map_err(core)?)
     ))
 }
 
@@ -656,7 +692,7 @@ impl Estimator<f64> for InF32 {
 // The text form.
 
 /// Method names, for error messages.
-const METHODS: &str = "step, covariance, model, settled, moving, ramp, iv, bc";
+const METHODS: &str = "step, covariance, model, settled, moving, compensated, shaped, ramp, iv, bc";
 
 /// Every key any method knows, parsed and range-checked; a family then refuses the keys it
 /// does not take.
@@ -678,6 +714,10 @@ struct Fields {
     damping_ratio: Option<f64>,
     filter_cutoff_hz: Option<f64>,
     delay: Option<usize>,
+    ratio: Option<f64>,
+    placed_zeta: Option<f64>,
+    shaper: Option<ShaperKind>,
+    average: Option<BaselineMode>,
     /// Canonical names of the keys given, in order.
     given: Vec<&'static str>,
 }
@@ -794,6 +834,22 @@ impl Fields {
                 self.delay = Some(value.parse().map_err(|_| bad(expected))?);
                 "delay"
             }
+            "shaper" => {
+                let kinds = [ShaperKind::Zv, ShaperKind::Zvd, ShaperKind::Zvdd];
+                let kind = kinds
+                    .into_iter()
+                    .find(|&k| filtered::shaper_name(k) == value);
+                self.shaper = Some(kind.ok_or_else(|| bad("zv, zvd or zvdd"))?);
+                "shaper"
+            }
+            "average" => {
+                let modes = [BaselineMode::MovingAverage, BaselineMode::SettledAverage];
+                let mode = modes
+                    .into_iter()
+                    .find(|&m| filtered::average_name(m) == value);
+                self.average = Some(mode.ok_or_else(|| bad("moving or settled"))?);
+                "average"
+            }
             other => bail!("method `{spec}`: unknown key `{other}`"),
         })
     }
@@ -834,6 +890,16 @@ impl Fields {
                 &mut self.filter_cutoff_hz,
                 "filter_hz",
                 "the filter cut-off in Hz, positive",
+            ),
+            "ratio" => (
+                &mut self.ratio,
+                "ratio",
+                "the placed pair's frequency over the cell's, positive",
+            ),
+            "placed_zeta" => (
+                &mut self.placed_zeta,
+                "placed_zeta",
+                "the placed pair's damping ratio, positive",
             ),
             _ => return None,
         })
@@ -927,8 +993,46 @@ impl Fields {
         })
     }
 
+    /// `compensated` and `shaped`: the cell's mode, the filter, the averaging and a baseline.
+    fn filtered(&self, spec: &str, family: &str) -> Result<FilteredSpec> {
+        let filter_keys: &[&str] = if family == "compensated" {
+            &["ratio", "placed_zeta"]
+        } else {
+            &["shaper"]
+        };
+        let mut allowed = vec!["fn_hz", "zeta", "average"];
+        allowed.extend_from_slice(filter_keys);
+        allowed.extend_from_slice(&BASELINE_KEYS);
+        self.only(spec, family, &allowed)?;
+        let (Some(natural_frequency_hz), Some(damping_ratio)) =
+            (self.natural_frequency_hz, self.damping_ratio)
+        else {
+            bail!("method `{spec}`: keys `fn_hz` and `zeta` are required for `{family}` (the cell's mode the filter is tuned to)");
+        };
+        let filter = if family == "compensated" {
+            Prefiltering::Compensation {
+                ratio: self.ratio.unwrap_or(2.0),
+                placed_zeta: self.placed_zeta.unwrap_or(1.0),
+            }
+        } else {
+            Prefiltering::Shaper(self.shaper.unwrap_or(ShaperKind::Zvd))
+        };
+        Ok(FilteredSpec {
+            natural_frequency_hz,
+            damping_ratio,
+            filter,
+            average: self.average.unwrap_or(BaselineMode::MovingAverage),
+            baseline: self.baseline_fields(spec)?,
+        })
+    }
+
     fn baseline(&self, spec: &str, family: &str) -> Result<BaselineSpec> {
-        self.only(spec, family, &["block", "K", "band_g", "precision"])?;
+        self.only(spec, family, &BASELINE_KEYS)?;
+        self.baseline_fields(spec)
+    }
+
+    /// The block, K, band and precision of any baseline.
+    fn baseline_fields(&self, spec: &str) -> Result<BaselineSpec> {
         let default = BaselineSpec::default();
         let blocks = self.count.unwrap_or(default.blocks);
         if !BASELINE_BLOCKS.contains(&blocks) {
@@ -961,6 +1065,8 @@ impl FromStr for Method {
             "model",
             "settled",
             "moving",
+            "compensated",
+            "shaped",
             "ramp",
             "iv",
             "bc",
@@ -1005,6 +1111,7 @@ impl FromStr for Method {
             "iv" => fields.instrumental_variable(spec, family)?,
             "settled" => Method::Settled(fields.baseline(spec, family)?),
             "moving" => Method::Moving(fields.baseline(spec, family)?),
+            "compensated" | "shaped" => Method::Filtered(fields.filtered(spec, family)?),
             _ => unreachable!("family checked above"),
         })
     }
@@ -1101,13 +1208,10 @@ impl fmt::Display for Method {
                 } else {
                     "moving"
                 };
-                write!(
-                    f,
-                    "{family}:block={},K={},band_g={}",
-                    spec.block, spec.blocks, spec.band_g
-                )?;
-                write_precision(f, spec.precision)
+                write!(f, "{family}:")?;
+                spec.write_fields(f)
             }
+            Method::Filtered(spec) => spec.fmt(f),
         }
     }
 }
@@ -1154,6 +1258,8 @@ mod tests {
             "iv:n=7,D=16",
             "iv:n=5,D=1,lambda=0.999,precision=f32,delay=11",
             "bc:n=7,D=12,precision=f32",
+            "compensated:fn_hz=25,zeta=0.03,ratio=2,placed_zeta=1,average=moving,block=80,K=10,band_g=0.5",
+            "shaped:fn_hz=25.000156487736767,zeta=0.0300060250982748,shaper=zvdd,average=settled,block=40,K=4,band_g=0.2,precision=f32",
         ] {
             let method = parse(spec);
             assert_eq!(method.to_string(), spec);
@@ -1219,6 +1325,26 @@ mod tests {
                 ["`delay`", "expected n, D, lambda, precision"],
             ),
             ("iv:D=16", ["`n` is required", "order from 1 to 40"]),
+            (
+                "shaped:zeta=0.03",
+                ["`fn_hz` and `zeta` are required", "tuned"],
+            ),
+            (
+                "shaped:fn_hz=25,zeta=0.03,shaper=zz",
+                ["`shaper`", "zv, zvd or zvdd"],
+            ),
+            (
+                "compensated:fn_hz=25,zeta=0.03,shaper=zv",
+                ["`shaper`", "does not apply"],
+            ),
+            (
+                "compensated:fn_hz=25,zeta=0.03,average=boxcar",
+                ["`average`", "moving or settled"],
+            ),
+            (
+                "compensated:fn_hz=25,zeta=0.03,ratio=0",
+                ["`ratio`", "positive"],
+            ),
         ];
         for (spec, needles) in cases {
             let message = error(spec);
@@ -1241,10 +1367,27 @@ mod tests {
                 assert!(built.is_ok(), "{spec}: {:?}", built.err());
             }
             for k in BASELINE_BLOCKS {
-                let spec = format!("moving:K={k},precision={precision}");
-                let built = parse(&spec).build(&context);
-                assert!(built.is_ok(), "{spec}: {:?}", built.err());
+                for family in [
+                    "moving:",
+                    "compensated:fn_hz=25,zeta=0.03,",
+                    "shaped:fn_hz=25,zeta=0.03,",
+                ] {
+                    let spec = format!("{family}K={k},precision={precision}");
+                    let built = parse(&spec).build(&context);
+                    assert!(built.is_ok(), "{spec}: {:?}", built.err());
+                }
             }
+        }
+        // A mode the core's filters refuse is an error naming the method and the field.
+        for spec in [
+            "compensated:fn_hz=25,zeta=1.5",
+            "shaped:fn_hz=2500,zeta=0.03",
+        ] {
+            let message = parse(spec).build(&context).err().unwrap().to_string();
+            assert!(
+                message.contains(spec) && message.contains("pre-filter field"),
+                "{message}"
+            );
         }
         // A value the core refuses is an error naming the method, not a panic.
         let zero_gain = BuildContext::new(SensorChain::reference(), 0.0);

@@ -2,8 +2,10 @@
 //! (138.32 g dropped at t = 0) at 30–80 dB, with the same seeds for every method. For each
 //! method and SNR: the time to reach and stay within 0.1% (median and 95th percentile over
 //! the runs, "never" when a run is not within at the end of the 1.5 s window), the RMS error
-//! at 50, 100 and 200 ms and its ratio to the Cramér–Rao bound at that time. It writes a CSV
-//! and a markdown table, draws the two charts and prints the firmware default's goals.
+//! at 50, 100 and 200 ms and its ratio to the Cramér–Rao bound at that time. The baselines
+//! join at the tuning [`baselines`] searches first, on runs of its own. It writes a CSV and a
+//! markdown table, the search's report, draws the two charts and prints the firmware
+//! default's goals.
 //!
 //! What it must never do: pick a method's figures from a different run or seed than its
 //! rivals' (one Monte Carlo holds them all), or report an RMS over a subset of runs as if it
@@ -19,6 +21,8 @@ use estimator_core::weighing::WeighingConfig;
 
 use crate::calibrate;
 use crate::chart;
+
+pub mod baselines;
 use crate::method::{IdentifiedModel, Method, ModelSpec};
 use crate::montecarlo::{self, Precision, SetupStats, Study, StudyResult};
 use crate::scene::Scene;
@@ -81,7 +85,8 @@ pub fn identified_bank(config: &WeighingConfig, precision: Precision) -> Method 
 }
 
 /// The methods of the study, in table order; the first is the firmware default (from
-/// `firmware/weighing.toml`). A new estimator joins with one line here.
+/// `firmware/weighing.toml`). A new estimator joins with one line here; the baselines join
+/// after these, at the tuning [`baselines::search`] finds.
 pub fn default_entries() -> Result<Vec<Entry>> {
     let (firmware, config) = firmware_default()?;
     let identified = identified_bank(&config, Precision::F64);
@@ -102,8 +107,6 @@ pub fn default_entries() -> Result<Vec<Entry>> {
             method: identified,
         },
         entry("model bank, true model at 200 g calibration", "model"),
-        entry("settled average (baseline)", "settled"),
-        entry("moving average (baseline)", "moving"),
         entry("instrumental variables (n=7, D=16)", "iv:n=7,D=16"),
         entry(
             "bias-compensated, σ² metered at tare (n=7, D=16)",
@@ -494,8 +497,44 @@ pub(crate) fn create(path: &Path) -> Result<std::io::BufWriter<std::fs::File>> {
     ))
 }
 
-/// `host-sim study speed`: run, write `speed-study.{csv,md}`, the charts (e) and (f), print
-/// the goals.
+/// The baselines at the tuning the search finds on `min(runs, SEARCH_RUNS)` runs of their
+/// own, its report written to `baseline-search.md`.
+fn searched_baselines(runs: usize, seed: u64, command: &str, out: &Path) -> Result<Vec<Entry>> {
+    let (_, config) = firmware_default()?;
+    let search_runs = runs.min(baselines::SEARCH_RUNS);
+    let start = Instant::now();
+    let tuned = baselines::search(
+        config.model.natural_frequency_hz,
+        config.model.damping_ratio,
+        search_runs,
+        seed.wrapping_add(baselines::SEARCH_SALT),
+    )?;
+    let mut report = create(&out.join("baseline-search.md"))?;
+    let search_command = format!(
+        "{command}; {search_runs} runs, seed {seed} + {:#x}",
+        baselines::SEARCH_SALT
+    );
+    baselines::write_markdown(&tuned, &search_command, &mut report)?;
+    report.flush()?;
+    eprintln!(
+        "study speed: the baselines' tuning searched over {} candidates in {:.1} s",
+        tuned.iter().map(|t| t.candidates).sum::<usize>(),
+        start.elapsed().as_secs_f64()
+    );
+    Ok(tuned
+        .iter()
+        .filter_map(|family| {
+            let best = family.best.first()?;
+            Some(Entry {
+                name: family.name.to_string(),
+                method: best.method,
+            })
+        })
+        .collect())
+}
+
+/// `host-sim study speed`: search the baselines' tuning, run, write `speed-study.{csv,md}`,
+/// `baseline-search.md`, the charts (e) and (f), print the goals.
 pub fn speed_command(
     runs: usize,
     seed: u64,
@@ -504,7 +543,13 @@ pub fn speed_command(
     out: &Path,
 ) -> Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let snr_text: Vec<String> = snrs_db.iter().map(|s| s.to_string()).collect();
+    let command = format!(
+        "host-sim study speed --runs {runs} --seed {seed} --snr-db {}",
+        snr_text.join(",")
+    );
     let mut entries = default_entries()?;
+    entries.extend(searched_baselines(runs, seed, &command, out)?);
     entries.extend(extra.into_iter().map(|method| Entry {
         name: method.label(),
         method,
@@ -521,11 +566,6 @@ pub fn speed_command(
     let mut csv = create(&out.join("speed-study.csv"))?;
     write_csv(&rows, &mut csv)?;
     csv.flush()?;
-    let snr_text: Vec<String> = snrs_db.iter().map(|s| s.to_string()).collect();
-    let command = format!(
-        "host-sim study speed --runs {runs} --seed {seed} --snr-db {}",
-        snr_text.join(",")
-    );
     let mut markdown = create(&out.join("speed-study.md"))?;
     write_markdown(&study, &command, &mut markdown)?;
     markdown.flush()?;
@@ -553,7 +593,7 @@ pub fn speed_command(
         );
     }
     println!(
-        "{:.1} s on {} threads; wrote {}/speed-study.{{csv,md}}, e-rms-vs-readout-time.{{svg,png}}, f-time-to-0p1pct-vs-snr.{{svg,png}}",
+        "{:.1} s on {} threads; wrote {}/speed-study.{{csv,md}}, baseline-search.md, e-rms-vs-readout-time.{{svg,png}}, f-time-to-0p1pct-vs-snr.{{svg,png}}",
         elapsed,
         rayon::current_num_threads(),
         out.display()

@@ -520,6 +520,7 @@ fn speed_study_is_reproducible_across_thread_counts() {
     assert_eq!(
         csv.lines().count(),
         1 + host_sim::study::default_entries().unwrap().len()
+            + host_sim::study::baselines::FAMILY_NAMES.len()
     );
     // The first row is the method firmware/weighing.toml configures, in f32.
     let (firmware, _) = host_sim::study::firmware_default().unwrap();

@@ -150,17 +150,19 @@ impl<T: Real> Intake<T> {
 ///
 /// The estimator provides a field `intake: Intake<T>` and the inherent methods
 /// `update(&mut self, x: T)` and `fresh(&self) -> Result<Self, ConfigError>`.
-/// Use: `estimator_via_intake!(Name<T, const N>);`
+/// Use: `estimator_via_intake!(Name<T, const N>);`, or with a trailing type parameter and
+/// its bound, `estimator_via_intake!(Name<T, const K, type F: Bound<T>>);`.
 macro_rules! estimator_via_intake {
-    ($name:ident<T $(, const $size:ident)*>) => {
+    ($name:ident<T $(, const $size:ident)* $(, type $param:ident: $bound:path)?>) => {
         $crate::estimators::intake::estimator_via_intake!(
-            $name<T $(, const $size)*>,
+            $name<T $(, const $size)* $(, type $param: $bound)?>,
             reading: |estimator: &Self| estimator.intake.reading()
         );
     };
-    ($name:ident<T $(, const $size:ident)*>, reading: $reading:expr) => {
-        impl<T: Real $(, const $size: usize)*> $crate::reading::Estimator<T>
-            for $name<T $(, $size)*>
+    ($name:ident<T $(, const $size:ident)* $(, type $param:ident: $bound:path)?>,
+        reading: $reading:expr) => {
+        impl<T: Real $(, const $size: usize)* $(, $param: $bound)?> $crate::reading::Estimator<T>
+            for $name<T $(, $size)* $(, $param)?>
         {
             fn push(&mut self, sample: T) -> $crate::reading::Reading<T> {
                 if let Some(x) = self.intake.take(sample) {

@@ -8,7 +8,8 @@
 //! - model-based: [`model`] (Kalman/RLS on the initial state and the input, and a bank of
 //!   models across the resonance);
 //! - baselines a user would otherwise pick: [`baseline`] (settle-then-average, moving
-//!   average);
+//!   average, each also behind a compensation filter or an input-shaper FIR tuned to the
+//!   cell);
 //! - shared: [`intake`] (the sample count, fault latch, range check, gain, decimation and
 //!   reading every estimator answers with), [`input`] (sample checks, block averaging, the
 //!   difference window),
