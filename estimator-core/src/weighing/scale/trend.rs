@@ -229,34 +229,52 @@ impl Trend {
 
     /// The `i`-th block of the window, oldest first: its time and mean.
     fn at(&self, i: usize) -> (u32, f32) {
-        let oldest = (self.next + TREND_WINDOW_BLOCKS - self.filled) % TREND_WINDOW_BLOCKS;
-        let j = (oldest + i) % TREND_WINDOW_BLOCKS;
+        let j = self.slot(i);
         (self.times[j], self.means_g[j])
     }
 
-    /// Least squares through blocks `from..to` of the window, centred on their means (so
-    /// that `f32` holds a few hundred grams to a tenth of a microgram; times counted from
-    /// the window's oldest block, the same origin for every part of it).
+    /// Where the `i`-th block of the window, oldest first, is kept.
+    fn slot(&self, i: usize) -> usize {
+        let j = self.next + TREND_WINDOW_BLOCKS - self.filled + i;
+        if j >= TREND_WINDOW_BLOCKS {
+            j - TREND_WINDOW_BLOCKS
+        } else {
+            j
+        }
+    }
+
+    /// Least squares through blocks `from..to` of the window, in one pass (once per block
+    /// on the target: the scale's budget is per sample). Times count from the window's
+    /// oldest block, the same origin for every part of it; means from the first of the
+    /// blocks, so that `f32` keeps a few hundred grams to a tenth of a microgram.
     fn line(&self, from: usize, to: usize) -> Line {
         let blocks = to.saturating_sub(from);
         let n = blocks.max(1) as f32;
-        let first = self.at(0).0;
-        let x = |i: usize| self.at(i).0.wrapping_sub(first) as f32;
-        let time = (from..to).map(x).sum::<f32>() / n;
-        let level = (from..to).map(|i| self.at(i).1).sum::<f32>() / n;
-        let (mut sxx, mut sxy, mut syy) = (0.0_f32, 0.0_f32, 0.0_f32);
-        for i in from..to {
-            let dx = x(i) - time;
-            let dy = self.at(i).1 - level;
-            sxx += dx * dx;
-            sxy += dx * dy;
-            syy += dy * dy;
+        let (origin, shift) = (self.at(0).0, self.at(from).1);
+        let (mut sx, mut sy, mut sxx, mut sxy, mut syy) = (0.0_f32, 0.0, 0.0, 0.0, 0.0);
+        let mut j = self.slot(from);
+        for _ in from..to {
+            let x = self.times[j].wrapping_sub(origin) as f32;
+            let y = self.means_g[j] - shift;
+            sx += x;
+            sy += y;
+            sxx += x * x;
+            sxy += x * y;
+            syy += y * y;
+            j += 1;
+            if j == TREND_WINDOW_BLOCKS {
+                j = 0;
+            }
         }
+        let (time, mean) = (sx / n, sy / n);
+        let sxx = (sxx - sx * time).max(0.0);
+        let sxy = sxy - sx * mean;
+        let syy = (syy - sy * mean).max(0.0);
         let per_block = if sxx > 0.0 { sxy / sxx } else { 0.0 };
         let variance = (blocks >= 3).then(|| (syy - per_block * sxy).max(0.0) / (n - 2.0));
         Line {
             time,
-            level,
+            level: mean + shift,
             per_block,
             sxx,
             blocks,
