@@ -158,6 +158,14 @@ impl<E: ScaleEstimator> Scale<E> {
         self.reading()
     }
 
+    /// The trend test's blocks while a fresh load may ring (`raw_arm_samples`, rounded up
+    /// to whole blocks): skipped after power-up and after a fast change.
+    pub(super) fn ringing_blocks(&self) -> u32 {
+        self.config
+            .raw_arm_samples
+            .div_ceil(self.config.block_samples.max(1))
+    }
+
     /// One good sample into the trend test (`trend`): at the end of each block, a slope
     /// that is significant and lags the reading by more than its part of the permissible
     /// error is an alarm, taken at the next valid reading.

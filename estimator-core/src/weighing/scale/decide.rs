@@ -39,9 +39,8 @@ impl<E: ScaleEstimator> Scale<E> {
             let slow = !changed || self.block_alarmed;
             if changed {
                 // Maybe a step: the trend test judges it once blocks after it are in.
-                let ringing = if slow { 0 } else { self.config.raw_arm_samples };
-                self.trend
-                    .changed(ringing.div_ceil(self.config.block_samples.max(1)));
+                let ringing = if slow { 0 } else { self.ringing_blocks() };
+                self.trend.changed(ringing);
             }
             let reading = self.load_changed();
             self.after_slow_change = slow;

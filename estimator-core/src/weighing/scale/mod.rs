@@ -276,11 +276,7 @@ impl<E: ScaleEstimator> Scale<E> {
         self.zero_tracked_counts = 0.0;
         self.clear_tare();
         self.stable_centre_g = 0.0;
-        self.trend.clear(
-            self.config
-                .raw_arm_samples
-                .div_ceil(self.config.block_samples.max(1)),
-        );
+        self.trend.clear(self.ringing_blocks());
         self.restart();
         (self.fault, self.state) = if calibrated {
             (None, ScaleState::Estimating)
