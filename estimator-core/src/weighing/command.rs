@@ -904,13 +904,21 @@ mod tests {
         ));
     }
 
-    /// Calibrate on the bench's cell with `placed_g` on the pan where 200 g was promised.
+    /// Calibrate on the bench's cell with `placed_g` on the pan where 200 g was promised,
+    /// once the pan reads empty again (within 3 s: a load taken off rings on, and a
+    /// calibration starts only from an empty pan at rest).
     fn calibrate_with(
         bench: &mut Bench,
         placed_g: f64,
     ) -> Option<Result<Calibration, CalibrationFailure>> {
         bench.cell.load_g = 0.0;
         bench.run_s(1.0);
+        for _ in 0..40 {
+            if bench.scale.reading().state == ScaleState::Empty {
+                break;
+            }
+            bench.run_s(0.05);
+        }
         assert!(bench
             .command(Command::Calibrate {
                 known_mass_g: KNOWN_MASS_G

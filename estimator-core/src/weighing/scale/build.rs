@@ -183,6 +183,10 @@ fn decisions_for(weighing: &WeighingConfig) -> Result<ScaleConfig, ConfigError> 
     }
     Ok(ScaleConfig::for_method(&weighing.method, sample_rate_hz)
         .with_scale(weighing.capacity_g as f32, weighing.scale_interval_g as f32)
+        .with_ringing(
+            weighing.model.natural_frequency_hz as f32,
+            weighing.calibration_mass_g as f32,
+        )
         .with_final_target(weighing.final_target_g as f32)
         .with_accuracy_target(
             weighing.target_relative as f32,

@@ -8,11 +8,21 @@
 
 use super::trend::{TREND_LAG_OF_PERMISSIBLE, TREND_LAG_S, TREND_T};
 use super::{Scale, ScaleEstimator, ScaleReading, ScaleState};
+use crate::numerics::real::Real;
 
 /// The ringing's amplitude over the step that set it off, at most: a load dropped from a
 /// height lands with its momentum, overshooting its step (the torture's drops reach about
 /// twice; a margin over that).
 const RINGING_OVER_STEP: f32 = 4.0;
+
+/// The ringing measured in a block, over the amplitude its spread gives: √2 times the
+/// standard deviation about the block mean of what is not white noise (the spread less
+/// half the mean square of sample-to-sample differences, which a ringing far below the
+/// sample rate hardly has; noise filtered before the converter shows less there, which
+/// only makes the amplitude larger). The spread of 400 samples of a ringing of 1.2 periods
+/// or more is within a few percent of a whole number of periods'; half as much again
+/// covers that and the estimates' own scatter.
+const RINGING_MEASURED_MARGIN: f32 = 1.5;
 
 /// The block test's sums past this part of its threshold are motion: no reading is shown
 /// stable or final. A quarter: a trickle of 0.4 e/s was still shown stable 0.5 e behind
@@ -52,9 +62,7 @@ impl<E: ScaleEstimator> Scale<E> {
     /// The residual test, once per decimated update and once the fit is determined enough:
     /// true when it alarms.
     pub(super) fn residual_alarm(&mut self, residual_counts: Option<f32>) -> bool {
-        let new_update = self
-            .samples_since_change
-            .is_multiple_of(u64::from(self.samples_per_update));
+        let new_update = self.update_phase == 0;
         let armed = self.samples_since_change >= u64::from(self.config.residual_arm_samples);
         if !(new_update && armed) {
             return false;
@@ -85,6 +93,15 @@ impl<E: ScaleEstimator> Scale<E> {
     /// change of 1 e long before the 1.5 s arming, which it used to wait for
     /// (`host-sim torture --runs 300 --seed 1`: silent wrong readings 232 → 122 of about
     /// 130,000 shown).
+    ///
+    /// That envelope is a bound for the worst landing (a drop) on the slowest-decaying
+    /// load; the ringing as it is, measured in each whole block (its spread about the
+    /// block mean, [`RINGING_MEASURED_MARGIN`]), caps it for the blocks after. The block
+    /// test allows only what a ringing of at least `ringing_min_hz` can add to a sum of
+    /// samples (half a period's area: a block mean of 100 ms takes 27 % of a 12 Hz
+    /// ringing's amplitude). With the envelope alone and in full, an item placed by hand
+    /// within two seconds of a load went unseen while it arrived, the old mass `Stable`
+    /// (`host-sim torture --runs 1000 --seed 1`: 7 of 29 silent wrong readings).
     pub(super) fn raw_alarm(&mut self, counts: i32) -> bool {
         self.block_alarmed = false;
         self.ringing_envelope *= self.ringing_decay;
@@ -104,33 +121,61 @@ impl<E: ScaleEstimator> Scale<E> {
         self.ringing_g = self
             .ringing_g
             .max(RINGING_OVER_STEP * step_g * self.ringing_envelope);
+        // The envelope's bound, or what the last block measured where that is less (by
+        // comparison: `f32::min`'s NaN rule costs instructions on every sample).
+        let ringing_g = if self.ringing_measured_g < self.ringing_g {
+            self.ringing_measured_g
+        } else {
+            self.ringing_g
+        };
+        self.ringing_allowed_g = ringing_g;
         let raw = self.raw_cusum.step(
             deviation_g,
-            self.config.raw_drift_g + self.ringing_g,
+            self.config.raw_drift_g + ringing_g,
             self.config.raw_threshold_g,
         );
+        if self.block_filled == 0 {
+            self.previous_deviation_g = deviation_g;
+        }
+        let difference_g = deviation_g - self.previous_deviation_g;
+        self.previous_deviation_g = deviation_g;
         self.block_sum_g += deviation_g;
+        self.block_square_g2 += deviation_g * deviation_g;
+        self.block_difference_g2 += difference_g * difference_g;
         self.block_filled += 1;
         if self.block_filled < self.config.block_samples {
             return raw;
         }
-        let block_mean_g = self.block_sum_g / self.block_filled as f32;
+        let filled = self.block_filled as f32;
+        let block_mean_g = self.block_sum_g / filled;
+        let drift_g = self.block_allowance_g(self.block_filled, ringing_g) / filled;
+        // The ringing of this block caps the allowance for the next (`max` keeps a NaN out).
+        let white_g2 = 0.5 * self.block_difference_g2 / (filled - 1.0).max(1.0);
+        let spread_g2 = self.block_square_g2 / filled - block_mean_g * block_mean_g - white_g2;
+        self.ringing_measured_g = RINGING_MEASURED_MARGIN * Real::sqrt(2.0 * spread_g2.max(0.0));
         self.block_sum_g = 0.0;
+        self.block_square_g2 = 0.0;
+        self.block_difference_g2 = 0.0;
         self.block_filled = 0;
-        let block = self.block_cusum.step(
-            block_mean_g,
-            self.block_drift_g(),
-            self.config.block_threshold_g,
-        );
+        let block = self
+            .block_cusum
+            .step(block_mean_g, drift_g, self.config.block_threshold_g);
         self.block_alarmed = block && !raw;
         raw || block
     }
 
     /// The block test's sums are past [`MOTION_OVER_THRESHOLD`] of its threshold: the load is moving (a trickle, a
     /// creep) though the test has not alarmed yet. No reading is shown stable or final then.
-    /// The block test's drift: its own, and the ringing's allowance until it has died down.
-    fn block_drift_g(&self) -> f32 {
-        self.config.block_drift_g + self.ringing_g
+    /// What the block test allows the sum of `filled` deviations (g·samples): its drift on
+    /// each, and a ringing of `ringing_g` for at most `ringing_sum_samples` of them.
+    fn block_allowance_g(&self, filled: u32, ringing_g: f32) -> f32 {
+        let filled = filled as f32;
+        let ringing_samples = if filled < self.ringing_sum_samples {
+            filled
+        } else {
+            self.ringing_sum_samples
+        };
+        filled * self.config.block_drift_g + ringing_samples * ringing_g
     }
 
     pub(super) fn in_motion(&self) -> bool {
@@ -143,7 +188,7 @@ impl<E: ScaleEstimator> Scale<E> {
         // item put on just after a block boundary otherwise stayed `Stable` at the old
         // mass for up to a block (100 ms; `host-sim torture`, small additions).
         let per_block = 1.0 / self.config.block_samples as f32;
-        let drifted = self.block_filled as f32 * self.block_drift_g();
+        let drifted = self.block_allowance_g(self.block_filled, self.ringing_allowed_g);
         let running = TwoSidedCusum {
             high: self.block_cusum.high + (self.block_sum_g - drifted) * per_block,
             low: self.block_cusum.low + (-self.block_sum_g - drifted) * per_block,
@@ -459,6 +504,54 @@ mod shown_settled {
                 trickle,
                 &what,
             );
+        }
+    }
+
+    /// An item of 0.6-2 g placed by hand (rising over 130 ms) on a load set down 1.5-1.9 s
+    /// before: the ringing allowance of the raw and block tests (four times the step,
+    /// decaying to e⁻⁵ over 1.5 s) was grams to tens of grams then, where the cell rang by
+    /// a few hundredths, and the old mass stayed on show, `Stable`, while the item arrived
+    /// (`host-sim torture --runs 1000 --seed 1`: 7 of 29 silent wrong readings, run 720
+    /// shown 215.71 g with 216.0-217.2 g on the pan). The ringing measured caps it now.
+    #[test]
+    fn an_item_placed_soon_after_a_load_is_not_shown_stable_without_it() {
+        for (seed, load_g, after_s, item_g) in [
+            (22, 215.0, 1.9, 1.5),
+            (23, 438.0, 1.85, 2.0),
+            (24, 300.0, 1.6, 0.6),
+            (21u64, 166.0, 1.5, 1.07),
+        ] {
+            let (mut scale, _) = scene(0.43);
+            let mut cell = Cell::seeded(0.43, seed);
+            let mut recent = VecDeque::new();
+            let what = std::format!("{item_g} g onto {load_g} g after {after_s} s");
+            checked((&mut scale, &mut cell, &mut recent), 4000, |_| 0.0, &what);
+            let set = (after_s * 4000.0) as usize;
+            checked((&mut scale, &mut cell, &mut recent), set, |_| load_g, &what);
+            let rise = |k: usize| load_g + item_g * (k as f64 / 520.0).min(1.0);
+            checked((&mut scale, &mut cell, &mut recent), 8000, rise, &what);
+        }
+    }
+
+    /// The limit of the test above: an item smaller than the ringing still on the pan.
+    /// 1.1 s after 166 g was set down on this cell (ζ = 0.03) it rings by about 0.9 g, and
+    /// 64 ms into the arrival of a 1.07 g item (half of it on) the old mass is still shown
+    /// `Stable`, 0.1 g below the truth of the last readout period; it leaves `Stable` at the
+    /// next (`host-sim torture --runs 1000 --seed 1`, run 381). Seeing it sooner needs the
+    /// ringing predicted, not allowed for.
+    #[test]
+    #[ignore = "known limit: an item smaller than the ringing still on the pan is seen a readout period late"]
+    fn an_item_smaller_than_the_ringing_is_seen_within_a_readout_period() {
+        for (seed, load_g, after_s, item_g) in [(21u64, 166.0, 1.1, 1.07), (25, 152.0, 0.9, 0.5)] {
+            let (mut scale, _) = scene(0.43);
+            let mut cell = Cell::seeded(0.43, seed);
+            let mut recent = VecDeque::new();
+            let what = std::format!("{item_g} g onto {load_g} g after {after_s} s");
+            checked((&mut scale, &mut cell, &mut recent), 4000, |_| 0.0, &what);
+            let set = (after_s * 4000.0) as usize;
+            checked((&mut scale, &mut cell, &mut recent), set, |_| load_g, &what);
+            let rise = |k: usize| load_g + item_g * (k as f64 / 520.0).min(1.0);
+            checked((&mut scale, &mut cell, &mut recent), 8000, rise, &what);
         }
     }
 

@@ -42,6 +42,12 @@ pub struct ScaleConfig {
     pub block_drift_g: f32,
     /// CUSUM alarm threshold h on the block means (gram·blocks).
     pub block_threshold_g: f32,
+    /// The lowest frequency the cell rings at with any load up to Max, Hz (0: not known).
+    /// A ringing of amplitude A and frequency f adds at most A/(π f) seconds' worth of A to
+    /// the sum of any stretch of samples (half a period's area), so the block test allows
+    /// a fraction 1/(π f T) of the ringing on a block of T seconds, not all of it
+    /// ([`Self::ringing_min_hz_for`]).
+    pub ringing_min_hz: f32,
     /// Samples the reading must be stable or empty before the raw test is armed (the
     /// cell's settling time: the raw signal rings until then).
     pub raw_arm_samples: u32,
@@ -105,6 +111,30 @@ impl ScaleConfig {
     /// per 5 °C (3.9.2.3), and a room swinging 10 °C in 10 minutes moves it 2 e in 600 s.
     /// What zero tracking must follow, and what `host-sim torture` drifts by at most.
     pub const FASTEST_ZERO_DRIFT_E_PER_S: f32 = 2.0 / 600.0;
+    /// The reference cell's resonance with [`Self::REFERENCE_RING_LOAD_G`] on, Hz
+    /// (host-sim's reference cell; `firmware/weighing.toml` identifies 25.0 Hz).
+    pub const REFERENCE_RING_HZ: f32 = 25.0;
+    /// The load the reference cell rings at [`Self::REFERENCE_RING_HZ`] with: its
+    /// calibration mass, g.
+    pub const REFERENCE_RING_LOAD_G: f32 = 138.32;
+
+    /// The lowest frequency a cell ringing at `ring_hz` with `load_g` on can ring at with
+    /// any load up to `capacity_g`: by the physical law (stiffness fixed, frequency ∝
+    /// 1/√(moving mass)) the heaviest load rings slowest, and with the platform's own
+    /// moving mass unknown the bound takes it as none, √(`load_g`/`capacity_g`) times
+    /// `ring_hz` (12.0 Hz for the reference cell: 25 Hz at 138.32 g, Max 600 g). 0 (not
+    /// known) when an argument is not finite and positive.
+    pub fn ringing_min_hz_for(ring_hz: f32, load_g: f32, capacity_g: f32) -> f32 {
+        let positive = |v: f32| v.is_finite() && v > 0.0;
+        if !(positive(ring_hz) && positive(load_g) && positive(capacity_g)) {
+            return 0.0;
+        }
+        if load_g >= capacity_g {
+            ring_hz
+        } else {
+            ring_hz * crate::numerics::real::Real::sqrt(load_g / capacity_g)
+        }
+    }
 
     /// The method the defaults' residual thresholds were measured with, and the firmware's
     /// choice before calibration wrote one: the step estimator, n = 7, D = 16, λ = 1
@@ -174,6 +204,11 @@ impl ScaleConfig {
             block_samples: (0.1 * sample_rate_hz) as u32,
             block_drift_g: 0.2 * Self::SCALE_INTERVAL_G,
             block_threshold_g: 1.5 * Self::SCALE_INTERVAL_G,
+            ringing_min_hz: Self::ringing_min_hz_for(
+                Self::REFERENCE_RING_HZ,
+                Self::REFERENCE_RING_LOAD_G,
+                Self::CAPACITY_G,
+            ),
             flag_restart_samples: (0.025 * sample_rate_hz) as u32,
             capacity_g: Self::CAPACITY_G,
             scale_interval_g: Self::SCALE_INTERVAL_G,
@@ -266,6 +301,7 @@ impl ScaleConfig {
             ("block_samples", self.block_samples > 0),
             ("block_drift_g", finite_non_negative(self.block_drift_g)),
             ("block_threshold_g", threshold(self.block_threshold_g)),
+            ("ringing_min_hz", finite_non_negative(self.ringing_min_hz)),
             (
                 "zero_tracking_band_g",
                 finite_non_negative(self.zero_tracking_band_g),
@@ -311,6 +347,16 @@ impl ScaleConfig {
         Self {
             accuracy_target_relative: relative,
             accuracy_target_mass_g: at_mass_g,
+            ..self
+        }
+    }
+
+    /// These decisions for a cell that rings at `ring_hz` with `load_g` on (the weighing
+    /// configuration's identified model at its calibration mass), up to the capacity set
+    /// ([`Self::ringing_min_hz_for`]).
+    pub fn with_ringing(self, ring_hz: f32, load_g: f32) -> Self {
+        Self {
+            ringing_min_hz: Self::ringing_min_hz_for(ring_hz, load_g, self.capacity_g),
             ..self
         }
     }
@@ -363,7 +409,7 @@ mod tests {
         let good = ScaleConfig::weighing_default(FS);
         assert_eq!(good.validate(), Ok(()));
         type Set = fn(&mut ScaleConfig, f32);
-        let fields: [(&str, Set); 17] = [
+        let fields: [(&str, Set); 18] = [
             ("accuracy_target_relative", |c, v| {
                 c.accuracy_target_relative = v
             }),
@@ -372,6 +418,7 @@ mod tests {
             }),
             ("block_drift_g", |c, v| c.block_drift_g = v),
             ("block_threshold_g", |c, v| c.block_threshold_g = v),
+            ("ringing_min_hz", |c, v| c.ringing_min_hz = v),
             ("sample_rate_hz", |c, v| c.sample_rate_hz = v),
             ("capacity_g", |c, v| c.capacity_g = v),
             ("scale_interval_g", |c, v| c.scale_interval_g = v),
@@ -409,5 +456,26 @@ mod tests {
             config.validate(),
             Err(ConfigError::ScaleField("noise_window_samples"))
         );
+    }
+
+    /// The slowest ringing up to Max: the reference cell's 12.0 Hz; the cell's own
+    /// frequency when it was identified at or above Max; not known (0, no attenuation)
+    /// from a bad argument.
+    #[test]
+    fn the_slowest_ringing_follows_the_heaviest_load() {
+        let reference = ScaleConfig::weighing_default(FS).ringing_min_hz;
+        assert!((reference - 12.0).abs() < 0.01, "{reference}");
+        assert_eq!(ScaleConfig::ringing_min_hz_for(25.0, 600.0, 600.0), 25.0);
+        let quarter = ScaleConfig::ringing_min_hz_for(20.0, 150.0, 600.0);
+        assert!((quarter - 10.0).abs() < 1e-5, "{quarter}");
+        for bad in [f32::NAN, 0.0, -1.0, f32::INFINITY] {
+            assert_eq!(ScaleConfig::ringing_min_hz_for(bad, 150.0, 600.0), 0.0);
+            assert_eq!(ScaleConfig::ringing_min_hz_for(25.0, bad, 600.0), 0.0);
+            assert_eq!(ScaleConfig::ringing_min_hz_for(25.0, 150.0, bad), 0.0);
+        }
+        let heavier = ScaleConfig::weighing_default(FS)
+            .with_scale(3000.0, 0.5)
+            .with_ringing(25.0, 138.32);
+        assert!((heavier.ringing_min_hz - 25.0 * (138.32f32 / 3000.0).sqrt()).abs() < 1e-4);
     }
 }

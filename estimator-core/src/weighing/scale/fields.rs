@@ -95,7 +95,7 @@ macro_rules! samples {
 impl ScaleConfig {
     /// Every field by name, in the order `config show` lists them: the instrument (Max, e,
     /// targets), stability and the empty pan, zero tracking, then the change tests.
-    pub const FIELDS: [ConfigField; 26] = [
+    pub const FIELDS: [ConfigField; 27] = [
         real!(capacity_g),
         real!(scale_interval_g),
         real!(final_target_g),
@@ -126,6 +126,7 @@ impl ScaleConfig {
         samples!(block_samples),
         real!(block_drift_g),
         real!(block_threshold_g),
+        real!(ringing_min_hz),
         samples!(flag_restart_samples),
     ];
 

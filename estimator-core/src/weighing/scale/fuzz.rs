@@ -128,7 +128,7 @@ proptest! {
     fn an_arbitrary_configuration_builds_or_is_refused(
         values in proptest::collection::vec(
             prop_oneof![any::<f32>(), -10.0f32..1000.0, Just(f32::NAN), Just(0.0)],
-            18,
+            19,
         ),
         counts in proptest::collection::vec(any::<u32>(), 7),
         codes in proptest::collection::vec(any::<i32>(), 0..500),
@@ -152,6 +152,7 @@ proptest! {
             final_target_g: values[15],
             accuracy_target_relative: values[16],
             accuracy_target_mass_g: values[17],
+            ringing_min_hz: values[18],
             block_samples: counts[6] % 10_000,
             stable_hold_samples: counts[0],
             residual_arm_samples: counts[1],

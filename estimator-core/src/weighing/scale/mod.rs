@@ -114,12 +114,21 @@ pub struct Scale<E> {
     residual_cusum: TwoSidedCusum,
     raw_cusum: TwoSidedCusum,
     block_cusum: TwoSidedCusum,
-    /// Σ (sample − gross) in grams and the samples in it, of the block in progress.
+    /// Σ (sample − gross) in grams, Σ (sample − gross)² and Σ of its sample-to-sample
+    /// differences squared in grams², and the samples in them, of the block in progress.
     block_sum_g: f32,
+    block_square_g2: f32,
+    block_difference_g2: f32,
+    /// The last sample − gross of the block in progress, g.
+    previous_deviation_g: f32,
     block_filled: u32,
     /// Raw samples of this run: `u64`, so it never wraps or saturates (2⁶⁴ samples at 4 kHz
     /// are 146 million years); the residual test's update phase depends on it.
     samples_since_change: u64,
+    /// `samples_since_change` modulo `samples_per_update`, counted on its own: 0 when the
+    /// estimator's residual is new. A `u64` remainder is a library call per sample on the
+    /// Cortex-M4F (`__aeabi_uldivmod`).
+    update_phase: u32,
     load_changes: u32,
     /// Where the stability band is centred, and how long the estimate stayed in it.
     stable_centre_g: f32,
@@ -142,6 +151,16 @@ pub struct Scale<E> {
     /// The ringing the per-sample raw test allows for, g: decays by `ringing_decay` per
     /// sample, carried over a restart.
     ringing_g: f32,
+    /// The ringing measured in the last whole block of this run (`change::raw_alarm`), g:
+    /// the tests allow the smaller of it and `ringing_g`; `+∞` until a block is measured.
+    ringing_measured_g: f32,
+    /// The ringing the raw tests allowed for at the last sample they judged, g: the smaller
+    /// of `ringing_g` and `ringing_measured_g`.
+    ringing_allowed_g: f32,
+    /// The most samples' worth of the ringing's amplitude the sum of a stretch of samples
+    /// can hold: `sample_rate_hz / (π ringing_min_hz)` (`+∞` when the frequency is not
+    /// known).
+    ringing_sum_samples: f32,
     /// The last alarm was the block test's alone (a slow change).
     block_alarmed: bool,
     /// The block test saw motion at the last shown reading (`change::in_motion`).
@@ -174,6 +193,10 @@ pub struct Scale<E> {
     noise: NoiseMetering,
     /// This sample went into the noise meter (else the window in progress is dropped).
     noise_metered: bool,
+    /// The shown reading's `u` bound meets the final target and is vouched for
+    /// (`decide::show`, once per sample; false after anything that changes the net reading
+    /// until the next sample is shown).
+    final_bound_met: bool,
     /// The trend test's window of block means (`trend`): kept over load changes, started
     /// over after a fault or a new calibration or configuration.
     trend: Trend,
@@ -219,8 +242,12 @@ impl<E: ScaleEstimator> Scale<E> {
             raw_cusum: TwoSidedCusum::default(),
             block_cusum: TwoSidedCusum::default(),
             block_sum_g: 0.0,
+            block_square_g2: 0.0,
+            block_difference_g2: 0.0,
+            previous_deviation_g: 0.0,
             block_filled: 0,
             samples_since_change: 0,
+            update_phase: 0,
             load_changes: 0,
             stable_centre_g: 0.0,
             stable_samples: 0,
@@ -231,6 +258,9 @@ impl<E: ScaleEstimator> Scale<E> {
             last_shown_gross_g: 0.0,
             ringing_envelope: 1.0,
             ringing_g: 0.0,
+            ringing_measured_g: f32::INFINITY,
+            ringing_allowed_g: 0.0,
+            ringing_sum_samples: ringing_sum_samples(&config),
             block_alarmed: false,
             moving: false,
             after_slow_change: false,
@@ -247,6 +277,7 @@ impl<E: ScaleEstimator> Scale<E> {
             state: ScaleState::Estimating,
             noise: NoiseMetering::new(samples_per_update, config.noise_window_samples),
             noise_metered: false,
+            final_bound_met: false,
             trend: Trend::new(0),
             trend_alarmed: false,
             after_trend_change: false,
@@ -309,23 +340,16 @@ impl<E: ScaleEstimator> Scale<E> {
         let uncertainty_g = mass_g
             .and(self.gross_u_g)
             .map(|u| with_tare(u, self.tare_u_g));
-        // Final once twice the upper confidence bound of `u` meets the target (see
-        // `Reading::uncertainty_bound`: on `u` itself the first final readings at 40 dB
-        // were wrong a quarter of the time), and only when the scale could show it stable
-        // by its `u` (a target looser than the permissible error does not let a final
-        // reading lie outside it).
-        // Nor after a change only the trend test saw (a trickle) before the raw tests are
-        // armed again, as for stable: a fresh fit of a ramp's few hundred samples was
-        // final 0.09 g off with u = 0.004 g.
+        // Final once the bound of `u` meets the target and is vouched for (decided with
+        // the reading, `decide::show`), the load not in motion, and not after a change only
+        // the trend test saw (a trickle) before the raw tests are armed again, as for
+        // stable: a fresh fit of a ramp's few hundred samples was final 0.09 g off with
+        // u = 0.004 g.
         let is_final = matches!(self.state, ScaleState::Estimating | ScaleState::Stable)
             && !self.moving
             && (self.raw_armed || !self.after_trend_change)
-            && mass_g
-                .zip(self.gross_u_bound_g)
-                .is_some_and(|(mass_g, bound)| {
-                    2.0 * with_tare(bound, self.tare_u_bound_g) <= self.config.final_target_g
-                        && self.within_permissible(mass_g, bound)
-                });
+            && mass_g.is_some()
+            && self.final_bound_met;
         ScaleReading {
             mass_g,
             uncertainty_g,
@@ -374,6 +398,7 @@ impl<E: ScaleEstimator> Scale<E> {
         config.validate()?;
         self.config = config;
         self.ringing_decay = ringing_decay(config.raw_arm_samples);
+        self.ringing_sum_samples = ringing_sum_samples(&config);
         self.noise = NoiseMetering::new(self.samples_per_update, config.noise_window_samples);
         self.trend.clear(0);
         self.restart_as_load_change();
@@ -392,9 +417,12 @@ impl<E: ScaleEstimator> Scale<E> {
         self.raw_cusum = TwoSidedCusum::default();
         self.block_cusum = TwoSidedCusum::default();
         self.block_sum_g = 0.0;
+        self.block_square_g2 = 0.0;
+        self.block_difference_g2 = 0.0;
         self.block_filled = 0;
         self.moving = false;
         self.samples_since_change = 0;
+        self.update_phase = 0;
         self.stable_samples = 0;
         self.settled_samples = 0;
         self.raw_armed = false;
@@ -403,6 +431,9 @@ impl<E: ScaleEstimator> Scale<E> {
         // causes (lost samples), and the step would then look like the whole load.
         self.previous_gross_g = self.last_shown_gross_g;
         self.ringing_envelope = 1.0;
+        self.ringing_measured_g = f32::INFINITY;
+        self.ringing_allowed_g = self.ringing_g;
+        self.final_bound_met = false;
         self.uncertain_samples = 0;
         self.after_slow_change = false;
         self.valid_in_run = false;
@@ -419,6 +450,17 @@ impl<E: ScaleEstimator> Scale<E> {
     #[cfg(test)]
     pub(crate) fn skip_samples_for_test(&mut self, samples: u64) {
         self.samples_since_change += samples;
+        let phase = (u64::from(self.update_phase) + samples) % u64::from(self.samples_per_update);
+        self.update_phase = phase as u32;
+    }
+
+    /// One more sample in this run.
+    fn count_sample(&mut self) {
+        self.samples_since_change += 1;
+        self.update_phase += 1;
+        if self.update_phase >= self.samples_per_update {
+            self.update_phase = 0;
+        }
     }
 
     /// A new run that counts as a load change. The trend test's window goes on: a trickle
@@ -438,6 +480,16 @@ fn ringing_decay(arm_samples: u32) -> f32 {
         return 0.0;
     }
     (1.0 - 5.0 / arm_samples as f32).max(0.0)
+}
+
+/// `sample_rate_hz / (π ringing_min_hz)` of `config`: the area of half a period of the
+/// slowest ringing, in samples of its amplitude; `+∞` when the frequency is not known (0).
+fn ringing_sum_samples(config: &ScaleConfig) -> f32 {
+    if config.ringing_min_hz > 0.0 {
+        config.sample_rate_hz / (core::f32::consts::PI * config.ringing_min_hz)
+    } else {
+        f32::INFINITY
+    }
 }
 
 /// The tare's accuracy a tare command needs, in scale intervals: twice the upper bound of

@@ -44,6 +44,7 @@ impl<E: ScaleEstimator> Scale<E> {
         self.tare_g = gross;
         self.tare_u_g = u;
         self.tare_u_bound_g = bound;
+        self.final_bound_met = false;
         Ok(())
     }
 
@@ -70,6 +71,7 @@ impl<E: ScaleEstimator> Scale<E> {
         self.power_up_zero_counts = zero_counts;
         self.zero_tracked_counts = 0.0;
         self.zero_counts = zero_counts;
+        self.final_bound_met = false;
         Ok(())
     }
 
@@ -98,6 +100,7 @@ impl<E: ScaleEstimator> Scale<E> {
         self.tare_g = 0.0;
         self.tare_u_g = 0.0;
         self.tare_u_bound_g = 0.0;
+        self.final_bound_met = false;
     }
 
     /// Zero tracking on an empty, stable reading: only a pan near zero and settled since
