@@ -517,7 +517,9 @@ estimator_via_intake!(ModelEstimator<T, const S>);
 /// fitted, the neighbour the interpolation needs is gone, and the bank flags the reading
 /// as it flags a best fit on the grid's edge. Data that single out no candidate (an empty
 /// pan at rest, a load whose resonance lies beyond the grid, where every fit is poor) rule
-/// none out: the whole grid is fitted then.
+/// none out: the whole grid is fitted then. Once a candidate's factor has a row in every
+/// column, its rows go through a fold unrolled for `S` (the same rotations and the same
+/// result, but for the sign of a zero).
 ///
 /// Memory: `K` estimators (host-sim's `model_based` figures print the size).
 ///
@@ -608,7 +610,8 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     }
 
     /// Check the runs after the next [`crate::Estimator::reset`] against `reference` (`None`: no
-    /// check): every candidate takes it, and only a bank of one flags (see the type's docs).
+    /// check): every candidate takes it, and only a bank of one checks and flags (see the
+    /// type's docs).
     pub fn set_noise_reference(
         &mut self,
         reference: Option<NoiseReference<T>>,
