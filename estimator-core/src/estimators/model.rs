@@ -266,6 +266,9 @@ pub struct ModelEstimator<T: Real, const S: usize> {
     /// `s(k)`: the regressor of the step.
     step_response: T,
     factor: Factor<T, S, 1>,
+    /// Whether every column of the factor has weight, all `S + 1` of them active (the
+    /// initial state estimated): rows then take the fold without the filling checks.
+    all_weighted: bool,
     rows: u32,
     /// Weighted residual sum of squares (raw units²): how well this model fits the data.
     residual_sum: T,
@@ -321,13 +324,20 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
             state_row: block.first_row,
             step_response: T::ZERO,
             factor: Factor::new(),
+            all_weighted: false,
             rows: 0,
             residual_sum: T::ZERO,
             residual_terms: 0,
-            check: config.noise_reference.as_ref().map(|reference| {
-                // Raw units, no forgetting: the residual is a block mean's noise alone.
-                ResidualCheck::new(reference, T::ONE, config.decimation, T::ONE)
-            }),
+            // Only an estimator that flags its own reading checks: a grid's candidates would
+            // run a check nobody reads, every block.
+            check: config
+                .noise_reference
+                .as_ref()
+                .filter(|_| flags_mismatch)
+                .map(|reference| {
+                    // Raw units, no forgetting: the residual is a block mean's noise alone.
+                    ResidualCheck::new(reference, T::ONE, config.decimation, T::ONE)
+                }),
             flags_mismatch,
             states_uncertainty,
         }
@@ -387,6 +397,9 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
 
     /// Fold the block mean `y` of block m; `state_row` and `step_response` hold
     /// `C·A^{mD}·mean_map` and `s(mD)` at the block's first sample.
+    // Not inlined: inlined into the bank's loop over its candidates it cost 6 % more
+    // (`cargo xtask bench bank`).
+    #[inline(never)]
     fn update(&mut self, y: T) {
         let had_estimate = self.intake.estimate().is_some();
         let block = &self.block;
@@ -405,7 +418,14 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
         // At rest the initial-state columns are left out of the regression (zero active
         // leading columns): the same engine then solves the one-unknown problem.
         let determined_before = self.rows as usize > self.state_columns();
-        let folded = self.factor.fold(self.state_columns(), row, [step_mean], y);
+        let folded = if self.all_weighted {
+            self.factor.fold_weighted_all(row, step_mean, y)
+        } else {
+            let folded = self.factor.fold(self.state_columns(), row, [step_mean], y);
+            self.all_weighted =
+                self.config.initial_state == InitialState::Unknown && self.factor.all_weighted();
+            folded
+        };
         self.state_row = next;
         self.step_response = step_next;
         self.rows = self.rows.saturating_add(1);
@@ -497,7 +517,9 @@ estimator_via_intake!(ModelEstimator<T, const S>);
 /// fitted, the neighbour the interpolation needs is gone, and the bank flags the reading
 /// as it flags a best fit on the grid's edge. Data that single out no candidate (an empty
 /// pan at rest, a load whose resonance lies beyond the grid, where every fit is poor) rule
-/// none out: the whole grid is fitted then.
+/// none out: the whole grid is fitted then. Once a candidate's factor has a row in every
+/// column, its rows go through a fold unrolled for `S` (the same rotations and the same
+/// result, but for the sign of a zero).
 ///
 /// Memory: `K` estimators (host-sim's `model_based` figures print the size).
 ///
@@ -565,6 +587,9 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
                 // the type's docs).
                 model.flags_mismatch = K == 1;
                 model.states_uncertainty = K == 1;
+                if !model.flags_mismatch {
+                    model.check = None;
+                }
                 model
             }),
             combined: intake.reading(),
@@ -585,7 +610,8 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     }
 
     /// Check the runs after the next [`crate::Estimator::reset`] against `reference` (`None`: no
-    /// check): every candidate takes it, and only a bank of one flags (see the type's docs).
+    /// check): every candidate takes it, and only a bank of one checks and flags (see the
+    /// type's docs).
     pub fn set_noise_reference(
         &mut self,
         reference: Option<NoiseReference<T>>,
@@ -848,15 +874,25 @@ mod tests {
         bank.reset();
         for model in &bank.models {
             assert_eq!(model.config.noise_reference, Some(reference));
-            assert!(model.check.is_some());
-            // A grid's candidates judge no reading of their own, after a reset too.
+            // A grid's candidates judge no reading of their own, after a reset too, so they
+            // run no check either.
             assert!(!model.flags_mismatch);
+            assert!(model.check.is_none());
         }
         // A single model flags its own, after a reset too.
         let mut single = ModelBank::new([lag(0.9)]).unwrap();
         single.set_noise_reference(Some(reference)).unwrap();
+        assert!(single.models[0].check.is_none());
         single.reset();
         assert!(single.models[0].flags_mismatch);
+        assert!(single.models[0].check.is_some());
+        // Built with the reference, too.
+        let checked = ModelBank::new([lag(0.8), lag(0.9), lag(0.95)].map(|c| ModelConfig {
+            noise_reference: Some(reference),
+            ..c
+        }))
+        .unwrap();
+        assert!(checked.models.iter().all(|m| m.check.is_none()));
         // And `None` turns the check off again at the next reset.
         bank.set_noise_reference(None).unwrap();
         bank.reset();

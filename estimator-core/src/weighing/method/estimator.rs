@@ -70,7 +70,7 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
     /// Check every run after the next [`Estimator::reset`] against the noise of `reference`
     /// (`None`: no check): the configured method flags a fit whose residuals exceed what
     /// that noise explains (`Invalid(ModelMismatch)`; a model bank of three or more
-    /// candidates checks but does not flag, see [`crate::ModelBank`]).
+    /// candidates neither checks nor flags, see [`crate::ModelBank`]).
     pub fn set_noise_reference(
         &mut self,
         reference: Option<NoiseReference<T>>,

@@ -546,25 +546,50 @@ pub fn bench() -> Result<()> {
     let result = (|| -> Result<()> {
         let shipped = shipped_config()?;
         for variant in bench_variants(&shipped)? {
-            let config = variant_config(&shipped, &variant)?;
-            let elf = build_with_config(Board::Qemu, true, Some(&config))?;
-            let stm32 = image_size(&build_with_config(Board::Stm32f411, false, Some(&config))?)?;
-            println!(
-                "{} instead (built with {WEIGHING_CONFIG_VAR}={}):",
-                variant.label,
-                config.display()
-            );
-            bench_run(&elf, false)?;
-            println!(
-                "  {STM32_BIN:<20} with it: flash {:>7} B  RAM {:>6} B (static)",
-                stm32.flash, stm32.ram
-            );
+            bench_variant(&shipped, &variant)?;
         }
         Ok(())
     })();
     // Leave the images as the shipped config builds them.
     build(Board::Qemu, true)?;
     result
+}
+
+/// `cargo xtask bench bank`: only the model bank's line of [`bench`] (its QEMU image built
+/// and run, its STM32 image's size), for a quicker loop on the bank's cost.
+pub fn bench_bank() -> Result<()> {
+    let result = (|| -> Result<()> {
+        let shipped = shipped_config()?;
+        let [_, bank] = bench_variants(&shipped)?;
+        bench_variant(&shipped, &bank)
+    })();
+    // Leave the images as the shipped config builds them.
+    build(Board::Qemu, true)?;
+    result
+}
+
+/// Build `variant` on the shipped calibration, run its bench image and print its figures.
+fn bench_variant(
+    shipped: &(
+        estimator_core::weighing::WeighingConfig,
+        host_sim::montecarlo::Precision,
+    ),
+    variant: &BenchVariant,
+) -> Result<()> {
+    let config = variant_config(shipped, variant)?;
+    let elf = build_with_config(Board::Qemu, true, Some(&config))?;
+    let stm32 = image_size(&build_with_config(Board::Stm32f411, false, Some(&config))?)?;
+    println!(
+        "{} instead (built with {WEIGHING_CONFIG_VAR}={}):",
+        variant.label,
+        config.display()
+    );
+    bench_run(&elf, false)?;
+    println!(
+        "  {STM32_BIN:<20} with it: flash {:>7} B  RAM {:>6} B (static)",
+        stm32.flash, stm32.ram
+    );
+    Ok(())
 }
 
 /// The variable a user names another weighing configuration (TOML) with.

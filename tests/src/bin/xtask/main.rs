@@ -4,7 +4,8 @@
 //!   everything CI checks and prints a summary; it exits non-zero if any step failed.
 //! - `cargo xtask demo` runs the firmware demo (see `firmware.rs`).
 //! - `cargo xtask bench` prints benchmark figures (host updates/s, on-target instructions per
-//!   update, estimator sizes); it asserts nothing about speed.
+//!   update, estimator sizes); it asserts nothing about speed. `cargo xtask bench bank` runs
+//!   only the model bank's on-target part.
 //! - `cargo xtask install` only installs the tools.
 //!
 //! It must never hide a failure: every step's outcome is in the summary and the exit status.
@@ -29,6 +30,7 @@ commands:
   demo                    run the firmware demo in QEMU and print the live readout
   monitor                 the QEMU demo in host-sim's live monitor (plot of mass and u, CSV log)
   bench                   print host and on-target benchmark figures and estimator sizes
+  bench bank              only the model bank's on-target figures (a quicker loop)
   install                 install what a fresh machine lacks (thumb target, QEMU, flip-link)
 ";
 
@@ -42,6 +44,7 @@ fn main() -> ExitCode {
         ["demo"] => install::ensure_tools().and_then(|()| firmware::demo()),
         ["monitor"] => install::ensure_tools().and_then(|()| firmware::monitor()),
         ["bench"] => bench::run(),
+        ["bench", "bank"] => install::ensure_tools().and_then(|()| firmware::bench_bank()),
         ["install"] => install::ensure_tools(),
         ["help"] | ["--help"] | ["-h"] => {
             print!("{USAGE}");
