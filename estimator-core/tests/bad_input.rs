@@ -55,6 +55,20 @@ fn impossible_configurations_are_refused_with_the_field() {
         StepEstimator::<f32, 7>::new(ok.with_decimation(0)).err(),
         Some(ConfigError::Decimation)
     );
+    // A white-noise floor that is not finite and non-negative is refused, and the one set
+    // before stays, over a reset too.
+    let mut est = StepEstimator::<f32, 7>::new(ok.with_decimation(4)).unwrap();
+    assert_eq!(est.set_white_noise_variance(Some(2.0)), Ok(()));
+    for bad in [-1.0, f32::NAN, f32::INFINITY] {
+        assert_eq!(
+            est.set_white_noise_variance(Some(bad)),
+            Err(ConfigError::NoiseReference)
+        );
+    }
+    est.reset();
+    assert_eq!(est.white_noise_variance(), Some(2.0));
+    assert_eq!(est.set_white_noise_variance(None), Ok(()));
+    assert_eq!(est.white_noise_variance(), None);
 }
 
 #[test]

@@ -224,6 +224,35 @@ impl<T: Real, const N: usize, const L: usize> StepEstimator<T, N, L> {
         NoiseReference::replace(&mut self.config.noise_reference, reference)
     }
 
+    /// Never rest the level's `u` on a noise level below the raw samples' white noise,
+    /// `variance` in raw units² per sample as their sample-to-sample differences show it
+    /// (`None`: not known, the default), from now on and after every reset: a fresh fit of
+    /// a few rows can all but interpolate its data and state a `u` far below what the
+    /// noise allows (see `crate::estimators::step_uncertainty`). Its share of a block mean
+    /// (`/D`) is the floor. One that is not finite and non-negative is refused and nothing
+    /// changes.
+    pub fn set_white_noise_variance(&mut self, variance: Option<T>) -> Result<(), ConfigError> {
+        let variance = variance.unwrap_or(T::ZERO);
+        // Written so that NaN fails too.
+        if !(variance >= T::ZERO && variance.is_finite()) {
+            return Err(ConfigError::NoiseReference);
+        }
+        let config = &self.config;
+        let block = T::from_u32(u32::from(config.decimation));
+        self.lags
+            .set_white_floor(variance / (config.gain * config.gain * block));
+        Ok(())
+    }
+
+    /// The raw samples' white noise the level's `u` rests on at least (raw units² per
+    /// sample; see [`Self::set_white_noise_variance`]), `None` when not known.
+    pub fn white_noise_variance(&self) -> Option<T> {
+        let config = &self.config;
+        let floor = self.lags.white_floor();
+        (floor > T::ZERO)
+            .then(|| floor * config.gain * config.gain * T::from_u32(u32::from(config.decimation)))
+    }
+
     /// The consistency check's residual ratio: the weighted mean square of the residuals
     /// over what the noise reference predicts for them (≈ 1 when the fit leaves only
     /// noise); `None` without a reference or before the first determined row.
@@ -255,7 +284,9 @@ impl<T: Real, const N: usize, const L: usize> StepEstimator<T, N, L> {
     }
 
     fn fresh(&self) -> Result<Self, ConfigError> {
-        Self::new(self.config)
+        let mut fresh = Self::new(self.config)?;
+        fresh.lags.set_white_floor(self.lags.white_floor());
+        Ok(fresh)
     }
 
     /// One decimated sample `x` (in the estimate's unit) into the regression.
@@ -331,8 +362,15 @@ impl<T: Real, const N: usize, const L: usize> StepEstimator<T, N, L> {
         }
         let (z, [z_level]) = self.factor.last_unknown_influence(n)?;
         let (lead, _) = self.factor.solution(n);
-        let floor = self.check.as_ref().map(ResidualCheck::block_variance);
-        self.lags.uncertainty(n, &z, z_level, &lead, floor)
+        // The larger of the empty pan's metered noise and the raw samples' white noise.
+        let metered = self
+            .check
+            .as_ref()
+            .map_or(T::ZERO, ResidualCheck::block_variance);
+        let white = self.lags.white_floor();
+        let floor = if metered > white { metered } else { white };
+        self.lags
+            .uncertainty(n, &z, z_level, &lead, (floor > T::ZERO).then_some(floor))
     }
 }
 

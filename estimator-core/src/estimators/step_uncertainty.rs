@@ -53,9 +53,10 @@ pub(crate) struct LagSums<T: Real, const N: usize, const L: usize> {
     older: [[T; L]; L],
     /// How many rows have a row `l` before them.
     pairs: [T; L],
-    /// The last `L` rows, the newest at `latest`.
+    /// The last `L` rows, the newest at `latest` (`u32`: an index below `L`, and the
+    /// bare estimator's size stays within its goal).
     history: [[T; L]; L],
-    latest: usize,
+    latest: u32,
     /// Rows folded.
     rows: u32,
     /// Weighted a-priori residuals squared: the residual sum of squares.
@@ -66,8 +67,12 @@ pub(crate) struct LagSums<T: Real, const N: usize, const L: usize> {
     residual_pairs: [u32; L],
     /// The last `L` a-posteriori residuals, the newest at `residual_latest`, and how many.
     residual_history: [T; L],
-    residual_latest: usize,
+    residual_latest: u32,
     residuals: u32,
+    /// The white noise's share of one block mean's variance (the residuals' unit²), below
+    /// which the noise level is not taken; 0 when not known. Kept over resets by the
+    /// estimator (`StepEstimator::set_white_noise_variance`).
+    white_floor: T,
 }
 
 impl<T: Real, const N: usize, const L: usize> LagSums<T, N, L> {
@@ -85,6 +90,7 @@ impl<T: Real, const N: usize, const L: usize> LagSums<T, N, L> {
             residual_pairs: [0; L],
             residual_history: [T::ZERO; L],
             residual_latest: 0,
+            white_floor: T::ZERO,
             residuals: 0,
         }
     }
@@ -103,7 +109,7 @@ impl<T: Real, const N: usize, const L: usize> LagSums<T, N, L> {
         let row = &row[..n];
         let held = (self.rows as usize).min(n);
         for lag in 1..=held {
-            let before = &self.history[(self.latest + L - (lag - 1)) % L][..n];
+            let before = &self.history[(self.latest as usize + L - (lag - 1)) % L][..n];
             let index = lag - 1;
             for (products, &x) in self.products[index].iter_mut().zip(row) {
                 for (product, &y) in products[..n].iter_mut().zip(before) {
@@ -118,8 +124,9 @@ impl<T: Real, const N: usize, const L: usize> LagSums<T, N, L> {
             }
             self.pairs[index] += T::ONE;
         }
-        self.latest = (self.latest + 1) % L;
-        self.history[self.latest][..n].copy_from_slice(row);
+        let latest = (self.latest as usize + 1) % L;
+        self.latest = latest as u32;
+        self.history[latest][..n].copy_from_slice(row);
         self.rows = self.rows.saturating_add(1);
     }
 
@@ -127,6 +134,16 @@ impl<T: Real, const N: usize, const L: usize> LagSums<T, N, L> {
     /// weight (`1/(1 + φᵀPφ)`): `weight·residual²` is its contribution to the residual sum
     /// of squares, `weight·residual` its a-posteriori residual.
     #[inline]
+    /// The white-noise floor of a block mean's variance (see `white_floor`).
+    pub(crate) fn white_floor(&self) -> T {
+        self.white_floor
+    }
+
+    /// Set the white-noise floor of a block mean's variance (see `white_floor`).
+    pub(crate) fn set_white_floor(&mut self, floor: T) {
+        self.white_floor = floor;
+    }
+
     pub(crate) fn push_residual(&mut self, residual: T, weight: T, n: usize) {
         let posterior = weight * residual;
         self.residual_sum += posterior * residual;
@@ -135,12 +152,13 @@ impl<T: Real, const N: usize, const L: usize> LagSums<T, N, L> {
         }
         let held = (self.residuals as usize).min(n);
         for lag in 1..=held {
-            let before = self.residual_history[(self.residual_latest + L - (lag - 1)) % L];
+            let before = self.residual_history[(self.residual_latest as usize + L - (lag - 1)) % L];
             self.residual_lags[lag - 1] += posterior * before;
             self.residual_pairs[lag - 1] += 1;
         }
-        self.residual_latest = (self.residual_latest + 1) % L;
-        self.residual_history[self.residual_latest] = posterior;
+        let latest = (self.residual_latest as usize + 1) % L;
+        self.residual_latest = latest as u32;
+        self.residual_history[latest] = posterior;
         self.residuals = self.residuals.saturating_add(1);
     }
 
@@ -321,7 +339,8 @@ mod tests {
     /// trickle) has difference columns of pure noise, and a fit of a few rows all but
     /// interpolates its data: its first stated `u` can be far below the error (the scale
     /// showed 0.13 g off as final with u = 0.0016 g on 1 g of raw noise). With the noise
-    /// metered on the empty pan as the floor, ±2u covers the first stated errors.
+    /// metered on the empty pan as the floor, or the raw samples' white noise (what the
+    /// scale measures on any pan), ±2u covers the first stated errors.
     #[test]
     fn a_fit_without_a_transient_is_not_overconfident_with_metered_noise() {
         use crate::estimators::consistency::NoiseReference;
@@ -331,14 +350,15 @@ mod tests {
         let mut state = 0x9E37_79B9_7F4A_7C15u64;
         let mut noise = move || unit_noise(&mut state);
         let runs = 400;
-        let mut outside = [0u32; 2];
-        for (floor, outside) in [false, true].into_iter().zip(&mut outside) {
+        let bare = StepConfig::new(7, 1.0f64).with_decimation(16);
+        let metered = bare.with_noise_reference(NoiseReference::exact(1.0));
+        // (configuration, white noise per raw sample)
+        let cases = [(bare, None), (metered, None), (bare, Some(1.0))];
+        let mut outside = [0u32; 3];
+        for ((config, white), outside) in cases.into_iter().zip(&mut outside) {
             for _ in 0..runs {
-                let mut config = StepConfig::new(7, 1.0f64).with_decimation(16);
-                if floor {
-                    config = config.with_noise_reference(NoiseReference::exact(1.0));
-                }
                 let mut estimator = StepEstimator::<f64, 8, 8>::new(config).unwrap();
+                estimator.set_white_noise_variance(white).unwrap();
                 for _ in 0..4000 {
                     let reading = estimator.push(noise());
                     if let (Some(estimate), Some(u)) = (reading.estimate, reading.uncertainty) {
@@ -350,14 +370,12 @@ mod tests {
                 }
             }
         }
-        let [without, with] = outside;
-        // Without the floor 54 of the 400 first errors lie beyond 2u (13.5 %, where a 95 %
-        // interval allows 5 %); with it none (the floor is the noise's expectation, and
-        // the coverage factor at 3 degrees of freedom is 1.6: conservative, not over).
-        assert!(
-            without > runs / 10,
-            "without the floor: {without} of {runs}"
-        );
-        assert!(with <= runs / 20, "with the floor: {with} of {runs}");
+        let [without, metered, white] = outside;
+        // Without a floor 54 of the 400 first errors lie beyond 2u (13.5 %, where a 95 %
+        // interval allows 5 %); with either none (the floor is the noise's expectation,
+        // and the coverage factor at 3 degrees of freedom is 1.6: conservative, not over).
+        assert!(without > runs / 10, "without a floor: {without} of {runs}");
+        assert!(metered <= runs / 20, "metered: {metered} of {runs}");
+        assert!(white <= runs / 20, "white noise: {white} of {runs}");
     }
 }

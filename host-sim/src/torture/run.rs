@@ -42,6 +42,8 @@ pub fn run_plan(
             out,
             "t_s,truth_low_g,truth_high_g,mass_g,u_g,state,final,act,tare_truth_g,event"
         );
+        // What the run's noise is: an event row before the first line.
+        let _ = writeln!(out, ",,,,,,,,,\"{:?}\"", plan.disturbances);
     }
     let mut adc = SimulatedAdc::<PLAN_EVENTS>::new(*chain, plan.script, plan.disturbances, seed);
     let calibration = CountsScale {

@@ -24,6 +24,7 @@ impl<E: ScaleEstimator> Scale<E> {
             Err(fault) => return self.set_fault(fault),
         };
         self.start_sample();
+        self.white.push(counts, self.config.block_samples);
         self.push_trend(counts);
         // The zero is removed in integer arithmetic, so the conversion is exact (|counts| is
         // far below 2^24 for any converter this runs).
@@ -84,11 +85,13 @@ impl<E: ScaleEstimator> Scale<E> {
         match sample {
             RawSample::Counts(counts) => Ok(counts),
             RawSample::Saturated => {
+                self.white.gap();
                 self.restart_pending = true;
                 self.trend.clear(0);
                 Err(ScaleFault::Saturated)
             }
             RawSample::Lost => {
+                self.white.gap();
                 self.restart_pending = true;
                 self.trend.clear(0);
                 Err(ScaleFault::SampleLost)

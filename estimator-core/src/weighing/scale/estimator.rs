@@ -28,6 +28,15 @@ pub trait ScaleEstimator: Estimator<f32> {
         &mut self,
         reference: Option<NoiseReference<f32>>,
     ) -> Result<(), ConfigError>;
+
+    /// Take the raw samples' white noise as `variance` in counts² per sample (`None`: not
+    /// known) from the next reset on, for an estimator whose `u` rests on its residuals
+    /// (see [`crate::StepConfig::white_noise_variance`]); the default takes nothing. A
+    /// variance that is not finite and non-negative is refused and nothing changes.
+    fn set_white_noise_variance(&mut self, variance: Option<f32>) -> Result<(), ConfigError> {
+        let _ = variance;
+        Ok(())
+    }
 }
 
 impl<E: ScaleEstimator + ?Sized> ScaleEstimator for &mut E {
@@ -41,6 +50,10 @@ impl<E: ScaleEstimator + ?Sized> ScaleEstimator for &mut E {
     ) -> Result<(), ConfigError> {
         (**self).set_noise_reference(reference)
     }
+
+    fn set_white_noise_variance(&mut self, variance: Option<f32>) -> Result<(), ConfigError> {
+        (**self).set_white_noise_variance(variance)
+    }
 }
 
 /// `ScaleEstimator` for the estimators of this crate: `samples_per_update` is the
@@ -48,7 +61,7 @@ impl<E: ScaleEstimator + ?Sized> ScaleEstimator for &mut E {
 /// estimator's own `set_noise_reference`. (A macro, not a trait default: the decimation
 /// sits in each estimator's own configuration, which no shared trait exposes.)
 macro_rules! scale_estimator {
-    ($([$($generics:tt)*] $estimator:ty => |$e:ident| $decimation:expr;)*) => {$(
+    ($([$($generics:tt)*] $estimator:ty => |$e:ident| $decimation:expr $(, $white:ident)?;)*) => {$(
         impl<$($generics)*> ScaleEstimator for $estimator {
             fn samples_per_update(&self) -> u32 {
                 let $e = self;
@@ -61,12 +74,19 @@ macro_rules! scale_estimator {
             ) -> Result<(), ConfigError> {
                 Self::set_noise_reference(self, reference)
             }
+
+            $(
+                fn $white(&mut self, variance: Option<f32>) -> Result<(), ConfigError> {
+                    Self::$white(self, variance)
+                }
+            )?
         }
     )*};
 }
 
 scale_estimator! {
-    [const N: usize, const L: usize] StepEstimator<f32, N, L> => |e| e.config().decimation;
+    [const N: usize, const L: usize] StepEstimator<f32, N, L> => |e| e.config().decimation,
+        set_white_noise_variance;
     [const N: usize] BiasCompensatedStepEstimator<f32, N> => |e| e.config().step.decimation;
     [const N: usize] IvStepEstimator<f32, N> => |e| e.config().step.decimation;
     [const S: usize, const K: usize] ModelBank<f32, S, K> => |e| e.decimation();
@@ -89,5 +109,9 @@ impl<const N: usize, const S: usize, const K: usize> ScaleEstimator
         reference: Option<NoiseReference<f32>>,
     ) -> Result<(), ConfigError> {
         WeighingEstimator::set_noise_reference(self, reference)
+    }
+
+    fn set_white_noise_variance(&mut self, variance: Option<f32>) -> Result<(), ConfigError> {
+        WeighingEstimator::set_white_noise_variance(self, variance)
     }
 }

@@ -67,6 +67,7 @@ mod reading;
 #[cfg(test)]
 pub(crate) mod test_scene;
 mod trend;
+mod white;
 mod zero;
 
 pub use build::{ConfiguredEstimator, MethodRefusal};
@@ -81,6 +82,7 @@ use crate::reading::ConfigError;
 use change::TwoSidedCusum;
 use noise::NoiseMetering;
 use trend::Trend;
+use white::WhiteNoise;
 use zero::round_to_i32;
 
 /// The weighing decisions around an estimator `E` (see [`ScaleEstimator`]).
@@ -197,6 +199,9 @@ pub struct Scale<E> {
     /// (`decide::show`, once per sample; false after anything that changes the net reading
     /// until the next sample is shown).
     final_bound_met: bool,
+    /// The raw samples' white noise (`white`), handed to each new run as the floor of its
+    /// `u`.
+    white: WhiteNoise,
     /// The trend test's window of block means (`trend`): kept over load changes, started
     /// over after a fault or a new calibration or configuration.
     trend: Trend,
@@ -278,6 +283,7 @@ impl<E: ScaleEstimator> Scale<E> {
             noise: NoiseMetering::new(samples_per_update, config.noise_window_samples),
             noise_metered: false,
             final_bound_met: false,
+            white: WhiteNoise::new(),
             trend: Trend::new(0),
             trend_alarmed: false,
             after_trend_change: false,
@@ -410,6 +416,10 @@ impl<E: ScaleEstimator> Scale<E> {
         // Refused only when not finite and positive, which the metering never hands over;
         // the estimator then keeps the reference it had.
         let _ = self.estimator.set_noise_reference(self.noise_reference());
+        // Refused only when not finite and non-negative, which the meter never hands over.
+        let _ = self
+            .estimator
+            .set_white_noise_variance(self.white.variance());
         self.estimator.reset();
         self.noise.interrupt();
         self.run_zero_counts = round_to_i32(self.zero_counts);
