@@ -12,7 +12,9 @@ use std::path::Path;
 
 use anyhow::{anyhow, Result};
 use plotters::coord::Shift;
+use plotters::element::DashedPathElement;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::montecarlo::{StudyResult, TOLERANCES};
 
@@ -60,6 +62,71 @@ const PALETTE: [RGBColor; 10] = [
     RGBColor(127, 127, 127),
 ];
 
+/// The legend panel's width, px, right of the plot.
+const LEGEND_WIDTH: u32 = 270;
+
+/// Dash and gap lengths, px, of the reference lines in turn.
+const DASHES: [(u32, u32); 4] = [(6, 4), (2, 3), (12, 4), (8, 3)];
+
+/// How a legend entry's sample line is drawn.
+enum LegendLine {
+    Solid(ShapeStyle),
+    Dashed(ShapeStyle, (u32, u32)),
+}
+
+/// The legend in its own panel: one sample line and the name (wrapped) per entry, top down.
+fn draw_legend<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    entries: &[(&str, LegendLine)],
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    const LINE_HEIGHT: i32 = 16;
+    const TEXT_X: i32 = 44;
+    // Characters a line holds at 12 px (about 6.5 px a character).
+    let columns = ((LEGEND_WIDTH as i32 - TEXT_X - 8) * 2 / 13) as usize;
+    let font = ("sans-serif", 12).into_font().color(&BLACK);
+    let mut y = 50;
+    for (name, line) in entries {
+        let sample = vec![(8, y + 6), (38, y + 6)];
+        match line {
+            LegendLine::Solid(style) => area.draw(&PathElement::new(sample, *style))?,
+            LegendLine::Dashed(style, (dash, gap)) => {
+                area.draw(&DashedPathElement::new(sample, *dash, *gap, *style))?
+            }
+        }
+        for text in wrap(name, columns) {
+            area.draw(&Text::new(text, (TEXT_X, y), font.clone()))?;
+            y += LINE_HEIGHT;
+        }
+        y += 6;
+    }
+    Ok(())
+}
+
+/// `text` in lines of at most `columns` characters, broken at spaces where it can be.
+fn wrap(text: &str, columns: usize) -> Vec<String> {
+    let mut lines = Vec::new();
+    let mut current = String::new();
+    for word in text.split(' ') {
+        if !current.is_empty() && current.chars().count() + 1 + word.chars().count() > columns {
+            lines.push(std::mem::take(&mut current));
+        }
+        if !current.is_empty() {
+            current.push(' ');
+        }
+        current.push_str(word);
+    }
+    if !current.is_empty() {
+        lines.push(current);
+    }
+    lines
+}
+
+/// A linear axis's tick as a plain number: `30`, not `30.0`; `0.25`, not `0.25000`.
+fn plain_label(x: f64) -> String {
+    let rounded = (x * 1e6).round() / 1e6;
+    format!("{rounded}")
+}
+
 impl Chart {
     fn bounds(&self) -> (f64, f64, f64, f64) {
         let points = self
@@ -86,9 +153,12 @@ impl Chart {
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<()> {
         let error = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("drawing failed: {e:?}");
         root.fill(&WHITE).map_err(error)?;
+        // The legend has a panel of its own right of the plot: never over the data.
+        let (width, _) = root.dim_in_pixel();
+        let (plot, legend) = root.split_horizontally(width.saturating_sub(LEGEND_WIDTH));
         let (x0, x1, y0, y1) = self.bounds();
-        let mut chart = ChartBuilder::on(root)
-            .caption(&self.title, ("sans-serif", 20))
+        let mut chart = ChartBuilder::on(&plot)
+            .caption(&self.title, ("sans-serif", 18))
             .margin(12)
             .x_label_area_size(45)
             .y_label_area_size(75)
@@ -99,10 +169,12 @@ impl Chart {
             .x_desc(&self.x_label)
             .y_desc(&self.y_label)
             .label_style(("sans-serif", 14))
+            .x_label_formatter(&|x| plain_label(*x))
             .y_label_formatter(&|y| log_label(*y))
             .draw()
             .map_err(error)?;
-        let mut colour = 0;
+        let mut entries = Vec::new();
+        let (mut colour, mut references) = (0, 0);
         for series in &self.series {
             let points: Vec<(f64, f64)> = series
                 .points
@@ -112,36 +184,49 @@ impl Chart {
                 .collect();
             // A series with nothing to draw takes neither a colour nor a legend entry: a
             // legend names only what the reader can find on the chart.
-            if points.is_empty() {
+            let (Some(&first), Some(&last)) = (points.first(), points.last()) else {
                 continue;
-            }
-            let style = if series.reference {
-                BLACK.mix(0.8).stroke_width(1)
-            } else {
-                let c = PALETTE[colour % PALETTE.len()];
-                colour += 1;
-                c.stroke_width(2)
             };
-            let marked = points.len() <= 40;
-            chart
-                .draw_series(LineSeries::new(points.clone(), style))
-                .map_err(error)?
-                .label(series.name.clone())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
-            if marked && !series.reference {
+            let line = if series.reference {
+                // Each reference its own dash and its name on the line (at alternate ends,
+                // so neighbouring references do not write over each other).
+                let dash = DASHES[references % DASHES.len()];
+                let at_right = references % 2 == 0;
+                references += 1;
+                let style = BLACK.mix(0.8).stroke_width(1);
                 chart
-                    .draw_series(points.iter().map(|p| Circle::new(*p, 3, style.filled())))
+                    .draw_series(DashedLineSeries::new(points, dash.0, dash.1, style))
                     .map_err(error)?;
-            }
+                let (at, anchor) = if at_right {
+                    (last, HPos::Right)
+                } else {
+                    (first, HPos::Left)
+                };
+                let font = ("sans-serif", 12)
+                    .into_font()
+                    .color(&BLACK)
+                    .pos(Pos::new(anchor, VPos::Bottom));
+                chart
+                    .draw_series(std::iter::once(Text::new(series.name.clone(), at, font)))
+                    .map_err(error)?;
+                LegendLine::Dashed(style, dash)
+            } else {
+                let style = PALETTE[colour % PALETTE.len()].stroke_width(2);
+                colour += 1;
+                let marked = points.len() <= 40;
+                if marked {
+                    chart
+                        .draw_series(points.iter().map(|p| Circle::new(*p, 3, style.filled())))
+                        .map_err(error)?;
+                }
+                chart
+                    .draw_series(LineSeries::new(points, style))
+                    .map_err(error)?;
+                LegendLine::Solid(style)
+            };
+            entries.push((series.name.as_str(), line));
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 13))
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(error)?;
+        draw_legend(&legend, &entries).map_err(error)?;
         root.present().map_err(error)?;
         Ok(())
     }
@@ -477,5 +562,22 @@ fn empty(title: &str) -> Chart {
         x_label: String::new(),
         y_label: String::new(),
         series: Vec::new(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ticks_are_plain_and_names_wrap_at_spaces() {
+        assert_eq!(plain_label(30.0), "30");
+        assert_eq!(plain_label(0.25), "0.25");
+        assert_eq!(plain_label(12.500000001), "12.5");
+        let lines = wrap("sensor itself settles within 0.05%: 1.606 s", 20);
+        assert_eq!(lines, ["sensor itself", "settles within", "0.05%: 1.606 s"]);
+        assert!(lines.iter().all(|l| l.chars().count() <= 20));
+        // A word longer than a line stands on a line of its own.
+        assert_eq!(wrap("a verylongword b", 5), ["a", "verylongword", "b"]);
     }
 }
