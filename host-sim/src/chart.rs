@@ -188,8 +188,9 @@ impl Chart {
                 continue;
             };
             let line = if series.reference {
-                // Each reference its own dash and its name on the line (at alternate ends,
-                // so neighbouring references do not write over each other).
+                // Each reference its own dash and its name under the line (at alternate
+                // ends, so neighbouring references do not write over each other; a bound
+                // lies below the data it bounds).
                 let dash = DASHES[references % DASHES.len()];
                 let at_right = references % 2 == 0;
                 references += 1;
@@ -205,7 +206,7 @@ impl Chart {
                 let font = ("sans-serif", 12)
                     .into_font()
                     .color(&BLACK)
-                    .pos(Pos::new(anchor, VPos::Bottom));
+                    .pos(Pos::new(anchor, VPos::Top));
                 chart
                     .draw_series(std::iter::once(Text::new(series.name.clone(), at, font)))
                     .map_err(error)?;
@@ -549,7 +550,7 @@ fn log_label(y: f64) -> String {
         .any(|m| (mantissa - m).abs() < 1e-6 * m);
     if !keep {
         String::new()
-    } else if (-3.0..=2.0).contains(&exponent) {
+    } else if (-3.0..=4.0).contains(&exponent) {
         format!("{}", (y * 1e6).round() / 1e6)
     } else {
         format!("{}e{}", mantissa.round(), exponent)
@@ -574,6 +575,11 @@ mod tests {
         assert_eq!(plain_label(30.0), "30");
         assert_eq!(plain_label(0.25), "0.25");
         assert_eq!(plain_label(12.500000001), "12.5");
+        // A log axis: plain from 0.001 to 10,000, powers of ten beyond.
+        assert_eq!(log_label(1000.0), "1000");
+        assert_eq!(log_label(0.002), "0.002");
+        assert_eq!(log_label(1e-4), "1e-4");
+        assert_eq!(log_label(3e-4), "");
         let lines = wrap("sensor itself settles within 0.05%: 1.606 s", 20);
         assert_eq!(lines, ["sensor itself", "settles within", "0.05%: 1.606 s"]);
         assert!(lines.iter().all(|l| l.chars().count() <= 20));

@@ -12,8 +12,9 @@ use crate::simulated::{LoadEvent, Script};
 pub const SNRS_DB: [f64; 8] = [10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0];
 /// Orders of slice A.
 pub const ORDERS: [usize; 15] = [1, 2, 3, 4, 5, 6, 7, 8, 10, 12, 16, 20, 25, 30, 40];
-/// The firmware's block length (firmware/README.md: n = 7, D = 16).
-pub const FIRMWARE_DECIMATION: u16 = 16;
+/// The block length slice A maps the orders at (the firmware's before calibration chose
+/// n = 5, D = 24; that one is among the default probes of slices B and C).
+pub const ORDER_MAP_DECIMATION: u16 = 16;
 /// The readouts of the Monte Carlo slices, s: the firmware's readout, and the end of the
 /// window (the last sample of 1.5 s).
 pub const READOUTS_S: [f64; 2] = [0.1, 1.5];

@@ -86,21 +86,26 @@ impl HeatMap {
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<()> {
         let error = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("drawing failed: {e:?}");
         root.fill(&WHITE).map_err(error)?;
-        let (_, height) = root.dim_in_pixel();
+        let (width, height) = root.dim_in_pixel();
         let (top, rest) = root.split_vertically(40);
+        // 20 px, or smaller where the title would run past the right edge (a character
+        // is about 0.55 of the font size wide).
+        let characters = self.title.chars().count().max(1) as f64;
+        let title_size = (1.8 * f64::from(width) / characters).min(20.0);
         top.draw(&Text::new(
             self.title.clone(),
             (10, 10),
-            ("sans-serif", 20).into_font(),
+            ("sans-serif", title_size).into_font(),
         ))
         .map_err(error)?;
-        let (body, legend) = rest.split_vertically(height - 40 - 36);
+        let legend_height = LEGEND_ROW_HEIGHT * legend_rows(width);
+        let (body, legend) = rest.split_vertically(height - 40 - legend_height);
         let rows = self.panels.len().div_ceil(self.columns);
         let areas = body.split_evenly((rows, self.columns));
         for (panel, area) in self.panels.iter().zip(areas.iter()) {
             self.draw_panel(panel, area)?;
         }
-        draw_legend(&legend)?;
+        draw_legend(&legend, width)?;
         root.present().map_err(error)?;
         Ok(())
     }
@@ -171,9 +176,10 @@ impl HeatMap {
     pub fn write(&self, base: &Path) -> Result<()> {
         chart::register_font()?;
         let rows = self.panels.len().div_ceil(self.columns) as u32;
+        let width = self.panel_size.0 * self.columns as u32;
         let size = (
-            self.panel_size.0 * self.columns as u32,
-            self.panel_size.1 * rows + 40 + 36,
+            width,
+            self.panel_size.1 * rows + 40 + LEGEND_ROW_HEIGHT * legend_rows(width),
         );
         let svg = base.with_extension("svg");
         self.draw(&SVGBackend::new(&svg, size).into_drawing_area())?;
@@ -191,25 +197,51 @@ fn segment_label(labels: &[String], value: &SegmentValue<i32>) -> String {
     }
 }
 
-/// The legend along the bottom: a swatch and a meaning per entry.
-fn draw_legend<DB: DrawingBackend>(legend: &DrawingArea<DB, Shift>) -> Result<()> {
+/// The height of one row of the legend, px.
+const LEGEND_ROW_HEIGHT: u32 = 30;
+
+/// Where each legend entry goes in an image `width` px wide: (x, row), in order; entries
+/// that would run past the right edge start a new row.
+fn legend_layout(width: u32) -> Vec<(i32, u32)> {
+    let mut places = Vec::new();
+    let (mut x, mut row) = (10i32, 0u32);
+    for (_, _, text) in LEGEND.iter().filter(|l| !l.2.is_empty()) {
+        let entry = 24 + 8 * text.chars().count() as i32 + 24;
+        if x > 10 && x + entry > width as i32 {
+            x = 10;
+            row += 1;
+        }
+        places.push((x, row));
+        x += entry;
+    }
+    places
+}
+
+/// The rows the legend takes in an image `width` px wide.
+fn legend_rows(width: u32) -> u32 {
+    legend_layout(width).last().map_or(1, |&(_, row)| row + 1)
+}
+
+/// The legend along the bottom: a swatch and a meaning per entry, in as many rows as the
+/// width needs.
+fn draw_legend<DB: DrawingBackend>(legend: &DrawingArea<DB, Shift>, width: u32) -> Result<()> {
     let error = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("drawing failed: {e:?}");
-    let mut x = 10i32;
-    for (class, silent, text) in LEGEND.iter().filter(|l| !l.2.is_empty()) {
+    let entries = LEGEND.iter().filter(|l| !l.2.is_empty());
+    for ((class, silent, text), (x, row)) in entries.zip(legend_layout(width)) {
+        let y = 8 + (row * LEGEND_ROW_HEIGHT) as i32;
         legend
             .draw(&Rectangle::new(
-                [(x, 8), (x + 18, 26)],
+                [(x, y), (x + 18, y + 18)],
                 colour(*class, *silent).filled(),
             ))
             .map_err(error)?;
         legend
             .draw(&Text::new(
                 text.to_string(),
-                (x + 24, 10),
+                (x + 24, y + 2),
                 ("sans-serif", 13).into_font(),
             ))
             .map_err(error)?;
-        x += 24 + 8 * text.chars().count() as i32 + 24;
     }
     Ok(())
 }
@@ -243,13 +275,15 @@ fn compact(ratio: f64) -> String {
     }
 }
 
-/// Slice A's heat map at readout `r`: a panel per family and precision, SNR against order.
+/// Slice A's heat map at readout `r`: a panel per family and precision, SNR against order;
+/// a family's f64 and f32 panels side by side, a row per family (two panels across stay
+/// readable at a page's 800 px; ten across were 160 px each).
 pub fn order_heat_map(slice: &SliceResult, r: usize) -> HeatMap {
     let families = distinct(slice.probes.iter().map(|p| p.family.clone()));
     let orders = slice.orders();
     let mut panels = Vec::new();
-    for precision in [Precision::F64, Precision::F32] {
-        for family in &families {
+    for family in &families {
+        for precision in [Precision::F64, Precision::F32] {
             let cells = slice
                 .conditions
                 .iter()
@@ -292,9 +326,9 @@ pub fn order_heat_map(slice: &SliceResult, r: usize) -> HeatMap {
             readout_name(r),
             slice.runs
         ),
-        columns: families.len(),
+        columns: 2,
         panels,
-        panel_size: (560, 330),
+        panel_size: (600, 330),
         label_width: 55,
     }
 }
@@ -337,9 +371,10 @@ pub fn probe_heat_map(
     }
     HeatMap {
         title: format!("{title} ({} runs a cell; cell text: RMS/CRLB)", slice.runs),
-        columns: groups.len(),
+        // One panel across: each is read row by row against its probe labels.
+        columns: 1,
         panels,
-        panel_size: (660, 560),
+        panel_size: (760, 560),
         label_width: 230,
     }
 }

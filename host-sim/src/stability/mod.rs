@@ -48,7 +48,7 @@ pub use command::stability_command;
 pub use conditions::{
     mass_for_ratio, noise_conditions, noisy_scene, off_calibration_conditions, order_conditions,
     readout_indices, resonance_ratio, vibration_gain, Condition, Noise, Slice, CALIBRATION_G,
-    FIRMWARE_DECIMATION, OFF_CALIBRATION_SNRS_DB, ORDERS, READOUTS_S, RESONANCE_RATIOS, SNRS_DB,
+    OFF_CALIBRATION_SNRS_DB, ORDERS, ORDER_MAP_DECIMATION, READOUTS_S, RESONANCE_RATIOS, SNRS_DB,
 };
 pub use csv::write_csv;
 pub use heatmap::{long_chart, order_heat_map, probe_heat_map, HeatMap, Panel};

@@ -2,7 +2,7 @@
 //! the two are judged on the same runs. The map's own specs must parse; a typo is a bug here,
 //! never a cell.
 
-use super::conditions::FIRMWARE_DECIMATION;
+use super::conditions::ORDER_MAP_DECIMATION;
 use crate::method::Method;
 use crate::montecarlo::Precision;
 
@@ -51,7 +51,7 @@ pub(super) fn push_pair(probes: &mut Vec<Probe>, family: &str, spec: &str, order
 
 /// Slice A's probes: every family where an order applies, at every order, f64 and f32.
 pub fn order_probes(orders: &[usize]) -> Vec<Probe> {
-    let d = FIRMWARE_DECIMATION;
+    let d = ORDER_MAP_DECIMATION;
     let families: [(String, String); 5] = [
         (format!("step D={d}"), format!("step:D={d}")),
         ("step D=1".into(), "step:D=1".into()),
@@ -73,12 +73,16 @@ pub fn order_probes(orders: &[usize]) -> Vec<Probe> {
     probes
 }
 
+/// The firmware's default method (`firmware/weighing.toml`, test
+/// `the_firmware_default_is_the_shipped_method`): its row label and spec.
+const FIRMWARE_DEFAULT: (&str, &str) = ("step n=5 D=24 (firmware default)", "step:n=5,D=24");
+
 /// Slices B and C: every method at its default configuration (the speed study's), f64 and
 /// f32.
 pub fn default_probes() -> Vec<Probe> {
     let mut probes = Vec::new();
     for (family, spec) in [
-        ("step n=7 D=16 (firmware)", "step:n=7,D=16"),
+        (FIRMWARE_DEFAULT.0, FIRMWARE_DEFAULT.1),
         ("step n=7 D=1 (thesis)", "step:n=7,D=1"),
         ("covariance n=7 D=16", "covariance:n=7,D=16"),
         ("iv n=7 D=16", "iv:n=7,D=16"),
@@ -147,10 +151,24 @@ mod tests {
     fn every_default_method_is_probed_in_both_precisions() {
         let probes = default_probes();
         assert_eq!(probes.len(), 20);
-        assert_eq!(probe_label(&probes[0]), "step n=7 D=16 (firmware) f64");
-        assert_eq!(probe_label(&probes[1]), "step n=7 D=16 (firmware) f32");
+        assert_eq!(
+            probe_label(&probes[0]),
+            "step n=5 D=24 (firmware default) f64"
+        );
+        assert_eq!(
+            probe_label(&probes[1]),
+            "step n=5 D=24 (firmware default) f32"
+        );
         assert_eq!(precision_name(&probes[13].method), "f32");
         assert_eq!(in_f32("model"), "model:precision=f32");
         assert_eq!(in_f32("step:n=7"), "step:n=7,precision=f32");
+    }
+
+    /// The map's "firmware default" row is the method the firmware ships with.
+    #[test]
+    fn the_firmware_default_is_the_shipped_method() {
+        let (shipped, _) = crate::study::firmware_default().unwrap();
+        let probed = parse(&in_f32(FIRMWARE_DEFAULT.1));
+        assert_eq!(probed.to_string(), shipped.to_string());
     }
 }
