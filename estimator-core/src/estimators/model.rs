@@ -459,17 +459,24 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
         shared_next: &[T; S],
     ) {
         let had_estimate = self.intake.estimate().is_some();
-        let block = &self.block;
         let row = self.state_row;
+        let mut step_mean = self.step_response;
+        for i in 0..S {
+            step_mean += row[i] * self.block.step_mean_weights[i];
+        }
+        let determined_before = self.rows as usize > self.state_columns();
+        let folded = self
+            .factor
+            .fold_after_shared(shared, rotations, row, step_mean);
+        // The next row after the fold, which then needs none of it in registers.
+        let block = &self.block;
         let mut next = *shared_next;
         for v in next[shared..].iter_mut() {
             *v = T::ZERO;
         }
-        let mut step_mean = self.step_response;
         let mut step_next = self.step_response;
         for i in 0..S {
             let ri = row[i];
-            step_mean += ri * block.step_mean_weights[i];
             step_next += ri * block.step_end_weights[i];
             // The shared states are not fed by the others (the bank checked it: those
             // entries of the transition are zero), so their part is the bank's.
@@ -477,10 +484,6 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
                 next[j] += ri * block.transition[i][j];
             }
         }
-        let determined_before = self.rows as usize > self.state_columns();
-        let folded = self
-            .factor
-            .fold_after_shared(shared, rotations, row, step_mean);
         self.state_row = next;
         self.step_response = step_next;
         self.after_fold(had_estimate, determined_before, folded);
