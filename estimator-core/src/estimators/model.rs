@@ -29,7 +29,7 @@ use crate::estimators::input::Decimator;
 use crate::estimators::intake::{estimator_via_intake, intake_config_builders, Intake};
 use crate::estimators::step::MAX_DECIMATION;
 use crate::estimators::step_uncertainty::{coverage_factor, MIN_DEGREES_OF_FREEDOM};
-use crate::numerics::factor::Factor;
+use crate::numerics::factor::{Factor, Folded, SharedRotations};
 use crate::numerics::real::Real;
 use crate::reading::{ConfigError, Estimator, InvalidReason, Reading, State};
 
@@ -122,6 +122,21 @@ impl<T: Real, const S: usize> BlockModel<T, S> {
             step_end_weights: solve(mean_map, step_partial)?,
         };
         block.is_finite().then_some(block)
+    }
+
+    /// The same model with its states renumbered so that state `first` comes first (state
+    /// `i` becomes `(i + S − first) mod S`): an exact change of basis, which changes only
+    /// the order in which the regression's columns are folded.
+    fn with_leading(&self, first: usize) -> Self {
+        let old = |i: usize| (i + first) % S;
+        Self {
+            transition: core::array::from_fn(|i| {
+                core::array::from_fn(|j| self.transition[old(i)][old(j)])
+            }),
+            first_row: core::array::from_fn(|i| self.first_row[old(i)]),
+            step_mean_weights: core::array::from_fn(|i| self.step_mean_weights[old(i)]),
+            step_end_weights: core::array::from_fn(|i| self.step_end_weights[old(i)]),
+        }
     }
 
     fn is_finite(&self) -> bool {
@@ -428,6 +443,55 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
         };
         self.state_row = next;
         self.step_response = step_next;
+        self.after_fold(had_estimate, determined_before, folded);
+    }
+
+    /// [`Self::update`] in a bank whose candidates share their first `shared` states (see
+    /// `SharedStates`): the bank has folded the row's shared entries (`rotations`) and
+    /// propagated their part of the row (`shared_next`, the first `shared` entries); this
+    /// candidate does the rest, the same operations on the same values as `update` (but
+    /// for the sign of a zero). Only once its factor has weight in every column.
+    #[inline(never)]
+    fn update_after_shared(
+        &mut self,
+        shared: usize,
+        rotations: &SharedRotations<T, S>,
+        shared_next: &[T; S],
+    ) {
+        let had_estimate = self.intake.estimate().is_some();
+        let row = self.state_row;
+        let mut step_mean = self.step_response;
+        for i in 0..S {
+            step_mean += row[i] * self.block.step_mean_weights[i];
+        }
+        let determined_before = self.rows as usize > self.state_columns();
+        let folded = self
+            .factor
+            .fold_after_shared(shared, rotations, row, step_mean);
+        // The next row after the fold, which then needs none of it in registers.
+        let block = &self.block;
+        let mut next = *shared_next;
+        for v in next[shared..].iter_mut() {
+            *v = T::ZERO;
+        }
+        let mut step_next = self.step_response;
+        for i in 0..S {
+            let ri = row[i];
+            step_next += ri * block.step_end_weights[i];
+            // The shared states are not fed by the others (the bank checked it: those
+            // entries of the transition are zero), so their part is the bank's.
+            for j in shared..S {
+                next[j] += ri * block.transition[i][j];
+            }
+        }
+        self.state_row = next;
+        self.step_response = step_next;
+        self.after_fold(had_estimate, determined_before, folded);
+    }
+
+    /// What follows a row's fold: the residual sums, the check, and the reading.
+    #[inline(always)]
+    fn after_fold(&mut self, had_estimate: bool, determined_before: bool, folded: Folded<T>) {
         self.rows = self.rows.saturating_add(1);
         if had_estimate {
             self.residual_sum += folded.row_weight * folded.residual * folded.residual;
@@ -546,6 +610,111 @@ pub struct ModelBank<T: Real, const S: usize, const K: usize> {
     /// Whether ruled-out candidates are dropped (always, but in the test that shows it
     /// changes no reading).
     prunes: bool,
+    /// The states the candidates have in common, folded once for all of them; `None` when
+    /// they have none.
+    shared: Option<SharedStates<T, S>>,
+}
+
+/// The states a bank's candidates differ in: the cell's mechanical mode, the first two of
+/// [`crate::LoadCellModel`]'s states. The rest are the low-pass filter's, which the
+/// mechanical states feed but which feed nothing back; built by the physical law, every
+/// candidate has the same filter, to the bit.
+const MODE_STATES: usize = 2;
+
+/// The states every candidate of a bank has in common (the filter's, see [`MODE_STATES`]),
+/// found when the bank is built: the same entries of the block transition among them, none
+/// from the other states into them, and the same entries in the first regressor row. Their
+/// part of every candidate's regressor row is then the same in every block, and so are the
+/// factor's columns of them when they come first: the bank numbers them first, propagates
+/// their part of the row and folds it once per block for all candidates, instead of once
+/// per candidate. The readings are those of each candidate folding its whole row in that
+/// column order (a test compares them bit for bit, in `f32` and `f64`).
+#[derive(Clone, Debug)]
+struct SharedStates<T: Real, const S: usize> {
+    /// The block transition among the shared states (the first `S − MODE_STATES`).
+    transition: [[T; S]; S],
+    /// `r_0` of the shared states (the first entries).
+    first_row: [T; S],
+    /// The shared states' part of the regressor row of the next block.
+    row: [T; S],
+    /// The common copy of the candidates' factor columns of the shared states, taken once
+    /// every candidate's factor has weight in every column (while they fill, each candidate
+    /// folds its whole row); `None` before.
+    factor: Option<Factor<T, S, 1>>,
+}
+
+impl<T: Real, const S: usize> SharedStates<T, S> {
+    /// How many states the candidates share: all but the mechanical mode's.
+    const COUNT: usize = S.saturating_sub(MODE_STATES);
+
+    /// What the candidates of `configs` share, if they have the filter's states in common
+    /// (see the type's docs); the bank then numbers those first in every candidate
+    /// ([`Self::renumber`]). One candidate's block model at a time: a bank's candidates
+    /// are 20 KB for K = 33, and the firmware's stack has no room for a copy of them.
+    fn find<const K: usize>(configs: &[ModelConfig<T, S>; K]) -> Option<Self> {
+        let unknown = configs
+            .iter()
+            .all(|c| c.initial_state == InitialState::Unknown);
+        if K < 2 || Self::COUNT == 0 || !unknown {
+            return None;
+        }
+        let block = |config: &ModelConfig<T, S>| {
+            BlockModel::new(&config.model, config.decimation)
+                .map(|block| block.with_leading(MODE_STATES))
+        };
+        let reference = block(&configs[0])?;
+        let common = |block: BlockModel<T, S>| {
+            (0..Self::COUNT).all(|j| {
+                block.first_row[j] == reference.first_row[j]
+                    && (0..S).all(|i| {
+                        let expected = if i < Self::COUNT {
+                            reference.transition[i][j]
+                        } else {
+                            T::ZERO
+                        };
+                        block.transition[i][j] == expected
+                    })
+            })
+        };
+        if !configs.iter().all(|c| block(c).is_some_and(common)) {
+            return None;
+        }
+        Some(Self {
+            transition: reference.transition,
+            first_row: reference.first_row,
+            row: reference.first_row,
+            factor: None,
+        })
+    }
+
+    /// Number a fresh candidate's shared states first.
+    fn renumber(model: &mut ModelEstimator<T, S>) {
+        model.block = model.block.with_leading(MODE_STATES);
+        model.state_row = model.block.first_row;
+    }
+
+    /// Back to the first block, the candidates' factors empty.
+    fn reset(&mut self) {
+        self.row = self.first_row;
+        self.factor = None;
+    }
+
+    /// Fold the shared entries of the current row with target `y` into the common factor
+    /// and step the shared row on: the rotations and the shared part of the next row.
+    #[inline(always)]
+    fn fold(&mut self, y: T) -> Option<(SharedRotations<T, S>, [T; S])> {
+        let factor = self.factor.as_mut()?;
+        let rotations = factor.fold_shared(Self::COUNT, self.row, y);
+        let mut next = [T::ZERO; S];
+        for i in 0..Self::COUNT {
+            let ri = self.row[i];
+            for j in 0..Self::COUNT {
+                next[j] += ri * self.transition[i][j];
+            }
+        }
+        self.row = next;
+        Some((rotations, next))
+    }
 }
 
 /// Residuals the best candidate must have before the bank drops any candidate: its residual
@@ -580,6 +749,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
             }
         }
         let intake = Self::shared_intake(shared);
+        let shared = SharedStates::find(&configs);
         Ok(Self {
             models: configs.map(|c| {
                 let mut model = ModelEstimator::new(c).expect("checked above");
@@ -590,6 +760,9 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
                 if !model.flags_mismatch {
                     model.check = None;
                 }
+                if shared.is_some() {
+                    SharedStates::renumber(&mut model);
+                }
                 model
             }),
             combined: intake.reading(),
@@ -597,6 +770,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
             first: 0,
             end: K,
             prunes: true,
+            shared,
         })
     }
 
@@ -650,10 +824,26 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     /// Fold one block mean into every candidate still fitted, then combine them and drop
     /// those the data have ruled out.
     fn update(&mut self, block_mean: T) {
-        for model in self.models[self.first..self.end].iter_mut() {
-            // A candidate whose own update latched a fault stays as it is until the reset.
-            if !model.intake.latched() {
+        let fitted = &mut self.models[self.first..self.end];
+        // A candidate whose own update latched a fault stays as it is until the reset.
+        if let Some((rotations, next)) = self.shared.as_mut().and_then(|s| s.fold(block_mean)) {
+            for model in fitted.iter_mut().filter(|m| !m.intake.latched()) {
+                model.update_after_shared(SharedStates::<T, S>::COUNT, &rotations, &next);
+            }
+        } else {
+            for model in fitted.iter_mut().filter(|m| !m.intake.latched()) {
                 model.update(block_mean);
+            }
+            if let Some(shared) = self.shared.as_mut() {
+                // Once every candidate's factor has weight in every column, their shared
+                // columns are one common copy (filled from the same rows).
+                let mut live = fitted.iter().filter(|m| !m.intake.latched());
+                if live.clone().all(|m| m.all_weighted) {
+                    if let Some(model) = live.next() {
+                        shared.factor = Some(model.factor.clone());
+                        shared.row = model.state_row;
+                    }
+                }
             }
         }
         let best = self.best();
@@ -825,6 +1015,9 @@ impl<T: Real, const S: usize, const K: usize> Estimator<T> for ModelBank<T, S, K
         self.combined = self.intake.reading();
         self.first = 0;
         self.end = K;
+        if let Some(shared) = self.shared.as_mut() {
+            shared.reset();
+        }
     }
 }
 
@@ -928,6 +1121,74 @@ mod tests {
                 y + sigma * noise
             })
             .collect()
+    }
+
+    /// A bank built by the physical law shares its filter's states (a bank of first-order
+    /// lags has none to share), and sharing them changes no reading: on noisy drops in the
+    /// grid and beyond it, in both precisions, the bank reads exactly what the same bank
+    /// reads with each candidate folding its whole row. The shared states come first in the
+    /// fold; in `f64` the readings stay those of the model's own state order to 1e-9.
+    #[test]
+    fn sharing_the_filter_states_changes_no_reading() {
+        fn compare<T: Real + core::fmt::Debug>(data: &[f64], label: &str) -> Vec<Reading<T>> {
+            let configs = crate::sensor::reference_cell()
+                .bank_configs::<T, 5, 33>(0.7, 1.3, 8, InitialState::Unknown)
+                .unwrap();
+            let mut shared = ModelBank::new(configs).unwrap();
+            let mut own = shared.clone();
+            own.shared = None;
+            let mut readings = Vec::new();
+            for (k, &y) in data.iter().enumerate() {
+                let y = T::from_f64(y);
+                let reading = shared.push(y);
+                assert_eq!(reading, own.push(y), "{label}, sample {k}");
+                readings.push(reading);
+            }
+            assert!(shared.shared.as_ref().unwrap().factor.is_some(), "{label}");
+            // After a reset the candidates fill their factors again before sharing.
+            shared.reset();
+            own.reset();
+            for (k, &y) in data.iter().take(200).enumerate() {
+                let y = T::from_f64(y);
+                assert_eq!(shared.push(y), own.push(y), "{label}, after the reset, {k}");
+            }
+            readings
+        }
+        let lags = ModelBank::new([lag(0.8), lag(0.9), lag(0.95)]).unwrap();
+        assert!(lags.shared.is_none());
+        for sigma in [3.0, 300.0] {
+            for ratio in [0.6, 0.83, 1.0105, 1.45] {
+                let data = drop_onto(ratio, 138.0, sigma, 7, 1500);
+                let label = std::format!("σ {sigma}, ratio {ratio}");
+                let readings = compare::<f64>(&data, &label);
+                compare::<f32>(&data, &label);
+                // The model's own state order: candidates unshared and not renumbered.
+                let configs = crate::sensor::reference_cell()
+                    .bank_configs::<f64, 5, 33>(0.7, 1.3, 8, InitialState::Unknown)
+                    .unwrap();
+                let mut original = ModelBank::new(configs).unwrap();
+                original.shared = None;
+                for model in original.models.iter_mut() {
+                    *model = ModelEstimator::started(
+                        model.config,
+                        BlockModel::new(&model.config.model, 8).unwrap(),
+                        false,
+                        false,
+                    );
+                }
+                for (k, (&y, reading)) in data.iter().zip(&readings).enumerate() {
+                    let expected = original.push(y);
+                    assert_eq!(reading.state, expected.state, "{label}, sample {k}");
+                    if let (Some(u), Some(expected)) = (reading.estimate, expected.estimate) {
+                        let tolerance = 1e-9 * expected.abs().max(1.0);
+                        assert!(
+                            (u - expected).abs() <= tolerance,
+                            "{label}, {k}: {u} {expected}"
+                        );
+                    }
+                }
+            }
+        }
     }
 
     /// Dropping the candidates the data have ruled out changes no reading: on noisy drops in

@@ -265,6 +265,106 @@ impl<T: Real, const N: usize> Factor<T, N, 1> {
     }
 }
 
+/// The rotations with which a row's first `shared` leading entries were folded into the
+/// leading columns of a factor that several regressions have in common (their rows agree
+/// there and their factors' leading columns are the same): what each of those regressions
+/// needs to fold the rest of the row ([`Factor::fold_after_shared`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SharedRotations<T, const N: usize> {
+    /// Each shared column's row entry as the column met it, and its rotation's c̄ and s̄
+    /// (the first `shared` entries are meaningful).
+    entry: [T; N],
+    cbar: [T; N],
+    sbar: [T; N],
+    /// The row's weight and target after the shared columns.
+    row_weight: T,
+    target: T,
+}
+
+impl<T: Real, const N: usize> SharedRotations<T, N> {
+    /// No rotations yet (a placeholder until the first shared fold).
+    pub(crate) fn new() -> Self {
+        Self {
+            entry: [T::ZERO; N],
+            cbar: [T::ZERO; N],
+            sbar: [T::ZERO; N],
+            row_weight: T::ONE,
+            target: T::ZERO,
+        }
+    }
+}
+
+impl<T: Real, const N: usize> Factor<T, N, 1> {
+    /// The first half of [`Self::fold_weighted_all`], for regressions whose rows agree in
+    /// their first `shared` leading entries and whose factors agree in those columns: fold
+    /// the row's shared entries into this factor's shared columns (the common copy), once
+    /// for all of them. Only this factor's shared columns change: their weights, their
+    /// couplings among themselves and their right-hand side.
+    #[inline(always)]
+    pub(crate) fn fold_shared(
+        &mut self,
+        shared: usize,
+        mut lead: [T; N],
+        target: T,
+    ) -> SharedRotations<T, N> {
+        let mut rotations = SharedRotations::new();
+        rotations.target = target;
+        for i in 0..shared {
+            let xi = lead[i];
+            let (cbar, sbar) = rotation(&mut self.lead_weight[i], &mut rotations.row_weight, xi);
+            for j in (i + 1)..shared {
+                apply(&mut lead[j], &mut self.lead_coupling[i][j], xi, cbar, sbar);
+            }
+            apply(&mut rotations.target, &mut self.lead_rhs[i], xi, cbar, sbar);
+            rotations.entry[i] = xi;
+            rotations.cbar[i] = cbar;
+            rotations.sbar[i] = sbar;
+        }
+        rotations
+    }
+
+    /// The second half: fold the rest of the row (leading entries `shared..N` and the
+    /// trailing one) into this regression's own columns, after the shared columns'
+    /// `rotations`. With [`Self::fold_shared`] on the common copy it does what
+    /// [`Self::fold_weighted_all`] does here, the same operations on the same values (a
+    /// test compares them bit for bit); this factor's own copy of the shared columns is
+    /// left as it was (the common copy holds them).
+    #[inline(always)]
+    pub(crate) fn fold_after_shared(
+        &mut self,
+        shared: usize,
+        rotations: &SharedRotations<T, N>,
+        mut lead: [T; N],
+        tail: T,
+    ) -> Folded<T> {
+        let mut tail = tail;
+        for i in 0..shared {
+            let (xi, cbar, sbar) = (rotations.entry[i], rotations.cbar[i], rotations.sbar[i]);
+            for j in shared..N {
+                apply(&mut lead[j], &mut self.lead_coupling[i][j], xi, cbar, sbar);
+            }
+            apply(&mut tail, &mut self.cross_coupling[i][0], xi, cbar, sbar);
+        }
+        let mut target = rotations.target;
+        let mut row_weight = rotations.row_weight;
+        for i in shared..N {
+            let xi = lead[i];
+            let (cbar, sbar) = rotation(&mut self.lead_weight[i], &mut row_weight, xi);
+            for j in (i + 1)..N {
+                apply(&mut lead[j], &mut self.lead_coupling[i][j], xi, cbar, sbar);
+            }
+            apply(&mut tail, &mut self.cross_coupling[i][0], xi, cbar, sbar);
+            apply(&mut target, &mut self.lead_rhs[i], xi, cbar, sbar);
+        }
+        let (cbar, sbar) = rotation(&mut self.tail_weight[0], &mut row_weight, tail);
+        apply(&mut target, &mut self.tail_rhs[0], tail, cbar, sbar);
+        Folded {
+            residual: target,
+            row_weight,
+        }
+    }
+}
+
 /// Gentleman's rotation for a column with weight `d` meeting a row entry `x` of weight `w`:
 /// updates both weights and returns the (c̄, s̄) that transform the rest of the row.
 #[inline(always)]
@@ -338,6 +438,70 @@ mod tests {
             assert!(fast_rows > 1900);
             assert_eq!(fast.solution(5), general.solution(5));
             assert_eq!(fast.lead_weight(), general.lead_weight());
+        }
+        compare::<f64>();
+        compare::<f32>();
+    }
+
+    /// Regressions whose rows agree in their first three entries, folded with those
+    /// columns' rotations done once on a common copy, get the factors and residuals of
+    /// each folding its own rows, to the last bit, in both precisions.
+    #[test]
+    fn a_shared_fold_is_each_regressions_own_fold() {
+        fn compare<T: Real + core::fmt::Debug>() {
+            const SHARED: usize = 3;
+            let mut own = [Factor::<T, 5, 1>::new(), Factor::new()];
+            let mut split = own.clone();
+            let mut common: Option<Factor<T, 5, 1>> = None;
+            let mut shared_rows = 0;
+            for (k, (lead, tail, target)) in rows::<T>(2000).enumerate() {
+                // The second regression's own entries and step column differ.
+                let other = |mut lead: [T; 5]| {
+                    lead[3] = lead[3] * T::from_f64(0.9) + T::from_f64(0.5);
+                    lead[4] *= T::from_f64(1.1);
+                    lead
+                };
+                let leads = [lead, other(lead)];
+                let tails = [tail, tail * T::from_f64(0.95)];
+                let expected: [Folded<T>; 2] = core::array::from_fn(|r| {
+                    if own[r].all_weighted() {
+                        own[r].fold_weighted_all(leads[r], tails[r], target)
+                    } else {
+                        own[r].fold(5, leads[r], [tails[r]], target)
+                    }
+                });
+                if common.is_none() && split.iter().all(Factor::all_weighted) {
+                    common = Some(split[0].clone());
+                }
+                let folded: [Folded<T>; 2] = if let Some(common) = common.as_mut() {
+                    shared_rows += 1;
+                    let rotations = common.fold_shared(SHARED, lead, target);
+                    core::array::from_fn(|r| {
+                        split[r].fold_after_shared(SHARED, &rotations, leads[r], tails[r])
+                    })
+                } else {
+                    core::array::from_fn(|r| split[r].fold(5, leads[r], [tails[r]], target))
+                };
+                for r in 0..2 {
+                    assert_eq!(folded[r].residual, expected[r].residual, "row {k}");
+                    assert_eq!(folded[r].row_weight, expected[r].row_weight, "row {k}");
+                    assert_eq!(split[r].tail_solution(), own[r].tail_solution(), "row {k}");
+                    assert_eq!(split[r].tail_weight(), own[r].tail_weight(), "row {k}");
+                }
+            }
+            assert!(shared_rows > 1900);
+            let common = common.unwrap();
+            for r in 0..2 {
+                // The shared columns live in the common copy, the rest in each factor.
+                assert_eq!(
+                    common.lead_weight()[..SHARED],
+                    own[r].lead_weight()[..SHARED]
+                );
+                assert_eq!(
+                    split[r].lead_weight()[SHARED..],
+                    own[r].lead_weight()[SHARED..]
+                );
+            }
         }
         compare::<f64>();
         compare::<f32>();
