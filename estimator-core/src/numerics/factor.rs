@@ -243,11 +243,24 @@ impl<T: Real, const N: usize> Factor<T, N, 1> {
     /// its time. The result differs from [`Self::fold`]'s at most in the sign of a zero
     /// (a zero entry rotates by `c̄ = 1, s̄ = 0`).
     #[inline(always)]
-    pub(crate) fn fold_weighted_all(&mut self, mut lead: [T; N], tail: T, target: T) -> Folded<T> {
-        let mut target = target;
-        let mut tail = tail;
-        let mut row_weight = T::ONE;
-        for i in 0..N {
+    pub(crate) fn fold_weighted_all(&mut self, lead: [T; N], tail: T, target: T) -> Folded<T> {
+        self.fold_from(0, lead, tail, target, T::ONE)
+    }
+
+    /// The rotations of [`Self::fold_weighted_all`] from leading column `from` on, and the
+    /// trailing column's: the row's entries before `from` have been folded already (into
+    /// this factor, or into a common copy of its first columns), leaving the row's weight
+    /// `row_weight`, its target `target` and the rest of its entries as given.
+    #[inline(always)]
+    fn fold_from(
+        &mut self,
+        from: usize,
+        mut lead: [T; N],
+        mut tail: T,
+        mut target: T,
+        mut row_weight: T,
+    ) -> Folded<T> {
+        for i in from..N {
             let xi = lead[i];
             let (cbar, sbar) = rotation(&mut self.lead_weight[i], &mut row_weight, xi);
             for j in (i + 1)..N {
@@ -345,23 +358,7 @@ impl<T: Real, const N: usize> Factor<T, N, 1> {
             }
             apply(&mut tail, &mut self.cross_coupling[i][0], xi, cbar, sbar);
         }
-        let mut target = rotations.target;
-        let mut row_weight = rotations.row_weight;
-        for i in shared..N {
-            let xi = lead[i];
-            let (cbar, sbar) = rotation(&mut self.lead_weight[i], &mut row_weight, xi);
-            for j in (i + 1)..N {
-                apply(&mut lead[j], &mut self.lead_coupling[i][j], xi, cbar, sbar);
-            }
-            apply(&mut tail, &mut self.cross_coupling[i][0], xi, cbar, sbar);
-            apply(&mut target, &mut self.lead_rhs[i], xi, cbar, sbar);
-        }
-        let (cbar, sbar) = rotation(&mut self.tail_weight[0], &mut row_weight, tail);
-        apply(&mut target, &mut self.tail_rhs[0], tail, cbar, sbar);
-        Folded {
-            residual: target,
-            row_weight,
-        }
+        self.fold_from(shared, lead, tail, rotations.target, rotations.row_weight)
     }
 }
 
