@@ -85,7 +85,7 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
 
     /// Take the raw samples' white noise as `variance` (per sample; `None`: not known) from
     /// the next [`Estimator::reset`] on: the step method's `u` never rests on less (see
-    /// [`crate::StepConfig::white_noise_variance`]); the other methods state no `u` from
+    /// [`crate::StepEstimator::set_white_noise_variance`]); the other methods state no `u` from
     /// the same residuals, or rest it on their model, and take nothing.
     pub fn set_white_noise_variance(&mut self, variance: Option<T>) -> Result<(), ConfigError> {
         match self {

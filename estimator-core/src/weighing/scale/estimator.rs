@@ -31,7 +31,7 @@ pub trait ScaleEstimator: Estimator<f32> {
 
     /// Take the raw samples' white noise as `variance` in counts² per sample (`None`: not
     /// known) from the next reset on, for an estimator whose `u` rests on its residuals
-    /// (see [`crate::StepConfig::white_noise_variance`]); the default takes nothing. A
+    /// (see [`crate::StepEstimator::set_white_noise_variance`]); the default takes nothing. A
     /// variance that is not finite and non-negative is refused and nothing changes.
     fn set_white_noise_variance(&mut self, variance: Option<f32>) -> Result<(), ConfigError> {
         let _ = variance;
