@@ -73,25 +73,34 @@ fn f32_states_the_f64_uncertainty() {
     }
 }
 
-/// The identified-model bank's `u` in its first readings: before the grid's model choice
+/// The identified-model bank's `u` in its first readings. Before the grid's model choice
 /// entered `u` (the candidates' own `u`, interpolated, knew nothing of which model), ±2u at
-/// 25 ms covered 68 % at 50 dB and at 50 ms 89 %; with the choice's spread in quadrature
-/// (`ModelBank::combined`), 95 % and 92 % (`study coverage --runs 1000 --seed 1`). The
-/// floor here is below that by this run count's Monte Carlo band.
+/// 25 ms covered 68 % at 50 dB and at 50 ms 89 % on the reference drop; with the choice's
+/// spread in quadrature (`ModelBank::combined`), 95 % and 92 %. In the rig's coloured noise
+/// and with floor vibration it still covered 4–75 % at 25–50 ms (`study coverage --runs
+/// 1000 --seed 1`): a fit over less than about one and a half periods of the mode tells the
+/// step from the ringing by detail that anything but white noise moves. So the bank states
+/// no `u` before its step response's second maximum (64 ms on the reference cell), and
+/// from there ±2u must hold in both scenes. The floor here is the goal's edge less this
+/// run count's Monte Carlo band.
 #[test]
-fn the_banks_early_u_carries_the_model_choice() {
+fn the_bank_states_no_u_before_the_cell_has_rung_and_a_u_that_holds_after() {
     let (_, config) = firmware_default().unwrap();
     let bank = host_sim::study::identified_bank(&config, host_sim::montecarlo::Precision::F32);
-    let rows = study("reference-step", &bank, 400, 3, &[50.0]).unwrap();
-    for (t, cell) in TIMES_MS.iter().zip(&rows[0].cells) {
-        if *t == 25 || *t == 50 {
-            let coverage = cell.coverage().unwrap();
-            assert!(
-                coverage >= 0.88 && cell.stated >= 300,
-                "{t} ms: {:.1} % of {} stated",
-                100.0 * coverage,
-                cell.stated
-            );
+    for scene in ["reference-step", "rig-noise"] {
+        let rows = study(scene, &bank, 400, 3, &[50.0]).unwrap();
+        for (t, cell) in TIMES_MS.iter().zip(&rows[0].cells) {
+            if *t <= 50 {
+                assert_eq!(cell.stated, 0, "{scene} {t} ms");
+            } else if *t <= 150 {
+                let coverage = cell.coverage().unwrap();
+                assert!(
+                    coverage >= 0.90 && cell.stated >= 390,
+                    "{scene} {t} ms: {:.1} % of {} stated",
+                    100.0 * coverage,
+                    cell.stated
+                );
+            }
         }
     }
 }
