@@ -639,7 +639,14 @@ estimator_via_intake!(ModelEstimator<T, const S>);
 /// fitted, the neighbour the interpolation needs is gone, and the bank flags the reading
 /// as it flags a best fit on the grid's edge. Data that single out no candidate (an empty
 /// pan at rest, a load whose resonance lies beyond the grid, where every fit is poor) rule
-/// none out: the whole grid is fitted then. Once a candidate's factor has a row in every
+/// none out; after 32 residuals of that (64 ms at D = 8) the bank fits every other
+/// candidate, keeping both ends, and halves again after 64, 128 and 256 while none is
+/// ruled out, down to five: where the data cannot tell the models apart the grid's
+/// resolution buys nothing, and the empty pan at rest, fitted by all 33, was most of the
+/// bank's cost (`cargo xtask bench`). The span stays, so a best fit beyond it is flagged as
+/// before (a thinned grid flags its edge whenever the whole grid does); the reading on a
+/// pan at rest moves by a small fraction of its noise (a test compares them); a load change
+/// restarts the run, and the whole grid with it. Once a candidate's factor has a row in every
 /// column, its rows go through a fold unrolled for `S` (the same rotations and the same
 /// result, but for the sign of a zero).
 ///
@@ -660,14 +667,19 @@ pub struct ModelBank<T: Real, const S: usize, const K: usize> {
     /// The shared sample check and block mean (gain 1: the models are in raw units); the
     /// candidates' own intakes only hold their readings.
     intake: Intake<T>,
-    /// The candidates still fitted: `first..end`, never empty.
+    /// The candidates still fitted: every `stride`-th of `first..end`, `end − 1` among them
+    /// (`end − 1 − first` a multiple of `stride`), never empty.
     first: usize,
     end: usize,
+    stride: usize,
     /// The combined reading as of the last block (its sample count aside).
     combined: Reading<T>,
     /// Whether ruled-out candidates are dropped (always, but in the test that shows it
     /// changes no reading).
     prunes: bool,
+    /// Whether a grid whose candidates the data cannot tell apart is thinned (always, but
+    /// in that test too).
+    thins: bool,
     /// The states the candidates have in common, folded once for all of them; `None` when
     /// they have none.
     shared: Option<SharedStates<T, S>>,
@@ -787,6 +799,14 @@ const RULED_OUT_VARIANCES: u32 = 100;
 /// fit can move by a step and still find both neighbours for the interpolation.
 const PRUNE_GUARD: usize = 2;
 
+/// Residuals after which a grid none of whose candidates the data rule out is thinned to
+/// every other candidate, and again after twice as many: 32 blocks (64 ms at D = 8), 64,
+/// 128, …
+const THIN_AFTER_TERMS: usize = 32;
+
+/// The fewest candidates thinning leaves: the two ends and the best with both neighbours.
+const THINNED_CANDIDATES: usize = 5;
+
 impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     /// A bank over `K ≥ 1` ordered candidate configurations, which share the decimation
     /// and the valid range (one block mean is one row of every candidate's regression).
@@ -827,7 +847,9 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
             intake,
             first: 0,
             end: K,
+            stride: 1,
             prunes: true,
+            thins: true,
             shared,
         })
     }
@@ -866,7 +888,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     /// Index of the best-fitting candidate so far, among those still fitted.
     pub fn best(&self) -> usize {
         let mut best = self.first;
-        for k in self.first + 1..self.end {
+        for k in (self.first + self.stride..self.end).step_by(self.stride) {
             if self.models[k].residual_sum < self.models[best].residual_sum {
                 best = k;
             }
@@ -875,27 +897,32 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     }
 
     /// The candidates still fitted (see the type's docs on what a sample costs).
-    pub fn fitted(&self) -> core::ops::Range<usize> {
-        self.first..self.end
+    pub fn fitted(&self) -> core::iter::StepBy<core::ops::Range<usize>> {
+        (self.first..self.end).step_by(self.stride)
     }
 
     /// Fold one block mean into every candidate still fitted, then combine them and drop
     /// those the data have ruled out.
     fn update(&mut self, block_mean: T) {
-        let fitted = &mut self.models[self.first..self.end];
+        let fitted = self.models[self.first..self.end]
+            .iter_mut()
+            .step_by(self.stride);
         // A candidate whose own update latched a fault stays as it is until the reset.
         if let Some((rotations, next)) = self.shared.as_mut().and_then(|s| s.fold(block_mean)) {
-            for model in fitted.iter_mut().filter(|m| !m.intake.latched()) {
+            for model in fitted.filter(|m| !m.intake.latched()) {
                 model.update_after_shared(SharedStates::<T, S>::COUNT, &rotations, &next);
             }
         } else {
-            for model in fitted.iter_mut().filter(|m| !m.intake.latched()) {
+            for model in fitted.filter(|m| !m.intake.latched()) {
                 model.update(block_mean);
             }
             if let Some(shared) = self.shared.as_mut() {
                 // Once every candidate's factor has weight in every column, their shared
                 // columns are one common copy (filled from the same rows).
-                let mut live = fitted.iter().filter(|m| !m.intake.latched());
+                let mut live = self.models[self.first..self.end]
+                    .iter()
+                    .step_by(self.stride)
+                    .filter(|m| !m.intake.latched());
                 if live.clone().all(|m| m.all_weighted) {
                     if let Some(model) = live.next() {
                         shared.factor = Some(model.factor.clone());
@@ -920,11 +947,28 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
         let limit = best_sum + T::from_u32(RULED_OUT_VARIANCES) * best_sum / T::from_u32(terms);
         // Not a number: nothing is ruled out.
         let ruled_out = |model: &ModelEstimator<T, S>| model.residual_sum > limit;
-        while best - self.first > PRUNE_GUARD && ruled_out(&self.models[self.first]) {
-            self.first += 1;
+        let (guard, stride) = (PRUNE_GUARD * self.stride, self.stride);
+        while best - self.first > guard && ruled_out(&self.models[self.first]) {
+            self.first += stride;
         }
-        while self.end - 1 - best > PRUNE_GUARD && ruled_out(&self.models[self.end - 1]) {
-            self.end -= 1;
+        while self.end - 1 - best > guard && ruled_out(&self.models[self.end - 1]) {
+            self.end -= stride;
+        }
+        // Not a number: nothing is thinned either.
+        let none_ruled_out = self.fitted().all(|k| self.models[k].residual_sum <= limit);
+        if none_ruled_out {
+            self.thin(terms);
+        }
+    }
+
+    /// A grid whose candidates the data have not told apart (none ruled out) after
+    /// `THIN_AFTER_TERMS · stride` residuals: fit every other one from here on, keeping
+    /// both ends, down to [`THINNED_CANDIDATES`] (see the type's docs).
+    fn thin(&mut self, terms: u32) {
+        let spans = (self.end - 1 - self.first) / self.stride;
+        let due = terms as usize >= THIN_AFTER_TERMS * self.stride;
+        if self.thins && due && spans.is_multiple_of(2) && spans / 2 + 1 >= THINNED_CANDIDATES {
+            self.stride *= 2;
         }
     }
 
@@ -953,16 +997,17 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
             }
             return centre;
         }
-        let (left, right) = (reading(best - 1), reading(best + 1));
+        let (below, above) = (best - self.stride, best + self.stride);
+        let (left, right) = (reading(below), reading(above));
         let (Some(u_left), Some(u_mid), Some(u_right)) =
             (left.estimate, centre.estimate, right.estimate)
         else {
             return centre;
         };
         let (r_left, r_mid, r_right) = (
-            self.models[best - 1].residual_sum,
+            self.models[below].residual_sum,
             self.models[best].residual_sum,
-            self.models[best + 1].residual_sum,
+            self.models[above].residual_sum,
         );
         let curvature = r_left - (r_mid + r_mid) + r_right;
         if !(curvature > T::ZERO) {
@@ -1006,9 +1051,9 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
         };
         let uncertainty = if resolved {
             match (
-                self.models[best - 1].uncertainty(),
+                self.models[below].uncertainty(),
                 self.models[best].uncertainty(),
-                self.models[best + 1].uncertainty(),
+                self.models[above].uncertainty(),
             ) {
                 (Some(left), Some(mid), Some(right)) => {
                     let statistical = interpolate(left, mid, right);
@@ -1073,6 +1118,7 @@ impl<T: Real, const S: usize, const K: usize> Estimator<T> for ModelBank<T, S, K
         self.combined = self.intake.reading();
         self.first = 0;
         self.end = K;
+        self.stride = 1;
         if let Some(shared) = self.shared.as_mut() {
             shared.reset();
         }
@@ -1289,6 +1335,69 @@ mod tests {
         }
     }
 
+    /// Where the data single out no candidate the grid is thinned, and only there: on an
+    /// empty pan at rest (three noise levels) the bank ends with five candidates, reads what
+    /// the whole grid reads within half the best candidate's own standard uncertainty (0.05
+    /// to 0.18 of it measured), and
+    /// flags its edge whenever the whole grid does; on drops in the grid, whose ringing
+    /// tells the candidates apart, it never thins and reads exactly what the whole grid
+    /// reads; beyond the grid it flags its edge whenever the whole grid does.
+    #[test]
+    fn a_grid_the_data_cannot_tell_apart_is_thinned_and_reads_alike() {
+        fn compare<T: Real + core::fmt::Debug>(
+            data: &[f64],
+            label: &str,
+            exact: bool,
+        ) -> (usize, f64) {
+            let configs = crate::sensor::reference_cell()
+                .bank_configs::<T, 5, 33>(0.7, 1.3, 8, InitialState::Unknown)
+                .unwrap();
+            let mut thinned = ModelBank::new(configs).unwrap();
+            let mut whole = ModelBank::new(configs).unwrap();
+            whole.thins = false;
+            let mut worst = 0.0f64;
+            for (k, &y) in data.iter().enumerate() {
+                let y = T::from_f64(y);
+                let (a, b) = (thinned.push(y), whole.push(y));
+                if exact {
+                    assert_eq!(a, b, "{label}, sample {k}");
+                }
+                if b.state == State::Invalid(InvalidReason::OutsideModelRange) {
+                    assert_eq!(a.state, b.state, "{label}, sample {k}");
+                }
+                if let (Some(x), Some(z), Some(u)) = (
+                    a.estimate,
+                    b.estimate,
+                    whole.models[whole.best()].uncertainty(),
+                ) {
+                    worst = worst.max(((x - z).abs() / u).to_f64());
+                }
+            }
+            (thinned.fitted().len(), worst)
+        }
+        for sigma in [3.0, 30.0, 300.0] {
+            for seed in 0..3 {
+                let label = std::format!("empty, σ {sigma}, seed {seed}");
+                let data = drop_onto(1.0, 0.0, sigma, seed, 4000);
+                for (fitted, worst) in [
+                    compare::<f64>(&data, &label, false),
+                    compare::<f32>(&data, &label, false),
+                ] {
+                    assert_eq!(fitted, 5, "{label}");
+                    assert!(worst <= 0.5, "{label}: {worst} u apart");
+                }
+                for ratio in [0.7, 0.9, 1.0, 1.17] {
+                    let label = std::format!("ratio {ratio}, σ {sigma}, seed {seed}");
+                    let data = drop_onto(ratio, 138.0, sigma, seed, 2000);
+                    compare::<f64>(&data, &label, true);
+                    compare::<f32>(&data, &label, true);
+                }
+                let label = std::format!("beyond, σ {sigma}, seed {seed}");
+                compare::<f64>(&drop_onto(1.45, 138.0, sigma, seed, 2000), &label, false);
+            }
+        }
+    }
+
     /// Dropping the candidates the data have ruled out changes no reading: on noisy drops in
     /// the grid, between its candidates and beyond its ends, at three noise levels, in both
     /// precisions, the bank that drops them reads exactly what the whole grid reads, and it
@@ -1300,13 +1409,14 @@ mod tests {
                 .bank_configs::<T, 5, 33>(0.7, 1.3, 8, InitialState::Unknown)
                 .unwrap();
             let mut pruned = ModelBank::new(configs).unwrap();
+            pruned.thins = false;
             let mut whole = ModelBank::new(configs).unwrap();
             whole.prunes = false;
             for (k, &y) in data.iter().enumerate() {
                 let y = T::from_f64(y);
                 assert_eq!(pruned.push(y), whole.push(y), "{label}, sample {k}");
             }
-            assert_eq!(whole.fitted(), 0..33);
+            assert_eq!(whole.fitted().len(), 33);
             pruned.fitted().len()
         }
         // 138 g on 73.25 counts/g: 10,000 counts; 50 dB below that and 20 dB either side.
