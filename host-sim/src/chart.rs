@@ -49,7 +49,8 @@ pub struct Chart {
     pub series: Vec<Series>,
 }
 
-const PALETTE: [RGBColor; 10] = [
+/// The line colours, in turn (plotters' default palette order).
+pub(crate) const PALETTE: [RGBColor; 10] = [
     RGBColor(31, 119, 180),
     RGBColor(214, 39, 40),
     RGBColor(44, 160, 44),
@@ -63,21 +64,26 @@ const PALETTE: [RGBColor; 10] = [
 ];
 
 /// The legend panel's width, px, right of the plot.
-const LEGEND_WIDTH: u32 = 270;
+pub(crate) const LEGEND_WIDTH: u32 = 270;
 
 /// Dash and gap lengths, px, of the reference lines in turn.
 const DASHES: [(u32, u32); 4] = [(6, 4), (2, 3), (12, 4), (8, 3)];
 
-/// How a legend entry's sample line is drawn.
-enum LegendLine {
+/// How a legend entry's sample is drawn.
+pub(crate) enum LegendLine {
+    /// A line in this style.
     Solid(ShapeStyle),
+    /// A dashed line: style, dash and gap in px.
     Dashed(ShapeStyle, (u32, u32)),
+    /// A filled box (a band).
+    Filled(ShapeStyle),
 }
 
-/// The legend in its own panel: one sample line and the name (wrapped) per entry, top down.
-fn draw_legend<DB: DrawingBackend>(
+/// The legend in its own panel (split off right of the plot, [`LEGEND_WIDTH`] wide): one
+/// sample and the name (wrapped) per entry, top down.
+pub(crate) fn draw_legend<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
-    entries: &[(&str, LegendLine)],
+    entries: &[(impl AsRef<str>, LegendLine)],
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     const LINE_HEIGHT: i32 = 16;
     const TEXT_X: i32 = 44;
@@ -92,8 +98,11 @@ fn draw_legend<DB: DrawingBackend>(
             LegendLine::Dashed(style, (dash, gap)) => {
                 area.draw(&DashedPathElement::new(sample, *dash, *gap, *style))?
             }
+            LegendLine::Filled(style) => {
+                area.draw(&Rectangle::new([(8, y + 1), (38, y + 11)], *style))?
+            }
         }
-        for text in wrap(name, columns) {
+        for text in wrap(name.as_ref(), columns) {
             area.draw(&Text::new(text, (TEXT_X, y), font.clone()))?;
             y += LINE_HEIGHT;
         }

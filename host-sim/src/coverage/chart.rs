@@ -12,21 +12,12 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use super::{SnrRow, TIMES_MS};
-
-/// Colours of the SNR lines (plotters' default palette order, as the other charts).
-const PALETTE: [RGBColor; 6] = [
-    RGBColor(31, 119, 180),
-    RGBColor(214, 39, 40),
-    RGBColor(44, 160, 44),
-    RGBColor(255, 127, 14),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-];
+use crate::chart::{draw_legend, LegendLine, LEGEND_WIDTH, PALETTE};
 
 /// Write `<base>.svg` and `<base>.png`: `title` names the method, scene and runs.
 pub fn write(rows: &[SnrRow], title: &str, base: &Path) -> Result<()> {
     crate::chart::register_font()?;
-    let size = (1000, 650);
+    let size = (1000 + LEGEND_WIDTH, 650);
     let svg = base.with_extension("svg");
     draw(
         rows,
@@ -49,6 +40,10 @@ fn draw<DB: DrawingBackend>(
 ) -> Result<()> {
     let error = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("drawing failed: {e:?}");
     root.fill(&WHITE).map_err(error)?;
+    // The legend has a panel of its own right of the plot: never over the data.
+    let (width, _) = root.dim_in_pixel();
+    let (plot, legend) = root.split_horizontally(width.saturating_sub(LEGEND_WIDTH));
+    let mut entries = Vec::new();
     let x_max = f64::from(*TIMES_MS.last().unwrap()) + 10.0;
     let lowest = rows
         .iter()
@@ -56,7 +51,7 @@ fn draw<DB: DrawingBackend>(
         .filter_map(|cell| cell.coverage())
         .fold(0.85f64, f64::min);
     let y_min = (100.0 * lowest - 5.0).floor().max(0.0);
-    let mut chart = ChartBuilder::on(root)
+    let mut chart = ChartBuilder::on(&plot)
         .caption(title, ("sans-serif", 18))
         .margin(12)
         .x_label_area_size(45)
@@ -81,29 +76,26 @@ fn draw<DB: DrawingBackend>(
         .fold(f64::INFINITY, f64::min);
     if band.is_finite() {
         let (low, high) = (100.0 * (0.95 - band), 100.0 * (0.95 + band));
+        let shade = BLACK.mix(0.12).filled();
         chart
             .draw_series(std::iter::once(Rectangle::new(
                 [(0.0, low), (x_max, high)],
-                BLACK.mix(0.12).filled(),
+                shade,
             )))
-            .map_err(error)?
-            .label(format!(
-                "Monte Carlo band of a true 95 % (±{:.1} %)",
-                100.0 * band
-            ))
-            .legend(|(x, y)| {
-                Rectangle::new([(x, y - 4), (x + 20, y + 4)], BLACK.mix(0.12).filled())
-            });
+            .map_err(error)?;
+        entries.push((
+            format!("Monte Carlo band of a true 95 % (±{:.1} %)", 100.0 * band),
+            LegendLine::Filled(shade),
+        ));
     }
     let goal = BLACK.stroke_width(1);
     chart
         .draw_series(LineSeries::new([(0.0, 95.0), (x_max, 95.0)], goal))
-        .map_err(error)?
-        .label("goal 95 %")
-        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], goal));
+        .map_err(error)?;
+    entries.push(("goal 95 %".to_string(), LegendLine::Solid(goal)));
     let tolerance = BLACK.mix(0.5).stroke_width(1);
     for edge in [92.0, 98.0] {
-        let series = chart
+        chart
             .draw_series(DashedLineSeries::new(
                 [(0.0, edge), (x_max, edge)],
                 6,
@@ -111,12 +103,11 @@ fn draw<DB: DrawingBackend>(
                 tolerance,
             ))
             .map_err(error)?;
-        if edge == 92.0 {
-            series
-                .label("goal's tolerance, 95 ± 3 %")
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], tolerance));
-        }
     }
+    entries.push((
+        "goal's tolerance, 95 ± 3 %".to_string(),
+        LegendLine::Dashed(tolerance, (6, 4)),
+    ));
     for (row, colour) in rows.iter().zip(PALETTE.iter().cycle()) {
         let points: Vec<(f64, f64)> = TIMES_MS
             .iter()
@@ -128,22 +119,14 @@ fn draw<DB: DrawingBackend>(
         }
         let style = colour.stroke_width(2);
         chart
-            .draw_series(LineSeries::new(points.clone(), style))
-            .map_err(error)?
-            .label(format!("{} dB", row.snr_db))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
-        chart
             .draw_series(points.iter().map(|p| Circle::new(*p, 3, style.filled())))
             .map_err(error)?;
+        chart
+            .draw_series(LineSeries::new(points, style))
+            .map_err(error)?;
+        entries.push((format!("{} dB", row.snr_db), LegendLine::Solid(style)));
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 13))
-        .position(SeriesLabelPosition::LowerRight)
-        .draw()
-        .map_err(error)?;
+    draw_legend(&legend, &entries).map_err(error)?;
     root.present().map_err(error)?;
     Ok(())
 }

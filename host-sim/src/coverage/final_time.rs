@@ -17,6 +17,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use rayon::prelude::*;
 
+use crate::chart::{draw_legend, LegendLine, LEGEND_WIDTH, PALETTE};
 use crate::method::{BuildContext, Method};
 use crate::scene::Scene;
 use crate::simulated::run_seed;
@@ -190,15 +191,6 @@ pub fn write_chart(rows: &[FinalRow], title: &str, base: &Path) -> Result<()> {
     Ok(())
 }
 
-const PALETTE: [RGBColor; 6] = [
-    RGBColor(31, 119, 180),
-    RGBColor(214, 39, 40),
-    RGBColor(44, 160, 44),
-    RGBColor(255, 127, 14),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-];
-
 fn draw<DB: DrawingBackend>(
     rows: &[FinalRow],
     title: &str,
@@ -206,7 +198,11 @@ fn draw<DB: DrawingBackend>(
 ) -> Result<()> {
     let error = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("drawing failed: {e:?}");
     root.fill(&WHITE).map_err(error)?;
-    let mut chart = ChartBuilder::on(root)
+    // The legend has a panel of its own right of the plot: never over the data.
+    let (width, _) = root.dim_in_pixel();
+    let (plot, legend) = root.split_horizontally(width.saturating_sub(LEGEND_WIDTH));
+    let mut entries = Vec::new();
+    let mut chart = ChartBuilder::on(&plot)
         .caption(title, ("sans-serif", 18))
         .margin(12)
         .x_label_area_size(45)
@@ -230,9 +226,11 @@ fn draw<DB: DrawingBackend>(
             4,
             readout,
         ))
-        .map_err(error)?
-        .label("the fixed readout, 100 ms")
-        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], readout));
+        .map_err(error)?;
+    entries.push((
+        "the fixed readout, 100 ms".to_string(),
+        LegendLine::Dashed(readout, (6, 4)),
+    ));
     for (row, colour) in rows.iter().zip(PALETTE.iter().cycle()) {
         // A step line: the share final by each run's time.
         let mut points = vec![(0.0, 0.0)];
@@ -249,18 +247,10 @@ fn draw<DB: DrawingBackend>(
         let style = colour.stroke_width(2);
         chart
             .draw_series(LineSeries::new(points, style))
-            .map_err(error)?
-            .label(format!("{} dB", row.snr_db))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+            .map_err(error)?;
+        entries.push((format!("{} dB", row.snr_db), LegendLine::Solid(style)));
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 13))
-        .position(SeriesLabelPosition::LowerRight)
-        .draw()
-        .map_err(error)?;
+    draw_legend(&legend, &entries).map_err(error)?;
     root.present().map_err(error)?;
     Ok(())
 }
