@@ -25,6 +25,7 @@ pub(crate) mod covariance;
 pub(crate) mod input;
 pub(crate) mod intake;
 pub(crate) mod iv;
+pub(crate) mod iv_uncertainty;
 pub(crate) mod model;
 pub(crate) mod noise_meter;
 pub(crate) mod ramp;

@@ -209,6 +209,32 @@ impl<T: Real, const N: usize, const E: usize> Factor<T, N, E> {
         Some((lead, tail))
     }
 
+    /// `‖D^{1/2}·U·δ‖²`: how much the weighted residual sum of squares grows when the
+    /// unknowns move by `δ` (leading `lead[..active]`, then trailing) away from the
+    /// least-squares solution, since that sum is `‖D^{1/2}·(U·θ − rhs)‖²` plus the part no θ
+    /// explains. O((n+E)²).
+    pub(crate) fn weighted_norm2(&self, active: usize, lead: &[T; N], tail: &[T; E]) -> T {
+        let mut sum = T::ZERO;
+        for i in 0..active {
+            let mut value = lead[i];
+            for j in (i + 1)..active {
+                value += self.lead_coupling[i][j] * lead[j];
+            }
+            for e in 0..E {
+                value += self.cross_coupling[i][e] * tail[e];
+            }
+            sum += self.lead_weight[i] * value * value;
+        }
+        for e in 0..E {
+            let mut value = tail[e];
+            for f in (e + 1)..E {
+                value += self.tail_coupling[e][f] * tail[f];
+            }
+            sum += self.tail_weight[e] * value * value;
+        }
+        sum
+    }
+
     /// All unknowns, leading then trailing (full back substitution, O((n+E)²)).
     pub(crate) fn solution(&self, active: usize) -> ([T; N], [T; E]) {
         let tail = self.tail_solution();
