@@ -29,5 +29,6 @@ pub(crate) mod iv_uncertainty;
 pub(crate) mod model;
 pub(crate) mod noise_meter;
 pub(crate) mod ramp;
+pub(crate) mod ramp_uncertainty;
 pub(crate) mod step;
 pub(crate) mod step_uncertainty;

@@ -95,6 +95,16 @@ impl<T: Real, const L: usize> LagSums<T, L> {
         }
     }
 
+    /// Rows pushed.
+    pub(crate) fn rows(&self) -> u32 {
+        self.rows
+    }
+
+    /// The residual sum of squares of the residuals pushed.
+    pub(crate) fn residual_sum(&self) -> T {
+        self.residual_sum
+    }
+
     /// Whether lags up to the order `n` are kept.
     pub(crate) fn covers(n: usize) -> bool {
         L >= n
