@@ -19,6 +19,7 @@
 //! private so that every item has one path.
 
 pub(crate) mod baseline;
+pub(crate) mod bc_uncertainty;
 pub(crate) mod bias_compensated;
 pub(crate) mod consistency;
 pub(crate) mod covariance;
