@@ -44,9 +44,9 @@ pub(crate) const RESOLVED_FOR_UNCERTAINTY: f64 = 5.0;
 
 /// What the bias-compensated estimator keeps for its level's `u`, for orders up to `L`.
 #[derive(Clone, Debug)]
-pub(crate) struct BcUncertainty<T: Real, const L: usize> {
+pub(crate) struct BcUncertainty<T: Real, const N: usize, const L: usize> {
     /// The regression rows' lagged cross-products.
-    lags: LagSums<T, L>,
+    lags: LagSums<T, N, L>,
     /// The least-squares residual sum of squares.
     least_squares_sum: T,
 }
@@ -63,7 +63,7 @@ pub(crate) struct Compensated<'a, T: Real, const N: usize> {
     pub least_squares_level: T,
 }
 
-impl<T: Real, const L: usize> BcUncertainty<T, L> {
+impl<T: Real, const N: usize, const L: usize> BcUncertainty<T, N, L> {
     pub(crate) fn new() -> Self {
         Self {
             lags: LagSums::new(),
@@ -72,9 +72,9 @@ impl<T: Real, const L: usize> BcUncertainty<T, L> {
     }
 
     /// One regression row's differences `window[..n]`, before it is folded.
-    pub(crate) fn push_row<const N: usize>(&mut self, window: &[T; N], n: usize) {
+    pub(crate) fn push_row(&mut self, window: &[T; N], n: usize) {
         if L > 0 && L >= n {
-            self.lags.push_row(&window[..n], n);
+            self.lags.push_row(window, n);
         }
     }
 
@@ -85,7 +85,7 @@ impl<T: Real, const L: usize> BcUncertainty<T, L> {
 
     /// The level's `u` and degrees of freedom, `least_squares` the running factor and
     /// `noise_variance` the configured block-mean noise variance (a floor).
-    pub(crate) fn uncertainty<const N: usize>(
+    pub(crate) fn uncertainty(
         &self,
         n: usize,
         compensated: Compensated<'_, T, N>,
@@ -104,14 +104,14 @@ impl<T: Real, const L: usize> BcUncertainty<T, L> {
         let level = compensated.level - compensated.least_squares_level;
         let excess = least_squares.weighted_norm2(n, &delta, &[level]);
         let quadratic = Quadratic {
-            z: &z[..n],
+            z: &z,
             z_level,
             lag0,
         };
         let (variance, _, degrees) = self.lags.consistent_variance(
             n,
             quadratic,
-            &compensated.lead[..n],
+            compensated.lead,
             self.least_squares_sum + excess,
             (noise_variance > T::ZERO).then_some(noise_variance),
         )?;

@@ -137,7 +137,7 @@ pub struct BiasCompensatedStepEstimator<T: Real, const N: usize, const L: usize 
     /// fit's a-posteriori residuals).
     check: Option<ResidualCheck<T>>,
     /// What the level's standard uncertainty needs.
-    uncertainty: BcUncertainty<T, L>,
+    uncertainty: BcUncertainty<T, N, L>,
 }
 
 impl<T: Real, const N: usize, const L: usize> BiasCompensatedStepEstimator<T, N, L> {

@@ -385,7 +385,7 @@ pub struct IvStepEstimator<T: Real, const N: usize, const L: usize = 0> {
     /// residuals: IV has no standardising row weight).
     check: Option<ResidualCheck<T>>,
     /// What the level's standard uncertainty needs.
-    uncertainty: IvUncertainty<T, L>,
+    uncertainty: IvUncertainty<T, N, L>,
 }
 
 impl<T: Real, const N: usize, const L: usize> IvStepEstimator<T, N, L> {

@@ -54,16 +54,16 @@ pub(crate) const STRONG_INSTRUMENTS: f64 = 10.0;
 
 /// What the IV estimator keeps for its level's `u`, for orders up to `L`.
 #[derive(Clone, Debug)]
-pub(crate) struct IvUncertainty<T: Real, const L: usize> {
+pub(crate) struct IvUncertainty<T: Real, const N: usize, const L: usize> {
     /// The instrument rows' lagged cross-products.
-    lags: LagSums<T, L>,
+    lags: LagSums<T, N, L>,
     /// Least squares on the regression rows, for the IV fit's residual sum of squares.
     least_squares: Factor<T, L, 1>,
     /// The least-squares residual sum of squares.
     least_squares_sum: T,
 }
 
-impl<T: Real, const L: usize> IvUncertainty<T, L> {
+impl<T: Real, const N: usize, const L: usize> IvUncertainty<T, N, L> {
     pub(crate) fn new() -> Self {
         Self {
             lags: LagSums::new(),
@@ -79,11 +79,11 @@ impl<T: Real, const L: usize> IvUncertainty<T, L> {
 
     /// One row: the instrument's leading entries `z`, the regressor's `phi` and the target
     /// `target` (in the IV system's origin).
-    pub(crate) fn push<const N: usize>(&mut self, n: usize, z: &[T; N], phi: &[T; N], target: T) {
+    pub(crate) fn push(&mut self, n: usize, z: &[T; N], phi: &[T; N], target: T) {
         if !Self::covers(n) {
             return;
         }
-        self.lags.push_row(&z[..n], n);
+        self.lags.push_row(z, n);
         let mut row = [T::ZERO; L];
         row[..n].copy_from_slice(&phi[..n]);
         let folded = self.least_squares.fold(n, row, [T::ONE], target);
@@ -101,7 +101,7 @@ impl<T: Real, const L: usize> IvUncertainty<T, L> {
     /// for the IV solution `theta` (in the system's origin) whose level is reached by the
     /// instrument rows with weights `g = (ZᵀK)⁻ᵀ·e_u`, `g_norm2` = `gᵀ·ZᵀZ·g`; `None` when
     /// they cannot be stated.
-    pub(crate) fn variance<const N: usize>(
+    pub(crate) fn variance(
         &self,
         n: usize,
         theta: &Column<T, N>,
@@ -121,14 +121,14 @@ impl<T: Real, const L: usize> IvUncertainty<T, L> {
             .least_squares
             .weighted_norm2(n, &delta, &[theta.last - ls_level]);
         let quadratic = Quadratic {
-            z: &g.lead[..n],
+            z: &g.lead,
             z_level: g.last,
             lag0: g_norm2,
         };
         self.lags.consistent_variance(
             n,
             quadratic,
-            &theta.lead[..n],
+            &theta.lead,
             self.least_squares_sum + excess,
             block_noise_floor,
         )

@@ -32,7 +32,7 @@ use crate::numerics::real::Real;
 #[derive(Clone, Debug)]
 pub(crate) struct RampUncertainty<T: Real, const L: usize> {
     /// Lag sums of the rows `[Δ²x …, t]` (the constant implied), and their residuals.
-    lags: LagSums<T, L>,
+    lags: LagSums<T, L, L>,
 }
 
 impl<T: Real, const L: usize> RampUncertainty<T, L> {
@@ -55,7 +55,7 @@ impl<T: Real, const L: usize> RampUncertainty<T, L> {
         let mut row = [T::ZERO; L];
         row[..n].copy_from_slice(&window[..n]);
         row[n] = t;
-        self.lags.push_row(&row[..=n], n + 1);
+        self.lags.push_row(&row, n + 1);
     }
 
     /// The a-priori residual of a row folded into a determined problem, and its weight.
@@ -91,7 +91,7 @@ impl<T: Real, const L: usize> RampUncertainty<T, L> {
         z[..n].copy_from_slice(&z_lead[..n]);
         z[n] = z_tail[0];
         let quadratic = Quadratic {
-            z: &z[..=n],
+            z: &z,
             z_level: z_tail[1],
             lag0: z_tail[0] * combination[0] + z_tail[1] * combination[1],
         };

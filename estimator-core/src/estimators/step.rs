@@ -188,7 +188,7 @@ pub struct StepEstimator<T: Real, const N: usize, const L: usize = 0> {
     /// `Σc²` of the latest solution: the next residual's noise in block-mean variances.
     noise_gain: T,
     /// The rows' lagged cross-products and residual sum of squares, for the uncertainty.
-    lags: LagSums<T, L>,
+    lags: LagSums<T, N, L>,
 }
 
 impl<T: Real, const N: usize, const L: usize> StepEstimator<T, N, L> {
