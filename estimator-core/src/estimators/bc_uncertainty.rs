@@ -71,9 +71,14 @@ impl<T: Real, const N: usize, const L: usize> BcUncertainty<T, N, L> {
         }
     }
 
+    /// Whether orders up to `n` are kept.
+    pub(crate) fn covers(n: usize) -> bool {
+        L > 0 && L >= n
+    }
+
     /// One regression row's differences `window[..n]`, before it is folded.
     pub(crate) fn push_row(&mut self, window: &[T; N], n: usize) {
-        if L > 0 && L >= n {
+        if Self::covers(n) {
             self.lags.push_row(window, n);
         }
     }
@@ -92,7 +97,7 @@ impl<T: Real, const N: usize, const L: usize> BcUncertainty<T, N, L> {
         least_squares: &Factor<T, N, 1>,
         noise_variance: T,
     ) -> Option<(T, u32)> {
-        if !(L > 0 && L >= n) {
+        if !Self::covers(n) {
             return None;
         }
         let (z, [z_level]) = compensated.factor.last_unknown_influence(n)?;

@@ -330,7 +330,8 @@ impl<T: Real, const N: usize, const L: usize> BiasCompensatedStepEstimator<T, N,
         self.intake.estimating(step, prior_residual);
         // The first-order `u` only where every share is resolved well beyond the floor
         // (`crate::estimators::bc_uncertainty`).
-        if growing && margin >= T::from_f64(RESOLVED_FOR_UNCERTAINTY) {
+        let resolved = margin >= T::from_f64(RESOLVED_FOR_UNCERTAINTY);
+        if growing && resolved && BcUncertainty::<T, N, L>::covers(n) {
             let (least_squares_lead, _) = self.factor.solution(n);
             let compensated = Compensated {
                 factor: &compensated,

@@ -516,7 +516,7 @@ impl<T: Real, const N: usize, const L: usize> IvStepEstimator<T, N, L> {
     /// The level's standard uncertainty (`crate::estimators::iv_uncertainty`): `None` for
     /// `L < n`, with forgetting, with too few rows, or with weak instruments.
     fn level_uncertainty(&self, n: usize, solved: &Solved<T, N>) -> Option<(T, u32)> {
-        if !(self.config.step.forgetting == T::ONE) {
+        if !(IvUncertainty::<T, N, L>::covers(n) && self.config.step.forgetting == T::ONE) {
             return None;
         }
         let g = self.factor.instrument_weights(n, &solved.last_row);
