@@ -15,7 +15,9 @@
 //!
 //! The noise level is the mean square of the compensated fit's own residuals,
 //! `RSS_LS + ‖R·(θ̂ − θ_LS)‖²` over `rows − (n + 1)`, never below the configured noise
-//! variance (metered at tare); with the t-factor of `step_uncertainty`.
+//! variance (metered at tare); with the t-factor of `step_uncertainty`. As the
+//! compensation itself, the `u` assumes white noise on the block means (the step
+//! estimator's autocovariance guard is not kept).
 //!
 //! ## Where it is stated
 //! The expansion is first order in the compensation's own error: the noise energy it

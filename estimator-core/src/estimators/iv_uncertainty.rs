@@ -20,7 +20,9 @@
 //! not a by-product of the solve; it is kept exactly, in `O(n²)` per row, from a
 //! least-squares factor of the same rows: `‖x − K·θ‖² = RSS_LS + ‖R·(θ − θ_LS)‖²`. With few
 //! degrees of freedom the t-factor of `step_uncertainty` applies, and the metered noise
-//! (the consistency check's reference) is a floor, as for the step estimator.
+//! (the consistency check's reference) is a floor, as for the step estimator. The step
+//! estimator's guard against noise that is not white (the residuals' own autocovariance)
+//! is not kept here: the `u` assumes white noise on the block means.
 //!
 //! ## Weak instruments: no `u`
 //! All of this is first order in the noise, and it holds only where the instruments pin
