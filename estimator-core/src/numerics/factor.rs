@@ -188,25 +188,7 @@ impl<T: Real, const N: usize, const E: usize> Factor<T, N, E> {
         }
         let mut tail = [T::ZERO; E];
         tail[E - 1] = T::ONE / d;
-        for e in (0..E - 1).rev() {
-            let mut value = T::ZERO;
-            for f in (e + 1)..E {
-                value -= self.tail_coupling[e][f] * tail[f];
-            }
-            tail[e] = value;
-        }
-        let mut lead = [T::ZERO; N];
-        for i in (0..active).rev() {
-            let mut value = T::ZERO;
-            for j in (i + 1)..active {
-                value -= self.lead_coupling[i][j] * lead[j];
-            }
-            for e in 0..E {
-                value -= self.cross_coupling[i][e] * tail[e];
-            }
-            lead[i] = value;
-        }
-        Some((lead, tail))
+        Some(self.back_substitute(active, tail))
     }
 
     /// `P·v` for `v` zero on the leading columns and `combination` on the trailing ones
@@ -233,7 +215,15 @@ impl<T: Real, const N: usize, const E: usize> Factor<T, N, E> {
             }
             *value = *value / d;
         }
-        for e in (0..E).rev() {
+        Some(self.back_substitute(active, tail))
+    }
+
+    /// `U⁻¹·v` for `v` zero on the leading columns and `tail` on the trailing ones: the
+    /// back substitution of the influences above. The last trailing entry has nothing after
+    /// it and stays as it is.
+    #[inline]
+    fn back_substitute(&self, active: usize, mut tail: [T; E]) -> ([T; N], [T; E]) {
+        for e in (0..E - 1).rev() {
             let mut value = tail[e];
             for f in (e + 1)..E {
                 value -= self.tail_coupling[e][f] * tail[f];
@@ -251,7 +241,7 @@ impl<T: Real, const N: usize, const E: usize> Factor<T, N, E> {
             }
             lead[i] = value;
         }
-        Some((lead, tail))
+        (lead, tail)
     }
 
     /// `‖D^{1/2}·U·δ‖²`: how much the weighted residual sum of squares grows when the
