@@ -103,15 +103,6 @@ fn thesis_scene(snr_db: f64) -> (Vec<f64>, f64, f64, f64) {
     (y, sensor.static_gain(), u, rms / 10f64.powf(snr_db / 20.0))
 }
 
-fn load_cell_counts(samples: usize) -> Vec<f64> {
-    let cell = load_cell();
-    let volts_per_gram = cell.static_gain();
-    cell.step_response(MASS_G, samples)
-        .iter()
-        .map(|v| v / volts_per_gram * COUNTS_PER_GRAM)
-        .collect()
-}
-
 type Iv = IvStepEstimator<f64, 8, 8>;
 type Bc = BiasCompensatedStepEstimator<f64, 8, 8>;
 
@@ -143,7 +134,7 @@ fn bc_load_cell(
     runs: u64,
     seed: u64,
 ) -> Vec<Cell> {
-    let clean = load_cell_counts(samples);
+    let clean = load_cell_counts(MASS_G, COUNTS_PER_GRAM, samples);
     let sigma = SIGMA_G * COUNTS_PER_GRAM;
     let step = StepConfig::new(order, COUNTS_PER_GRAM).with_decimation(decimation);
     coverage(&clean, sigma, MASS_G, readouts, runs, seed, || {
@@ -167,7 +158,7 @@ fn iv_load_cell(
     runs: u64,
     seed: u64,
 ) -> Vec<Cell> {
-    let clean = load_cell_counts(samples);
+    let clean = load_cell_counts(MASS_G, COUNTS_PER_GRAM, samples);
     let step = StepConfig::new(order, COUNTS_PER_GRAM).with_decimation(decimation);
     coverage(
         &clean,
@@ -235,14 +226,12 @@ fn iv_f32_states_the_f64_uncertainty() {
             let mut e32 =
                 IvStepEstimator::<f32, 8, 8>::new(IvConfig::new(StepConfig::new(2, g as f32)))
                     .unwrap();
-            for &clean in &y {
-                let sample = (clean + sigma * noise.sample()) as f32;
-                let (a, b) = (e32.push(sample), e64.push(f64::from(sample)));
-                if let (Some(u32_), Some(u64_)) = (a.uncertainty, b.uncertainty) {
-                    worst = worst.max((f64::from(u32_) / u64_ - 1.0).abs());
-                    compared += 1;
-                }
-            }
+            let samples = y
+                .iter()
+                .map(|clean| (clean + sigma * noise.sample()) as f32);
+            let (run_worst, run_compared) = u_f32_against_f64(&mut e32, &mut e64, samples);
+            worst = worst.max(run_worst);
+            compared += run_compared;
         }
         println!("IV thesis {snr_db} dB: f32 u against f64, worst {worst:.2e} over {compared}");
         assert!(compared > runs * 150, "{snr_db} dB: {compared}");
@@ -262,22 +251,8 @@ fn iv_states_no_u_where_it_has_no_valid_estimate() {
     let mut bare = IvStepEstimator::<f64, 8>::new(IvConfig::new(step)).unwrap();
     let mut narrow = IvStepEstimator::<f64, 8, 1>::new(IvConfig::new(step)).unwrap();
     let mut forgetting = Iv::new(IvConfig::new(step.with_forgetting(0.99))).unwrap();
-    let mut stated = 0;
-    for (k, &sample) in data.iter().enumerate() {
-        let bad = if k == 150 { f64::NAN } else { sample };
-        let reading = plain.push(bad);
-        assert!(reading.uncertainty.is_none() || reading.estimate.is_some());
-        if k >= 150 {
-            assert!(reading.is_invalid() && reading.uncertainty.is_none());
-        }
-        stated += usize::from(reading.uncertainty.is_some());
-        let others: [&mut dyn Estimator<f64>; 3] = [&mut bare, &mut narrow, &mut forgetting];
-        for other in others {
-            let reading = other.push(sample);
-            assert_eq!(reading.uncertainty, None);
-            assert_eq!(reading.degrees_of_freedom, 0);
-        }
-    }
+    let mut others: [&mut dyn Estimator<f64>; 3] = [&mut bare, &mut narrow, &mut forgetting];
+    let stated = stated_u_around_a_bad_sample(&mut plain, &mut others, &data, f64::NAN);
     assert!(stated > 100, "{stated}");
     assert!(bare.push(data[0]).estimate.is_some());
 }
@@ -363,14 +338,12 @@ fn bc_f32_states_the_f64_uncertainty() {
                 BiasCompensatedConfig::new(StepConfig::new(2, g as f32), variance as f32),
             )
             .unwrap();
-            for &clean in &y {
-                let sample = (clean + sigma * noise.sample()) as f32;
-                let (a, b) = (e32.push(sample), e64.push(f64::from(sample)));
-                if let (Some(u32_), Some(u64_)) = (a.uncertainty, b.uncertainty) {
-                    worst = worst.max((f64::from(u32_) / u64_ - 1.0).abs());
-                    compared += 1;
-                }
-            }
+            let samples = y
+                .iter()
+                .map(|clean| (clean + sigma * noise.sample()) as f32);
+            let (run_worst, run_compared) = u_f32_against_f64(&mut e32, &mut e64, samples);
+            worst = worst.max(run_worst);
+            compared += run_compared;
         }
         println!("BCLS thesis {snr_db} dB: f32 u against f64, worst {worst:.2e} over {compared}");
         assert!(compared > runs * 100, "{snr_db} dB: {compared}");
@@ -400,23 +373,9 @@ fn bc_states_no_u_where_it_has_no_valid_estimate() {
         ..config
     })
     .unwrap();
-    let mut stated = 0;
-    for (k, &sample) in data.iter().enumerate() {
-        let bad = if k == 150 { f64::NAN } else { sample };
-        let reading = plain.push(bad);
-        assert!(reading.uncertainty.is_none() || reading.estimate.is_some());
-        if k >= 150 {
-            assert!(reading.is_invalid() && reading.uncertainty.is_none());
-        }
-        stated += usize::from(reading.uncertainty.is_some());
-        let others: [&mut dyn Estimator<f64>; 4] =
-            [&mut bare, &mut narrow, &mut forgetting, &mut uncompensated];
-        for other in others {
-            let reading = other.push(sample);
-            assert_eq!(reading.uncertainty, None);
-            assert_eq!(reading.degrees_of_freedom, 0);
-        }
-    }
+    let mut others: [&mut dyn Estimator<f64>; 4] =
+        [&mut bare, &mut narrow, &mut forgetting, &mut uncompensated];
+    let stated = stated_u_around_a_bad_sample(&mut plain, &mut others, &data, f64::NAN);
     assert!(stated > 50, "{stated}");
 }
 

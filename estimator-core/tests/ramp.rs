@@ -12,7 +12,7 @@
 mod support;
 
 use estimator_core::{Estimator, NoiseReference, RampConfig, RampEstimator, StepConfig};
-use support::Gaussian;
+use support::{stated_u_around_a_bad_sample, u_f32_against_f64, Gaussian};
 
 const PLATFORM_KG: f64 = 0.015;
 const DAMPING_NS_PER_M: f64 = 5.5;
@@ -363,14 +363,10 @@ fn ramp_f32_states_the_f64_uncertainty() {
             let mut noise = Gaussian::new(7000 + run);
             let mut e64 = Ramp::<f64>::new(config).unwrap();
             let mut e32 = Ramp::<f32>::new(config32).unwrap();
-            for &y in &clean {
-                let sample = (y + sigma * noise.sample()) as f32;
-                let (a, b) = (e32.push(sample), e64.push(f64::from(sample)));
-                if let (Some(u32_), Some(u64_)) = (a.uncertainty, b.uncertainty) {
-                    worst = worst.max((f64::from(u32_) / u64_ - 1.0).abs());
-                    compared += 1;
-                }
-            }
+            let samples = clean.iter().map(|y| (y + sigma * noise.sample()) as f32);
+            let (run_worst, run_compared) = u_f32_against_f64(&mut e32, &mut e64, samples);
+            worst = worst.max(run_worst);
+            compared += run_compared;
         }
         println!("ramp LTI {snr_db} dB: f32 u against f64, worst {worst:.2e} over {compared}");
         assert!(compared > 40 * 250, "{snr_db} dB: {compared}");
@@ -393,22 +389,8 @@ fn ramp_states_no_u_where_it_has_no_valid_estimate() {
         ..config
     };
     let mut forgetting = Ramp::<f64>::new(forgetting_config).unwrap();
-    let mut stated = 0;
-    for (k, &sample) in data.iter().enumerate() {
-        let bad = if k == 150 { f64::INFINITY } else { sample };
-        let reading = plain.push(bad);
-        assert!(reading.uncertainty.is_none() || reading.estimate.is_some());
-        if k >= 150 {
-            assert!(reading.is_invalid() && reading.uncertainty.is_none());
-        }
-        stated += usize::from(reading.uncertainty.is_some());
-        let others: [&mut dyn Estimator<f64>; 3] = [&mut bare, &mut narrow, &mut forgetting];
-        for other in others {
-            let reading = other.push(sample);
-            assert_eq!(reading.uncertainty, None);
-            assert_eq!(reading.degrees_of_freedom, 0);
-        }
-    }
+    let mut others: [&mut dyn Estimator<f64>; 3] = [&mut bare, &mut narrow, &mut forgetting];
+    let stated = stated_u_around_a_bad_sample(&mut plain, &mut others, &data, f64::INFINITY);
     assert!(stated > 100, "{stated}");
     assert!(bare.line().is_some());
 }
