@@ -176,9 +176,7 @@ impl<T: Real, const N: usize, const L: usize> LagSums<T, N, L> {
     /// `P`: leading entries, then the constant's) and the current `ℓ` (`lead[..n]`);
     /// `None` when it cannot be stated. `block_noise_floor`: the noise variance of one
     /// block mean as metered on the empty pan, where known; the residuals' noise level is
-    /// not taken below it. Its own copy of [`Self::sandwich`]'s arithmetic, kept as it was
-    /// measured: the shipped method's code (and instruction count) must not move when the
-    /// other estimators' uncertainty does.
+    /// not taken below it.
     pub(crate) fn uncertainty(
         &self,
         n: usize,
@@ -187,87 +185,41 @@ impl<T: Real, const N: usize, const L: usize> LagSums<T, N, L> {
         lead: &[T; N],
         block_noise_floor: Option<T>,
     ) -> Option<(T, u32)> {
-        if !Self::covers(n) || L == 0 {
+        if !Self::covers(n) {
             return None;
         }
-        let degrees = self.rows.checked_sub(n as u32 + 1)?;
-        if degrees < MIN_DEGREES_OF_FREEDOM {
-            return None;
-        }
-        let mean_square = self.residual_sum / T::from_u32(degrees);
-        // h_0..h_{n-1}, and h_n apart (n ≤ L, and L + 1 is no array length here).
-        let mut h = [T::ZERO; L];
-        for (m, value) in h[..n].iter_mut().enumerate() {
-            *value = moving_average(lead, n, m);
-        }
-        let h_last = moving_average(lead, n, n);
-        let h_at = |m: usize| if m < n { h[m] } else { h_last };
-        let mut power = h_last * h_last;
-        for &value in &h[..n] {
-            power += value * value;
-        }
-        if !(power > T::ZERO) {
-            return None;
-        }
-        // e's variance (block means), and the level's variance term by term; never below
-        // the metered noise where there is one: a fresh fit of few rows on a signal
-        // without a transient (a run restarted on a trickle) all but interpolated its
-        // data, its residual level 170 times below the block means' noise, and stated
-        // u = 0.0016 g on 1 g of raw noise, shown final 0.13 g off (test
-        // `a_fit_without_a_transient_is_not_overconfident_with_metered_noise`).
-        let mut noise = mean_square / power;
-        let mut mean_square = mean_square;
-        if let Some(floor) = block_noise_floor {
-            if noise < floor {
-                noise = floor;
-                mean_square = floor * power;
-            }
-        }
-        let z = &z[..n];
-        let mut variance = mean_square * z_level;
-        // The same with the residuals' own autocovariance at lags 1..n (noise that is not
-        // white: vibration near the resonance made the model's `u` over-confident, 73 % at
-        // 80 dB on the rig's noise); the larger of the two is stated.
-        let mut observed = variance;
-        for lag in 1..=n {
-            let mut covariance = T::ZERO;
-            for m in 0..=(n - lag) {
-                covariance += h_at(m) * h_at(m + lag);
-            }
-            let index = lag - 1;
-            let mut quadratic = T::ZERO;
-            for (products, &zi) in self.products[index].iter().zip(z) {
-                let mut row = T::ZERO;
-                for (&product, &zj) in products[..n].iter().zip(z) {
-                    row += product * zj;
-                }
-                quadratic += zi * row;
-            }
-            let mut sides = T::ZERO;
-            for ((&newer, &older), &zi) in self.newer[index].iter().zip(&self.older[index]).zip(z) {
-                sides += (newer + older) * zi;
-            }
-            quadratic += z_level * (sides + z_level * self.pairs[index]);
-            variance += T::from_f64(2.0) * noise * covariance * quadratic;
-            if self.residual_pairs[index] > 0 {
-                let lagged = self.residual_lags[index] / T::from_u32(self.residual_pairs[index]);
-                observed += T::from_f64(2.0) * lagged * quadratic;
-            }
-        }
-        if observed > variance {
-            variance = observed;
-        }
-        // The errors-in-variables bias: E[φ_k·ε_k] per row, times the rows.
+        let noise_model = NoiseModel::first_differences(lead, n);
+        let quadratic = Quadratic {
+            z,
+            z_level,
+            lag0: z_level,
+        };
+        let (variance, noise, degrees) = self.variance(
+            n,
+            &noise_model,
+            quadratic,
+            self.residual_sum,
+            block_noise_floor,
+        )?;
+        let bias = self.errors_in_variables_bias(n, z, &noise_model, noise);
+        stated(variance + bias * bias, degrees)
+    }
+
+    /// The first-order errors-in-variables bias of the least-squares level whose row of `P`
+    /// is `z` (leading entries): `E[φ_k·ε_k]` per row, times the rows (thesis eq. 4.15), for
+    /// the first-difference regression with block-mean noise variance `noise`.
+    fn errors_in_variables_bias(
+        &self,
+        n: usize,
+        z: &[T; N],
+        noise_model: &NoiseModel<T, L>,
+        noise: T,
+    ) -> T {
         let mut bias = T::ZERO;
-        for (i, &zi) in z.iter().enumerate() {
-            bias += zi * (h_at(n - 1 - i) - h_at(n - i));
+        for (i, &zi) in z[..n].iter().enumerate() {
+            bias += zi * (noise_model.at(n, n - 1 - i) - noise_model.at(n, n - i));
         }
-        bias *= T::from_u32(self.rows) * noise;
-        let total = variance + bias * bias;
-        if !(total > T::ZERO && total.is_finite()) {
-            return None;
-        }
-        Some((total.sqrt() * coverage_factor::<T>(degrees), degrees))
+        bias * (T::from_u32(self.rows) * noise)
     }
 
     /// The variance of `zᵀ·θ̂` for a consistent estimator of the first-difference
