@@ -89,7 +89,11 @@ pub struct Reading<T> {
     pub residual: Option<T>,
     /// The estimate's standard uncertainty (GUM), in its unit, stated so that ±2u is a
     /// 95 % interval; `Some` only with an estimate, and only from estimators that can state
-    /// it (the step estimator with its lag sums; see `estimators::step_uncertainty`).
+    /// it: the step, instrumental-variable, bias-compensated and ramp estimators with their
+    /// lag sums (`L > 0`; see `estimators::step_uncertainty`, `iv_uncertainty`,
+    /// `bc_uncertainty`, `ramp_uncertainty`, each of which says where it states none: with
+    /// forgetting, weak instruments, barely resolved compensation), and the model-based
+    /// estimators. `None` is not zero: it means no `u` is known to hold.
     pub uncertainty: Option<T>,
     /// The degrees of freedom the noise level in `uncertainty` rests on (0 without one):
     /// what [`Reading::uncertainty_bound`] needs.

@@ -33,15 +33,6 @@ type Ls = StepEstimator<f64, 8>;
 type Iv = IvStepEstimator<f64, 8>;
 type Bc = BiasCompensatedStepEstimator<f64, 8>;
 
-fn load_cell_counts(samples: usize) -> Vec<f64> {
-    let cell = load_cell();
-    let volts_per_gram = cell.static_gain();
-    cell.step_response(MASS_G, samples)
-        .iter()
-        .map(|v| v / volts_per_gram * COUNTS_PER_GRAM)
-        .collect()
-}
-
 /// The thesis scene: response, static gain, true input, and σ for an SNR by eq. 4.39.
 fn thesis_scene() -> (Vec<f64>, f64, f64, impl Fn(f64) -> f64) {
     let sensor = thesis_second_order();
@@ -549,7 +540,7 @@ fn load_cell_study(
     runs: usize,
     seed: u64,
 ) -> CellStudy {
-    let clean = load_cell_counts(READOUT_SAMPLES);
+    let clean = load_cell_counts(MASS_G, COUNTS_PER_GRAM, READOUT_SAMPLES);
     let sigma = SIGMA_G * COUNTS_PER_GRAM;
     let step = StepConfig::new(order, COUNTS_PER_GRAM).with_decimation(decimation);
     let mut noise = Gaussian::new(seed);
@@ -753,7 +744,7 @@ fn f32_adds_less_than_a_tenth_of_the_statistical_error_where_the_variants_are_va
             }
         }
     }
-    let clean = load_cell_counts(READOUT_SAMPLES);
+    let clean = load_cell_counts(MASS_G, COUNTS_PER_GRAM, READOUT_SAMPLES);
     let sigma = SIGMA_G * COUNTS_PER_GRAM;
     for order in [5, 7] {
         let step64 = StepConfig::new(order, COUNTS_PER_GRAM).with_decimation(12);

@@ -404,7 +404,7 @@ impl Method {
                 .map_err(core)?,
             ),
             Method::Ramp(spec) => Box::new(
-                RampEstimator::<T, CAPACITY>::new(RampConfig {
+                RampEstimator::<T, CAPACITY, UNCERTAINTY_ORDERS>::new(RampConfig {
                     regression: step_config(&spec.setup, gain),
                     sample_period_s: T::from_f64(1.0 / context.chain.sample_rate_hz),
                     lag_s: T::from_f64(spec.lag_s),
@@ -416,7 +416,10 @@ impl Method {
                 if let Some(delay) = delay {
                     config = config.with_instrument_delay(*delay);
                 }
-                Box::new(IvStepEstimator::<T, CAPACITY>::new(config).map_err(core)?)
+                Box::new(
+                    IvStepEstimator::<T, CAPACITY, UNCERTAINTY_ORDERS>::new(config)
+                        .map_err(core)?,
+                )
             }
             Method::BiasCompensated {
                 setup,
@@ -426,10 +429,9 @@ impl Method {
                     bail!("needs the noise variance measured at tare (raw units²), and none was given (`noise_var` in the spec, or `estimate --tare-variance V`)");
                 };
                 Box::new(
-                    BiasCompensatedStepEstimator::<T, CAPACITY>::new(BiasCompensatedConfig::new(
-                        step_config(setup, gain),
-                        T::from_f64(variance),
-                    ))
+                    BiasCompensatedStepEstimator::<T, CAPACITY, UNCERTAINTY_ORDERS>::new(
+                        BiasCompensatedConfig::new(step_config(setup, gain), T::from_f64(variance)),
+                    )
                     .map_err(core)?,
                 )
             }

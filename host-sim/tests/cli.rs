@@ -4,6 +4,7 @@
 
 use std::path::PathBuf;
 
+use estimator_core::weighing::UNCERTAINTY_ORDERS;
 use estimator_core::{
     Baseline, BaselineConfig, BaselineMode, BiasCompensatedConfig, BiasCompensatedStepEstimator,
     CovarianceStepEstimator, Estimator, InvalidReason, IvConfig, IvStepEstimator, ModelBank,
@@ -260,7 +261,7 @@ fn bias_compensated<T: Real>(
     order: usize,
     decimation: u16,
     gain: T,
-) -> BiasCompensatedStepEstimator<T, 40> {
+) -> BiasCompensatedStepEstimator<T, 40, UNCERTAINTY_ORDERS> {
     BiasCompensatedStepEstimator::new(BiasCompensatedConfig::new(
         StepConfig::new(order, gain).with_decimation(decimation),
         T::from_f64(TARE_VARIANCE),
@@ -358,7 +359,7 @@ fn estimate_with_every_method_equals_the_core() {
         (
             "ramp:n=5,D=16,lag_s=0.01",
             all_f64(
-                &mut RampEstimator::<f64, 40>::new(RampConfig {
+                &mut RampEstimator::<f64, 40, UNCERTAINTY_ORDERS>::new(RampConfig {
                     regression: StepConfig::new(5, gain).with_decimation(16),
                     sample_period_s: 1.0 / chain.sample_rate_hz,
                     lag_s: 0.01,
@@ -369,7 +370,7 @@ fn estimate_with_every_method_equals_the_core() {
         (
             "iv:n=7,D=16",
             all_f64(
-                &mut IvStepEstimator::<f64, 40>::new(IvConfig::new(
+                &mut IvStepEstimator::<f64, 40, UNCERTAINTY_ORDERS>::new(IvConfig::new(
                     StepConfig::new(7, gain).with_decimation(16),
                 ))
                 .unwrap(),
@@ -378,7 +379,7 @@ fn estimate_with_every_method_equals_the_core() {
         (
             "iv:n=5,D=12,delay=11,precision=f32",
             all_f32(
-                &mut IvStepEstimator::<f32, 40>::new(
+                &mut IvStepEstimator::<f32, 40, UNCERTAINTY_ORDERS>::new(
                     IvConfig::new(StepConfig::new(5, g32).with_decimation(12))
                         .with_instrument_delay(11),
                 )

@@ -47,6 +47,12 @@
 //!
 //! With `noise_variance = 0` it is the least-squares estimator, estimate for estimate.
 //!
+//! ## The standard uncertainty
+//! With lag sums for orders up to `L` (`BiasCompensatedStepEstimator<T, N, L>`, `L = 0` by
+//! default) a reading states the level's `u` (`crate::estimators::bc_uncertainty`) where
+//! every share is resolved at least [`RESOLVED_FOR_UNCERTAINTY`] times its floor; not with
+//! forgetting, nor without a noise variance (no compensation).
+//!
 //! ## LS vs IV vs BCLS, and the verdict
 //! `cargo test --release -p estimator-core --test eiv -- --ignored --nocapture study_table`
 //! prints the comparison on the load cell of `tests/support`; `tests/eiv.rs` pins each of
@@ -64,6 +70,7 @@
 //! - **Verdict:** for the load cell, decimated LS (`StepEstimator`, D ≈ 12) is far better
 //!   than either variant at full rate; keep IV and BCLS for well-excited, low-order sensors
 //!   like the thesis scene, or as a bias check.
+use crate::estimators::bc_uncertainty::{BcUncertainty, Compensated, RESOLVED_FOR_UNCERTAINTY};
 use crate::estimators::consistency::{
     difference_correlation, difference_noise_gain, NoiseReference, ResidualCheck,
 };
@@ -104,11 +111,13 @@ impl<T: Real> BiasCompensatedConfig<T> {
     }
 }
 
-/// The bias-compensated data-driven step estimator with capacity for orders up to `N`.
+/// The bias-compensated data-driven step estimator with capacity for orders up to `N`,
+/// stating the standard uncertainty of its level for orders up to `L` (the default 0 states
+/// none; see `crate::estimators::bc_uncertainty`).
 ///
 /// Same reading semantics as [`crate::StepEstimator`]; see the module docs.
 #[derive(Clone, Debug)]
-pub struct BiasCompensatedStepEstimator<T: Real, const N: usize> {
+pub struct BiasCompensatedStepEstimator<T: Real, const N: usize, const L: usize = 0> {
     config: BiasCompensatedConfig<T>,
     intake: Intake<T>,
     /// s² in the estimate's unit at the decimated rate: σ²/(G²·D).
@@ -127,9 +136,11 @@ pub struct BiasCompensatedStepEstimator<T: Real, const N: usize> {
     /// The consistency check, when configured with a noise reference (on the compensated
     /// fit's a-posteriori residuals).
     check: Option<ResidualCheck<T>>,
+    /// What the level's standard uncertainty needs.
+    uncertainty: BcUncertainty<T, N, L>,
 }
 
-impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
+impl<T: Real, const N: usize, const L: usize> BiasCompensatedStepEstimator<T, N, L> {
     /// A new estimator, or the reason the configuration is impossible.
     pub fn new(config: BiasCompensatedConfig<T>) -> Result<Self, ConfigError> {
         config.validate(N)?;
@@ -152,6 +163,7 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
             solution: None,
             identifiability: T::ZERO,
             check: step.residual_check(),
+            uncertainty: BcUncertainty::new(),
         })
     }
 
@@ -185,14 +197,16 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
         self.intake.latch(reason);
     }
 
-    /// The LS factor downdated by the expected noise information, or `None` when a pivot
-    /// keeps no more than `max(√(2/N_eff), 100·ε)` of its uncompensated value (the signal's
-    /// share of that direction is not resolved from the noise's; ≤ 0: indefinite).
-    fn compensated(&self, n: usize) -> Option<Factor<T, N, 1>> {
+    /// The LS factor downdated by the expected noise information and the smallest share
+    /// over the floor, or `None` when a pivot keeps no more than `max(√(2/N_eff), 100·ε)`
+    /// of its uncompensated value (the signal's share of that direction is not resolved
+    /// from the noise's; ≤ 0: indefinite). Without a noise variance the share is zero: no
+    /// compensation, nothing resolved.
+    fn compensated(&self, n: usize) -> Option<(Factor<T, N, 1>, T)> {
         let mut factor = self.factor.clone();
         let weight = -(self.effective_rows * self.decimated_variance);
         if weight == T::ZERO {
-            return Some(factor);
+            return Some((factor, T::ZERO));
         }
         let lead_before = factor.lead_weight();
         let [tail_before] = factor.tail_weight();
@@ -222,16 +236,21 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
             rounding
         };
         let lead_after = factor.lead_weight();
+        let [tail_after] = factor.tail_weight();
+        let mut margin = tail_after / (floor * tail_before);
         for i in 0..n {
             if !(lead_after[i] > floor * lead_before[i]) {
                 return None;
             }
+            let share = lead_after[i] / (floor * lead_before[i]);
+            if share < margin {
+                margin = share;
+            }
         }
-        let [tail_after] = factor.tail_weight();
         if !(tail_after > floor * tail_before) {
             return None;
         }
-        Some(factor)
+        Some((factor, margin))
     }
 
     fn update(&mut self, x: T) {
@@ -248,7 +267,15 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
             self.factor.forget(n, lambda);
         }
         self.effective_rows = self.effective_rows * lambda + T::ONE;
+        let growing = lambda == T::ONE;
+        if growing {
+            self.uncertainty.push_row(&phi, n);
+        }
         let folded = self.factor.fold(n, phi, [T::ONE], x - self.offset);
+        if growing {
+            self.uncertainty
+                .push_residual(folded.residual, folded.row_weight);
+        }
         self.rows = self.rows.saturating_add(1);
         let [ls_deviation] = self.factor.tail_solution();
         let ls_step = self.offset + ls_deviation;
@@ -268,7 +295,7 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
         if ls_weight > identifiability_floor::<T>() * self.effective_rows {
             self.offset = recentre(&mut self.factor, n, self.offset, ls_step);
         }
-        let Some(compensated) = compensated else {
+        let Some((compensated, margin)) = compensated else {
             self.identifiability = T::ZERO;
             self.invalidate(InvalidReason::IllConditioned);
             return;
@@ -301,7 +328,24 @@ impl<T: Real, const N: usize> BiasCompensatedStepEstimator<T, N> {
         }
         self.solution = Some((lead, step));
         self.intake.estimating(step, prior_residual);
+        // The first-order `u` only where every share is resolved well beyond the floor
+        // (`crate::estimators::bc_uncertainty`).
+        let resolved = margin >= T::from_f64(RESOLVED_FOR_UNCERTAINTY);
+        if growing && resolved && BcUncertainty::<T, N, L>::covers(n) {
+            let (least_squares_lead, _) = self.factor.solution(n);
+            let compensated = Compensated {
+                factor: &compensated,
+                lead: &lead,
+                level: step,
+                least_squares_lead: &least_squares_lead,
+                least_squares_level: ls_step,
+            };
+            let u =
+                self.uncertainty
+                    .uncertainty(n, compensated, &self.factor, self.decimated_variance);
+            self.intake.state_uncertainty(u);
+        }
     }
 }
 
-estimator_via_intake!(BiasCompensatedStepEstimator<T, const N>);
+estimator_via_intake!(BiasCompensatedStepEstimator<T, const N, const L>);

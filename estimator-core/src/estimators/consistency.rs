@@ -317,7 +317,7 @@ pub(crate) fn threshold<T: Real>(nu1: T, nu2: T) -> T {
 /// ramp), from their coefficients `lead[..n]` = ℓ (see the module docs): the target's own
 /// noise, minus each regressor's difference stencil `(−1)^(ORDER−t)·C(ORDER, t)` weighted by ℓ.
 #[inline]
-fn coefficient<T: Real, const ORDER: usize>(lead: &[T], n: usize, m: usize) -> T {
+pub(crate) fn coefficient<T: Real, const ORDER: usize>(lead: &[T], n: usize, m: usize) -> T {
     let mut c = if m == n + ORDER - 1 { T::ONE } else { T::ZERO };
     for t in 0..=ORDER.min(m) {
         let i = m - t;

@@ -19,14 +19,17 @@
 //! private so that every item has one path.
 
 pub(crate) mod baseline;
+pub(crate) mod bc_uncertainty;
 pub(crate) mod bias_compensated;
 pub(crate) mod consistency;
 pub(crate) mod covariance;
 pub(crate) mod input;
 pub(crate) mod intake;
 pub(crate) mod iv;
+pub(crate) mod iv_uncertainty;
 pub(crate) mod model;
 pub(crate) mod noise_meter;
 pub(crate) mod ramp;
+pub(crate) mod ramp_uncertainty;
 pub(crate) mod step;
 pub(crate) mod step_uncertainty;

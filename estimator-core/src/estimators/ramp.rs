@@ -14,10 +14,15 @@
 //! with τ the sensor's steady-state ramp lag. The slope is estimated without bias on an
 //! LTI sensor; the intercept needs τ, calibrated with a reference mass (`lag_s`). The same
 //! recursive engine as the step estimator solves it, with `[t, 1]` as trailing columns.
+//!
+//! With lag sums for orders up to `L − 1` (`RampEstimator<T, N, L>`, `L = 0` by default)
+//! each reading states the standard uncertainty of the line at its time
+//! (`crate::estimators::ramp_uncertainty`).
 
 use crate::estimators::consistency::ResidualCheck;
 use crate::estimators::input::DifferenceWindow;
 use crate::estimators::intake::{estimator_via_intake, Intake};
+use crate::estimators::ramp_uncertainty::RampUncertainty;
 use crate::estimators::step::StepConfig;
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
@@ -36,9 +41,10 @@ pub struct RampConfig<T> {
     pub lag_s: T,
 }
 
-/// The data-driven affine-input estimator, capacity order `N`.
+/// The data-driven affine-input estimator, capacity order `N`, stating the standard
+/// uncertainty of its readings for orders below `L` (the default 0 states none).
 #[derive(Clone, Debug)]
-pub struct RampEstimator<T: Real, const N: usize> {
+pub struct RampEstimator<T: Real, const N: usize, const L: usize = 0> {
     config: RampConfig<T>,
     /// Its estimate is the line's intercept `b`; the reading moves it along `slope`.
     intake: Intake<T>,
@@ -55,9 +61,11 @@ pub struct RampEstimator<T: Real, const N: usize> {
     noise_gain: T,
     /// The line's slope `a`, valid while the intake has an intercept.
     slope: T,
+    /// What the readings' standard uncertainty needs.
+    uncertainty: RampUncertainty<T, L>,
 }
 
-impl<T: Real, const N: usize> RampEstimator<T, N> {
+impl<T: Real, const N: usize, const L: usize> RampEstimator<T, N, L> {
     /// A new ramp estimator, or why the configuration is impossible.
     pub fn new(config: RampConfig<T>) -> Result<Self, ConfigError> {
         config.regression.validate(N)?;
@@ -80,6 +88,7 @@ impl<T: Real, const N: usize> RampEstimator<T, N> {
             check: config.regression.residual_check(),
             noise_gain: T::ONE,
             slope: T::ZERO,
+            uncertainty: RampUncertainty::new(),
         })
     }
 
@@ -121,9 +130,12 @@ impl<T: Real, const N: usize> RampEstimator<T, N> {
         }
         self.effective_rows = self.effective_rows * lambda + T::ONE;
         let determined_before = self.rows as usize > n + 1;
-        let folded = self
-            .factor
-            .fold(n, self.differences.window(), [t, T::ONE], x);
+        let window = self.differences.window();
+        let growing = lambda == T::ONE;
+        if growing {
+            self.uncertainty.push_row(&window, t, n);
+        }
+        let folded = self.factor.fold(n, window, [t, T::ONE], x);
         self.rows = self.rows.saturating_add(1);
         let [slope, c0] = self.factor.tail_solution();
         if !(slope.is_finite() && c0.is_finite() && folded.row_weight.is_finite()) {
@@ -132,6 +144,10 @@ impl<T: Real, const N: usize> RampEstimator<T, N> {
         }
         if (self.rows as usize) < n + 2 {
             return;
+        }
+        if growing && determined_before {
+            self.uncertainty
+                .push_residual(folded.residual, folded.row_weight, n);
         }
         let mismatch = match self.check.as_mut() {
             Some(check) => {
@@ -158,7 +174,37 @@ impl<T: Real, const N: usize> RampEstimator<T, N> {
         }
         self.slope = slope;
         self.intake.estimating(c0 + slope * self.config.lag_s, None);
+        if growing {
+            self.intake.state_uncertainty(self.line_uncertainty(n));
+        }
+    }
+
+    /// The standard uncertainty of the line at the latest raw sample, the block's last
+    /// (`crate::estimators::ramp_uncertainty`); `None` for `L ≤ n` or too few rows.
+    fn line_uncertainty(&self, n: usize) -> Option<(T, u32)> {
+        if !RampUncertainty::<T, L>::covers(n) {
+            return None;
+        }
+        let latest = T::from_u32(self.intake.reading().samples.saturating_sub(1));
+        let combination = [
+            latest * self.config.sample_period_s + self.config.lag_s,
+            T::ONE,
+        ];
+        let (z_lead, z_tail) = self.factor.tail_influence(n, combination)?;
+        let (lead, _) = self.factor.solution(n);
+        let metered = self
+            .check
+            .as_ref()
+            .map_or(T::ZERO, ResidualCheck::block_variance);
+        self.uncertainty.uncertainty(
+            n,
+            &lead,
+            &z_lead,
+            z_tail,
+            combination,
+            (metered > T::ZERO).then_some(metered),
+        )
     }
 }
 
-estimator_via_intake!(RampEstimator<T, const N>, reading: Self::reading);
+estimator_via_intake!(RampEstimator<T, const N, const L>, reading: Self::reading);

@@ -95,6 +95,16 @@ impl<T: Real, const N: usize, const L: usize> LagSums<T, N, L> {
         }
     }
 
+    /// Rows pushed.
+    pub(crate) fn rows(&self) -> u32 {
+        self.rows
+    }
+
+    /// The residual sum of squares of the residuals pushed.
+    pub(crate) fn residual_sum(&self) -> T {
+        self.residual_sum
+    }
+
     /// Whether lags up to the order `n` are kept.
     pub(crate) fn covers(n: usize) -> bool {
         L >= n
@@ -175,23 +185,105 @@ impl<T: Real, const N: usize, const L: usize> LagSums<T, N, L> {
         lead: &[T; N],
         block_noise_floor: Option<T>,
     ) -> Option<(T, u32)> {
-        if !Self::covers(n) || L == 0 {
+        if !Self::covers(n) {
             return None;
         }
-        let degrees = self.rows.checked_sub(n as u32 + 1)?;
+        let noise_model = NoiseModel::first_differences(lead, n);
+        let quadratic = Quadratic {
+            z,
+            z_level,
+            lag0: z_level,
+        };
+        let (variance, noise, degrees) = self.variance(
+            n,
+            &noise_model,
+            quadratic,
+            self.residual_sum,
+            block_noise_floor,
+        )?;
+        let bias = self.errors_in_variables_bias(n, z, &noise_model, noise);
+        stated(variance + bias * bias, degrees)
+    }
+
+    /// The first-order errors-in-variables bias of the least-squares level whose row of `P`
+    /// is `z` (leading entries): `E[φ_k·ε_k]` per row, times the rows (thesis eq. 4.15), for
+    /// the first-difference regression with block-mean noise variance `noise`.
+    fn errors_in_variables_bias(
+        &self,
+        n: usize,
+        z: &[T; N],
+        noise_model: &NoiseModel<T, L>,
+        noise: T,
+    ) -> T {
+        let mut bias = T::ZERO;
+        for (i, &zi) in z[..n].iter().enumerate() {
+            bias += zi * (noise_model.at(n, n - 1 - i) - noise_model.at(n, n - i));
+        }
+        bias * (T::from_u32(self.rows) * noise)
+    }
+
+    /// The variance of `zᵀ·θ̂` for a consistent estimator of the first-difference
+    /// regression (instrumental variables, bias compensation), the block means' noise
+    /// variance and the degrees of freedom: `z` is how the rows' equation errors reach the
+    /// estimate (`δ = zᵀ·Σ_k ψ_k·ε_k`, `ψ_k` the rows pushed) and `lag0` = `zᵀ·S_0·z`;
+    /// `residual_sum` is the sum of squares of the estimate's own residuals over the rows
+    /// (`rows − (n + 1)` degrees of freedom) and `lead` its `ℓ`. No errors-in-variables bias
+    /// is added: the caller removes it. [`stated`] turns the variance into `u`.
+    pub(crate) fn consistent_variance(
+        &self,
+        n: usize,
+        quadratic: Quadratic<'_, T, N>,
+        lead: &[T; N],
+        residual_sum: T,
+        block_noise_floor: Option<T>,
+    ) -> Option<(T, T, u32)> {
+        if !Self::covers(n) {
+            return None;
+        }
+        let noise_model = NoiseModel::first_differences(lead, n);
+        self.variance(n, &noise_model, quadratic, residual_sum, block_noise_floor)
+    }
+
+    /// The sandwich's variance, the block-mean noise variance and the degrees of freedom,
+    /// for `lags` lags of an equation error whose moving average is `noise_model` and whose
+    /// residual sum of squares is `residual_sum` (`rows − (lags + 1)` degrees of freedom:
+    /// `lags` leading columns and the constant); `None` below [`MIN_DEGREES_OF_FREEDOM`].
+    pub(crate) fn variance(
+        &self,
+        lags: usize,
+        noise_model: &NoiseModel<T, L>,
+        quadratic: Quadratic<'_, T, N>,
+        residual_sum: T,
+        block_noise_floor: Option<T>,
+    ) -> Option<(T, T, u32)> {
+        if !Self::covers(lags) || L == 0 {
+            return None;
+        }
+        let degrees = self.rows.checked_sub(lags as u32 + 1)?;
         if degrees < MIN_DEGREES_OF_FREEDOM {
             return None;
         }
-        let mean_square = self.residual_sum / T::from_u32(degrees);
-        // h_0..h_{n-1}, and h_n apart (n ≤ L, and L + 1 is no array length here).
-        let mut h = [T::ZERO; L];
-        for (m, value) in h[..n].iter_mut().enumerate() {
-            *value = moving_average(lead, n, m);
-        }
-        let h_last = moving_average(lead, n, n);
-        let h_at = |m: usize| if m < n { h[m] } else { h_last };
-        let mut power = h_last * h_last;
-        for &value in &h[..n] {
+        let mean_square = residual_sum / T::from_u32(degrees);
+        let (variance, noise) =
+            self.sandwich(lags, noise_model, quadratic, mean_square, block_noise_floor)?;
+        Some((variance, noise, degrees))
+    }
+
+    /// The variance of `zᵀ·Σ_k ψ_k·ε_k` for the moving-average equation error (module docs)
+    /// whose level is `mean_square` (the residuals'), and the block means' noise variance it
+    /// implies; `None` for a moving average without power.
+    fn sandwich(
+        &self,
+        lags: usize,
+        noise_model: &NoiseModel<T, L>,
+        quadratic: Quadratic<'_, T, N>,
+        mean_square: T,
+        block_noise_floor: Option<T>,
+    ) -> Option<(T, T)> {
+        let n = lags;
+        let Quadratic { z, z_level, lag0 } = quadratic;
+        let mut power = noise_model.h_last * noise_model.h_last;
+        for &value in &noise_model.h[..n] {
             power += value * value;
         }
         if !(power > T::ZERO) {
@@ -212,7 +304,7 @@ impl<T: Real, const N: usize, const L: usize> LagSums<T, N, L> {
             }
         }
         let z = &z[..n];
-        let mut variance = mean_square * z_level;
+        let mut variance = mean_square * lag0;
         // The same with the residuals' own autocovariance at lags 1..n (noise that is not
         // white: vibration near the resonance made the model's `u` over-confident, 73 % at
         // 80 dB on the rig's noise); the larger of the two is stated.
@@ -220,7 +312,7 @@ impl<T: Real, const N: usize, const L: usize> LagSums<T, N, L> {
         for lag in 1..=n {
             let mut covariance = T::ZERO;
             for m in 0..=(n - lag) {
-                covariance += h_at(m) * h_at(m + lag);
+                covariance += noise_model.at(n, m) * noise_model.at(n, m + lag);
             }
             let index = lag - 1;
             let mut quadratic = T::ZERO;
@@ -242,21 +334,65 @@ impl<T: Real, const N: usize, const L: usize> LagSums<T, N, L> {
                 observed += T::from_f64(2.0) * lagged * quadratic;
             }
         }
-        if observed > variance {
+        // Only where residuals were pushed to observe (the estimators without them have
+        // `observed` at lag 0 alone, which would undo the lags).
+        if self.residuals > 0 && observed > variance {
             variance = observed;
         }
-        // The errors-in-variables bias: E[φ_k·ε_k] per row, times the rows.
-        let mut bias = T::ZERO;
-        for (i, &zi) in z.iter().enumerate() {
-            bias += zi * (h_at(n - 1 - i) - h_at(n - i));
-        }
-        bias *= T::from_u32(self.rows) * noise;
-        let total = variance + bias * bias;
-        if !(total > T::ZERO && total.is_finite()) {
-            return None;
-        }
-        Some((total.sqrt() * coverage_factor::<T>(degrees), degrees))
+        Some((variance, noise))
     }
+}
+
+/// How an estimate reaches the rows' equation errors, for [`LagSums`]' sandwich: `z` (its
+/// leading entries) and `z_level` (the constant column's) weigh the rows, and `lag0` is the
+/// lag-0 term `zᵀ·S_0·z` (the rows' own cross-products, which the lag sums do not keep).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Quadratic<'a, T, const N: usize> {
+    pub z: &'a [T; N],
+    pub z_level: T,
+    pub lag0: T,
+}
+
+/// The moving-average coefficients `h_0..h_q` of an equation error (`q ≤ L` lags), `h_q`
+/// apart because `L + 1` is no array length.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct NoiseModel<T, const L: usize> {
+    pub h: [T; L],
+    pub h_last: T,
+}
+
+impl<T: Real, const L: usize> NoiseModel<T, L> {
+    /// The moving average of the first-difference regression's equation error (module
+    /// docs), of order `n ≤ L` (checked by the caller), from its `ℓ` (`lead[..n]`).
+    pub(crate) fn first_differences<const N: usize>(lead: &[T; N], n: usize) -> Self {
+        let mut h = [T::ZERO; L];
+        for (m, value) in h[..n].iter_mut().enumerate() {
+            *value = moving_average(lead, n, m);
+        }
+        Self {
+            h,
+            h_last: moving_average(lead, n, n),
+        }
+    }
+
+    /// `h_m` of a moving average of order `q`.
+    #[inline]
+    fn at(&self, q: usize, m: usize) -> T {
+        if m < q {
+            self.h[m]
+        } else {
+            self.h_last
+        }
+    }
+}
+
+/// `u = √variance`, times the t-factor of `degrees`; `None` for a variance that is not
+/// finite and positive.
+pub(crate) fn stated<T: Real>(variance: T, degrees: u32) -> Option<(T, u32)> {
+    if !(variance > T::ZERO && variance.is_finite()) {
+        return None;
+    }
+    Some((variance.sqrt() * coverage_factor::<T>(degrees), degrees))
 }
 
 /// The moving-average coefficient `h_m` (`m ≤ n`) of the equation error (module docs):

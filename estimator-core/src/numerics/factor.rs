@@ -188,8 +188,43 @@ impl<T: Real, const N: usize, const E: usize> Factor<T, N, E> {
         }
         let mut tail = [T::ZERO; E];
         tail[E - 1] = T::ONE / d;
+        Some(self.back_substitute(active, tail))
+    }
+
+    /// `P·v` for `v` zero on the leading columns and `combination` on the trailing ones
+    /// (`P = (ΦᵀWΦ)⁻¹ = U⁻¹·D⁻¹·U⁻ᵀ`): the weights with which the rows' equation errors reach
+    /// `combinationᵀ·θ_tail`. `U⁻ᵀ·v` stays on the trailing columns (`U` is unit upper
+    /// triangular), so one forward and one back substitution, O((n+E)²). `None` while a
+    /// trailing column has no weight.
+    pub(crate) fn tail_influence(
+        &self,
+        active: usize,
+        combination: [T; E],
+    ) -> Option<([T; N], [T; E])> {
+        let mut tail = [T::ZERO; E];
+        for e in 0..E {
+            let mut value = combination[e];
+            for f in 0..e {
+                value -= self.tail_coupling[f][e] * tail[f];
+            }
+            tail[e] = value;
+        }
+        for (value, &d) in tail.iter_mut().zip(&self.tail_weight) {
+            if !(d > T::ZERO) {
+                return None;
+            }
+            *value = *value / d;
+        }
+        Some(self.back_substitute(active, tail))
+    }
+
+    /// `U⁻¹·v` for `v` zero on the leading columns and `tail` on the trailing ones: the
+    /// back substitution of the influences above. The last trailing entry has nothing after
+    /// it and stays as it is.
+    #[inline]
+    fn back_substitute(&self, active: usize, mut tail: [T; E]) -> ([T; N], [T; E]) {
         for e in (0..E - 1).rev() {
-            let mut value = T::ZERO;
+            let mut value = tail[e];
             for f in (e + 1)..E {
                 value -= self.tail_coupling[e][f] * tail[f];
             }
@@ -206,7 +241,33 @@ impl<T: Real, const N: usize, const E: usize> Factor<T, N, E> {
             }
             lead[i] = value;
         }
-        Some((lead, tail))
+        (lead, tail)
+    }
+
+    /// `‖D^{1/2}·U·δ‖²`: how much the weighted residual sum of squares grows when the
+    /// unknowns move by `δ` (leading `lead[..active]`, then trailing) away from the
+    /// least-squares solution, since that sum is `‖D^{1/2}·(U·θ − rhs)‖²` plus the part no θ
+    /// explains. O((n+E)²).
+    pub(crate) fn weighted_norm2(&self, active: usize, lead: &[T; N], tail: &[T; E]) -> T {
+        let mut sum = T::ZERO;
+        for i in 0..active {
+            let mut value = lead[i];
+            for j in (i + 1)..active {
+                value += self.lead_coupling[i][j] * lead[j];
+            }
+            for e in 0..E {
+                value += self.cross_coupling[i][e] * tail[e];
+            }
+            sum += self.lead_weight[i] * value * value;
+        }
+        for e in 0..E {
+            let mut value = tail[e];
+            for f in (e + 1)..E {
+                value += self.tail_coupling[e][f] * tail[f];
+            }
+            sum += self.tail_weight[e] * value * value;
+        }
+        sum
     }
 
     /// All unknowns, leading then trailing (full back substitution, O((n+E)²)).
@@ -502,6 +563,32 @@ mod tests {
         }
         compare::<f64>();
         compare::<f32>();
+    }
+
+    #[test]
+    fn a_tail_combinations_influence_is_p_times_the_combination() {
+        // Rows [lead, t, 1]: P·[0 … 0, τ, 1] is τ times P's t row plus its constant row, and
+        // P's constant row is `last_unknown_influence`. P's t row comes from the same
+        // factor with the columns [1, t] swapped (P is symmetric, and its t row there is the
+        // last one).
+        let mut factor = Factor::<f64, 5, 2>::new();
+        let mut swapped = Factor::<f64, 5, 2>::new();
+        for (k, (lead, tail, target)) in rows::<f64>(40).enumerate() {
+            let t = k as f64 * 0.1 + tail;
+            factor.fold(5, lead, [t, 1.0], target);
+            swapped.fold(5, lead, [1.0, t], target);
+        }
+        let tau = 2.5;
+        let (lead, tail) = factor.tail_influence(5, [tau, 1.0]).unwrap();
+        let (constant_lead, constant_tail) = factor.last_unknown_influence(5).unwrap();
+        let (t_lead, t_tail) = swapped.last_unknown_influence(5).unwrap();
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * (1.0 + b.abs());
+        for i in 0..5 {
+            let expected = tau * t_lead[i] + constant_lead[i];
+            assert!(close(lead[i], expected), "{i}: {} vs {expected}", lead[i]);
+        }
+        assert!(close(tail[0], tau * t_tail[1] + constant_tail[0]));
+        assert!(close(tail[1], tau * t_tail[0] + constant_tail[1]));
     }
 
     #[test]

@@ -20,7 +20,9 @@ impl<T: Real, const N: usize> Column<T, N> {
             last: T::ZERO,
         }
     }
+}
 
+impl<T: Copy, const N: usize> Column<T, N> {
     #[inline(always)]
     pub(crate) fn get(&self, i: usize, n: usize) -> T {
         if i < n {
@@ -64,6 +66,8 @@ pub(crate) struct Solved<T, const N: usize> {
     /// `Σ_i ω_i·g_i²` with `g = M⁻ᵀ e_last`: the squared norm of the last row of `M⁻¹`
     /// weighted by the caller's row weights ω (how noise on the rows reaches the last unknown).
     pub last_row_norm2: T,
+    /// `g = M⁻ᵀ e_last` itself, the last row of `M⁻¹`.
+    pub last_row: Column<T, N>,
 }
 
 /// Why a solve failed.
@@ -76,8 +80,9 @@ pub(crate) enum SolveError {
 }
 
 impl<T: Real, const N: usize> Square<T, N> {
+    /// Entry `(i, j)` of the `(n+1) × (n+1)` matrix.
     #[inline(always)]
-    fn get(&self, i: usize, j: usize, n: usize) -> T {
+    pub(crate) fn get(&self, i: usize, j: usize, n: usize) -> T {
         match (i < n, j < n) {
             (true, true) => self.lead[i][j],
             (true, false) => self.right[i],
@@ -117,11 +122,22 @@ impl<T: Real, const N: usize> Square<T, N> {
         rhs: Column<T, N>,
         row_weight: Column<T, N>,
     ) -> Result<Solved<T, N>, SolveError> {
-        let mut rows = RowSide { rhs, row_weight };
-        self.scale_rows(n, &mut rows)?;
+        let mut rows = RowSide {
+            rhs,
+            row_weight,
+            origin: Column {
+                lead: core::array::from_fn(|i| i),
+                last: n,
+            },
+        };
+        let row_scale = self.scale_rows(n, &mut rows)?;
         let column_scale = self.scale_columns(n)?;
         self.factor_lu(n, &mut rows)?;
-        let RowSide { rhs, row_weight } = rows;
+        let RowSide {
+            rhs,
+            row_weight,
+            origin,
+        } = rows;
         // U y = (L⁻¹ P b), then θ = S_c y.
         let p = n + 1;
         let mut theta = Column::<T, N>::zero();
@@ -135,17 +151,27 @@ impl<T: Real, const N: usize> Square<T, N> {
         for j in 0..p {
             theta.set(j, n, theta.get(j, n) * column_scale.get(j, n));
         }
+        let (last_row_norm2, last_row) =
+            self.last_row(n, &column_scale, &row_weight, &row_scale, &origin);
         Ok(Solved {
             theta,
-            last_row_norm2: self.last_row_norm2(n, &column_scale, &row_weight),
+            last_row_norm2,
+            last_row,
         })
     }
 
-    /// Scale each row (and its right-hand side) to a largest entry of one; refuse a matrix or
-    /// right-hand side that is not finite, or a zero row.
-    fn scale_rows(&mut self, n: usize, rows: &mut RowSide<T, N>) -> Result<(), SolveError> {
-        let RowSide { rhs, row_weight } = rows;
+    /// Scale each row (and its right-hand side) to a largest entry of one, and return the
+    /// scales `S_r`; refuse a matrix or right-hand side that is not finite, or a zero row.
+    fn scale_rows(
+        &mut self,
+        n: usize,
+        rows: &mut RowSide<T, N>,
+    ) -> Result<Column<T, N>, SolveError> {
+        let RowSide {
+            rhs, row_weight, ..
+        } = rows;
         let p = n + 1;
+        let mut row_scale = Column::<T, N>::zero();
         for i in 0..p {
             let mut largest = T::ZERO;
             for j in 0..p {
@@ -168,8 +194,9 @@ impl<T: Real, const N: usize> Square<T, N> {
             rhs.set(i, n, rhs.get(i, n) * scale);
             // M⁻¹ = (row-scaled)⁻¹·S_r, so row i of the scaled problem carries weight ω_i·s_i².
             row_weight.set(i, n, row_weight.get(i, n) * scale * scale);
+            row_scale.set(i, n, scale);
         }
-        Ok(())
+        Ok(row_scale)
     }
 
     /// Scale each column to a largest entry of one; the scales `S_c`, or `Singular` for a
@@ -195,9 +222,13 @@ impl<T: Real, const N: usize> Square<T, N> {
     }
 
     /// `P M = L U` in place (L strictly below the diagonal, unit diagonal implied), applying
-    /// L⁻¹ P to `rhs` and P to the row weights.
+    /// L⁻¹ P to `rhs` and P to the row weights and origins.
     fn factor_lu(&mut self, n: usize, rows: &mut RowSide<T, N>) -> Result<(), SolveError> {
-        let RowSide { rhs, row_weight } = rows;
+        let RowSide {
+            rhs,
+            row_weight,
+            origin,
+        } = rows;
         let p = n + 1;
         // Every entry is now at most one in magnitude; a pivot at the rounding level of the
         // elimination (ε·(n+1)) means the matrix is numerically singular.
@@ -219,6 +250,7 @@ impl<T: Real, const N: usize> Square<T, N> {
                 self.swap_rows(k, pivot_row, n);
                 rhs.swap(k, pivot_row, n);
                 row_weight.swap(k, pivot_row, n);
+                origin.swap(k, pivot_row, n);
             }
             let inv_pivot = T::ONE / self.get(k, k, n);
             for i in (k + 1)..p {
@@ -236,14 +268,16 @@ impl<T: Real, const N: usize> Square<T, N> {
     }
 
     /// `Σ ω_i g_i²` for `g = M⁻ᵀ e_last`, from the LU factors: with P M = L U,
-    /// Uᵀ w = S_c e_last, Lᵀ v = w, and g = Pᵀ v; the row weights were permuted with the
-    /// rows, so Σ ω_i g_i² = Σ ω'_k v_k².
-    fn last_row_norm2(
+    /// Uᵀ w = S_c e_last, Lᵀ v = w, and g = S_r Pᵀ v; the row weights were permuted with the
+    /// rows, so Σ ω_i g_i² = Σ ω'_k v_k². Returns the sum and `g`.
+    fn last_row(
         &self,
         n: usize,
         column_scale: &Column<T, N>,
         row_weight: &Column<T, N>,
-    ) -> T {
+        row_scale: &Column<T, N>,
+        origin: &Column<usize, N>,
+    ) -> (T, Column<T, N>) {
         let p = n + 1;
         let mut w = Column::<T, N>::zero();
         for i in 0..p {
@@ -266,14 +300,21 @@ impl<T: Real, const N: usize> Square<T, N> {
             w.set(i, n, value);
             last_row_norm2 += row_weight.get(i, n) * value * value;
         }
-        last_row_norm2
+        let mut last_row = Column::<T, N>::zero();
+        for k in 0..p {
+            let row = origin.get(k, n);
+            last_row.set(row, n, row_scale.get(row, n) * w.get(k, n));
+        }
+        (last_row_norm2, last_row)
     }
 }
 
-/// What moves with the rows of `M` in the solve: the right-hand side and the row weights.
+/// What moves with the rows of `M` in the solve: the right-hand side, the row weights, and
+/// each row's index before pivoting.
 struct RowSide<T, const N: usize> {
     rhs: Column<T, N>,
     row_weight: Column<T, N>,
+    origin: Column<usize, N>,
 }
 
 #[inline(always)]
@@ -283,5 +324,41 @@ fn max_abs<T: Real>(current: T, value: T) -> T {
         a
     } else {
         current
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `last_row` is the last row of `M⁻¹` (`Mᵀ·g = e_last`) whatever the pivoting and the
+    /// scaling, and `last_row_norm2` its weighted squared norm.
+    #[test]
+    fn the_last_row_is_that_of_the_inverse() {
+        // Rows of very different scales, and a first column that makes pivoting swap.
+        let matrix = Square {
+            lead: [[1e-3, 2.0, 0.5], [3.0, -1.0, 0.25], [0.5, 4.0, -2.0]],
+            right: [1.0, 1e3, -0.5],
+            bottom: [2.0, 0.125, 7.0],
+            corner: 0.75,
+        };
+        let n = 3;
+        let weight = Column {
+            lead: [1.0, 2.0, 0.5],
+            last: 4.0,
+        };
+        let solved = matrix.solve(n, Column::zero(), weight).unwrap();
+        let g = solved.last_row;
+        let mut norm2 = 0.0;
+        for j in 0..=n {
+            let mut value = 0.0;
+            for i in 0..=n {
+                value += matrix.get(i, j, n) * g.get(i, n);
+            }
+            let expected = if j == n { 1.0 } else { 0.0 };
+            assert!((value - expected).abs() < 1e-12, "column {j}: {value}");
+            norm2 += weight.get(j, n) * g.get(j, n) * g.get(j, n);
+        }
+        assert!((solved.last_row_norm2 / norm2 - 1.0).abs() < 1e-12);
     }
 }

@@ -261,3 +261,57 @@ pub fn well_formed<T: estimator_core::Real>(reading: &estimator_core::Reading<T>
         && reading.estimate.is_none_or(|v| v.is_finite())
         && reading.residual.is_none_or(|v| v.is_finite())
 }
+
+/// The load cell's noise-free response to `mass_g`, in ADC counts at `counts_per_gram`.
+pub fn load_cell_counts(mass_g: f64, counts_per_gram: f64, samples: usize) -> Vec<f64> {
+    let cell = load_cell();
+    let volts_per_gram = cell.static_gain();
+    cell.step_response(mass_g, samples)
+        .iter()
+        .map(|v| v / volts_per_gram * counts_per_gram)
+        .collect()
+}
+
+/// Pushes the same `samples` into an `f32` and an `f64` estimator and returns the worst
+/// relative difference of their `u` wherever both state one, and how many readings that was.
+pub fn u_f32_against_f64(
+    e32: &mut dyn estimator_core::Estimator<f32>,
+    e64: &mut dyn estimator_core::Estimator<f64>,
+    samples: impl IntoIterator<Item = f32>,
+) -> (f64, usize) {
+    let (mut worst, mut compared) = (0.0f64, 0);
+    for sample in samples {
+        let (a, b) = (e32.push(sample), e64.push(f64::from(sample)));
+        if let (Some(u32_), Some(u64_)) = (a.uncertainty, b.uncertainty) {
+            worst = worst.max((f64::from(u32_) / u64_ - 1.0).abs());
+            compared += 1;
+        }
+    }
+    (worst, compared)
+}
+
+/// Pushes `data` into `plain`, with `bad` in place of sample 150 (which latches it), and
+/// into each of `others`, which must never state a `u`. Asserts that `plain` states no `u`
+/// without an estimate nor from the bad sample on; returns how many readings state one.
+pub fn stated_u_around_a_bad_sample(
+    plain: &mut dyn estimator_core::Estimator<f64>,
+    others: &mut [&mut dyn estimator_core::Estimator<f64>],
+    data: &[f64],
+    bad: f64,
+) -> usize {
+    let mut stated = 0;
+    for (k, &sample) in data.iter().enumerate() {
+        let reading = plain.push(if k == 150 { bad } else { sample });
+        assert!(reading.uncertainty.is_none() || reading.estimate.is_some());
+        if k >= 150 {
+            assert!(reading.is_invalid() && reading.uncertainty.is_none());
+        }
+        stated += usize::from(reading.uncertainty.is_some());
+        for other in others.iter_mut() {
+            let reading = other.push(sample);
+            assert_eq!(reading.uncertainty, None);
+            assert_eq!(reading.degrees_of_freedom, 0);
+        }
+    }
+    stated
+}
