@@ -130,6 +130,23 @@ impl<T: Real, const S: usize> BlockModel<T, S> {
         block.is_finite().then_some(block)
     }
 
+    /// One block on: the step regressor's block mean and the step response at the next
+    /// block's start from `row` and `response` (`r_m`, `s(mD)`), and `r_{m+1}`.
+    #[inline(always)]
+    fn advance(&self, row: &[T; S], response: T) -> (T, T, [T; S]) {
+        let (mut mean, mut next_response) = (response, response);
+        let mut next = [T::ZERO; S];
+        for i in 0..S {
+            let ri = row[i];
+            mean += ri * self.step_mean_weights[i];
+            next_response += ri * self.step_end_weights[i];
+            for j in 0..S {
+                next[j] += ri * self.transition[i][j];
+            }
+        }
+        (mean, next_response, next)
+    }
+
     /// The block at which the step response's block means turn for the third time (see
     /// `ringing_blocks`), propagated as the estimator propagates its regressors; 0 when they
     /// do not turn three times within [`MAX_RINGING_BLOCKS`].
@@ -140,16 +157,8 @@ impl<T: Real, const S: usize> BlockModel<T, S> {
         let mut rising: Option<bool> = None;
         let mut turns = 0;
         for block in 0..MAX_RINGING_BLOCKS {
-            let mut mean = response;
-            let mut next = [T::ZERO; S];
-            for i in 0..S {
-                mean += row[i] * self.step_mean_weights[i];
-                response += row[i] * self.step_end_weights[i];
-                for j in 0..S {
-                    next[j] += row[i] * self.transition[i][j];
-                }
-            }
-            row = next;
+            let mean;
+            (mean, response, row) = self.advance(&row, response);
             if let Some(previous) = previous.filter(|&p| mean != p) {
                 let now = mean > previous;
                 if rising.is_some_and(|was| was != now) {
@@ -463,19 +472,8 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
     #[inline(never)]
     fn update(&mut self, y: T) {
         let had_estimate = self.intake.estimate().is_some();
-        let block = &self.block;
         let row = self.state_row;
-        let mut next = [T::ZERO; S];
-        let mut step_mean = self.step_response;
-        let mut step_next = self.step_response;
-        for i in 0..S {
-            let ri = row[i];
-            step_mean += ri * block.step_mean_weights[i];
-            step_next += ri * block.step_end_weights[i];
-            for j in 0..S {
-                next[j] += ri * block.transition[i][j];
-            }
-        }
+        let (step_mean, step_next, next) = self.block.advance(&row, self.step_response);
         // At rest the initial-state columns are left out of the regression (zero active
         // leading columns): the same engine then solves the one-unknown problem.
         let determined_before = self.rows as usize > self.state_columns();
@@ -954,20 +952,22 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
         while self.end - 1 - best > guard && ruled_out(&self.models[self.end - 1]) {
             self.end -= stride;
         }
-        // Not a number: nothing is thinned either.
-        let none_ruled_out = self.fitted().all(|k| self.models[k].residual_sum <= limit);
-        if none_ruled_out {
-            self.thin(terms);
-        }
+        self.thin(terms, limit);
     }
 
     /// A grid whose candidates the data have not told apart (none ruled out) after
     /// `THIN_AFTER_TERMS · stride` residuals: fit every other one from here on, keeping
     /// both ends, down to [`THINNED_CANDIDATES`] (see the type's docs).
-    fn thin(&mut self, terms: u32) {
+    /// `limit`: the residual sum beyond which a candidate is ruled out (see `prune`); the
+    /// candidates are compared only when thinning is due and possible.
+    fn thin(&mut self, terms: u32, limit: T) {
         let spans = (self.end - 1 - self.first) / self.stride;
         let due = terms as usize >= THIN_AFTER_TERMS * self.stride;
-        if self.thins && due && spans.is_multiple_of(2) && spans / 2 + 1 >= THINNED_CANDIDATES {
+        if !(self.thins && due && spans.is_multiple_of(2) && spans / 2 + 1 >= THINNED_CANDIDATES) {
+            return;
+        }
+        // Not a number: nothing is thinned either.
+        if self.fitted().all(|k| self.models[k].residual_sum <= limit) {
             self.stride *= 2;
         }
     }
