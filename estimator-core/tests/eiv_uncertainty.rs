@@ -213,26 +213,45 @@ fn iv_states_no_u_with_weak_instruments_on_the_load_cell() {
     }
 }
 
+/// Over `runs` noisy copies of the thesis scene at `snr_db` (noise seed `seed`), each fed
+/// to a fresh f32 and f64 pair from `build(gain, σ)`: the worst relative difference of the
+/// f32 `u` from the f64 one, and how many readings both stated.
+fn thesis_u_f32_against_f64<E32, E64>(
+    snr_db: f64,
+    runs: usize,
+    seed: u64,
+    build: impl Fn(f64, f64) -> (E32, E64),
+) -> (f64, usize)
+where
+    E32: Estimator<f32>,
+    E64: Estimator<f64>,
+{
+    let (y, g, _, sigma) = thesis_scene(snr_db);
+    let mut noise = Gaussian::new(seed);
+    let (mut worst, mut compared) = (0.0f64, 0);
+    for _ in 0..runs {
+        let (mut e32, mut e64) = build(g, sigma);
+        let samples = y
+            .iter()
+            .map(|clean| (clean + sigma * noise.sample()) as f32);
+        let (run_worst, run_compared) = u_f32_against_f64(&mut e32, &mut e64, samples);
+        worst = worst.max(run_worst);
+        compared += run_compared;
+    }
+    (worst, compared)
+}
+
 /// f32 states the f64 `u` of the same data within 10 % wherever both state one.
 #[test]
 fn iv_f32_states_the_f64_uncertainty() {
     let runs = 40;
     for snr_db in [30.0, 50.0, 70.0] {
-        let (y, g, _, sigma) = thesis_scene(snr_db);
-        let mut noise = Gaussian::new(13);
-        let (mut worst, mut compared) = (0.0f64, 0);
-        for _ in 0..runs {
-            let mut e64 = Iv::new(IvConfig::new(StepConfig::new(2, g))).unwrap();
-            let mut e32 =
+        let (worst, compared) = thesis_u_f32_against_f64(snr_db, runs, 13, |g, _| {
+            let e32 =
                 IvStepEstimator::<f32, 8, 8>::new(IvConfig::new(StepConfig::new(2, g as f32)))
                     .unwrap();
-            let samples = y
-                .iter()
-                .map(|clean| (clean + sigma * noise.sample()) as f32);
-            let (run_worst, run_compared) = u_f32_against_f64(&mut e32, &mut e64, samples);
-            worst = worst.max(run_worst);
-            compared += run_compared;
-        }
+            (e32, Iv::new(IvConfig::new(StepConfig::new(2, g))).unwrap())
+        });
         println!("IV thesis {snr_db} dB: f32 u against f64, worst {worst:.2e} over {compared}");
         assert!(compared > runs * 150, "{snr_db} dB: {compared}");
         assert!(worst < 0.1, "{snr_db} dB: {worst}");
@@ -327,24 +346,16 @@ fn bc_states_no_u_on_the_load_cell() {
 fn bc_f32_states_the_f64_uncertainty() {
     let runs = 40;
     for snr_db in [30.0, 50.0, 70.0] {
-        let (y, g, _, sigma) = thesis_scene(snr_db);
-        let variance = sigma * sigma;
-        let mut noise = Gaussian::new(23);
-        let (mut worst, mut compared) = (0.0f64, 0);
-        for _ in 0..runs {
-            let mut e64 =
-                Bc::new(BiasCompensatedConfig::new(StepConfig::new(2, g), variance)).unwrap();
-            let mut e32 = BiasCompensatedStepEstimator::<f32, 8, 8>::new(
-                BiasCompensatedConfig::new(StepConfig::new(2, g as f32), variance as f32),
-            )
+        let (worst, compared) = thesis_u_f32_against_f64(snr_db, runs, 23, |g, sigma| {
+            let variance = sigma * sigma;
+            let e32 = BiasCompensatedStepEstimator::<f32, 8, 8>::new(BiasCompensatedConfig::new(
+                StepConfig::new(2, g as f32),
+                variance as f32,
+            ))
             .unwrap();
-            let samples = y
-                .iter()
-                .map(|clean| (clean + sigma * noise.sample()) as f32);
-            let (run_worst, run_compared) = u_f32_against_f64(&mut e32, &mut e64, samples);
-            worst = worst.max(run_worst);
-            compared += run_compared;
-        }
+            let e64 = Bc::new(BiasCompensatedConfig::new(StepConfig::new(2, g), variance)).unwrap();
+            (e32, e64)
+        });
         println!("BCLS thesis {snr_db} dB: f32 u against f64, worst {worst:.2e} over {compared}");
         assert!(compared > runs * 100, "{snr_db} dB: {compared}");
         assert!(worst < 0.1, "{snr_db} dB: {worst}");
