@@ -62,8 +62,14 @@ impl Cell {
 
 /// The scenes `study coverage` runs by default: the reference drop in white noise, and the
 /// same drop with noise coloured as on the thesis's rig (`rig-noise`: vibration near the
-/// resonance, its Fig. 5.9) and with floor vibration and 50 Hz mains (`vibration`).
-pub const SCENES: [&str; 3] = ["reference-step", "rig-noise", "vibration"];
+/// resonance, its Fig. 5.9) and with floor vibration and 50 Hz mains (`vibration`); and a
+/// load off calibration (`off-calibration`: 340 g, 2.5 times the identified mass).
+pub const SCENES: [&str; 4] = [
+    "reference-step",
+    "rig-noise",
+    "vibration",
+    "off-calibration",
+];
 
 /// The cells of one SNR, in [`TIMES_MS`] order.
 #[derive(Clone, Debug, PartialEq)]

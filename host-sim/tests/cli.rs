@@ -629,3 +629,30 @@ fn a_moved_binary_needs_nothing_from_its_source_tree() {
     assert!(replay.starts_with("t_s,mass_g,u_g,state,final"), "{replay}");
     assert!(replay.lines().count() > 10, "{replay}");
 }
+
+/// `study coverage --scene FILE` names the charts by the file's stem: a scene given as a
+/// path once made the chart's name a path into a directory that did not exist, and the
+/// study failed after its runs with "drawing failed: No such file or directory".
+#[test]
+fn coverage_study_on_a_scene_file_names_its_charts_by_the_stem() {
+    let out = temp("coverage-on-file");
+    let _ = std::fs::remove_dir_all(&out);
+    let scene = temp("my-drop.toml");
+    std::fs::write(
+        &scene,
+        "duration_s = 0.5\n[[events]]\ntime_s = 0.0\nmass_g = 200.0\n",
+    )
+    .unwrap();
+    run_ok(
+        host_sim()
+            .args([
+                "study", "coverage", "--runs", "8", "--seed", "1", "--snr-db", "50",
+            ])
+            .args(["--method", "step:n=5,D=24", "--scene"])
+            .arg(&scene)
+            .arg("--out")
+            .arg(&out),
+    );
+    assert!(out.join("coverage-my-drop-0.svg").exists());
+    assert!(out.join("coverage.md").exists());
+}

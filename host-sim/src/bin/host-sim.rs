@@ -868,20 +868,25 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
     let stdout = std::io::stdout();
     let mut charts = Vec::new();
     for scene in &scenes {
+        // A scene given as a file is named by its stem in the charts' file names.
+        let stem = std::path::Path::new(scene)
+            .file_stem()
+            .and_then(|stem| stem.to_str())
+            .unwrap_or(scene);
         for (m, method) in methods.iter().enumerate() {
             let rows = host_sim::coverage::study(scene, method, runs as u64, args.seed, &snr_db)?;
             let (name, label) = match (defaults, m) {
                 (true, 0) => (
-                    format!("coverage-{scene}-firmware"),
+                    format!("coverage-{stem}-firmware"),
                     format!("firmware `{method}`"),
                 ),
                 (true, _) => (
-                    format!("coverage-{scene}-bank"),
+                    format!("coverage-{stem}-bank"),
                     "identified-model bank (f32)".to_string(),
                 ),
-                (false, _) => (format!("coverage-{scene}-{m}"), format!("`{method}`")),
+                (false, _) => (format!("coverage-{stem}-{m}"), format!("`{method}`")),
             };
-            let title = format!("{label} on {scene}, {runs} runs per SNR");
+            let title = format!("{label} on {stem}, {runs} runs per SNR");
             host_sim::coverage::write_chart(&rows, &title, &args.out.join(&name))?;
             charts.push(name);
             let header = format!(

@@ -21,6 +21,10 @@ pub const SHIPPED_SCENES: &[(&str, &str)] = &[
         include_str!("../../scenes/dropped-from-height.toml"),
     ),
     (
+        "off-calibration",
+        include_str!("../../scenes/off-calibration.toml"),
+    ),
+    (
         "placed-by-hand",
         include_str!("../../scenes/placed-by-hand.toml"),
     ),
