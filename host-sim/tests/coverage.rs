@@ -108,13 +108,16 @@ fn the_bank_states_no_u_before_the_cell_has_rung_and_a_u_that_holds_after() {
 /// In noise coloured as on the thesis's rig (vibration at the resonance outweighing the
 /// white noise at 80 dB) the model's white-noise autocovariance made the firmware's `u`
 /// over-confident: 85-89 % within ±2u at 100-200 ms. The residuals' own autocovariance at
-/// lags 1..n, where larger, brings it to 95-97 % (`study coverage --runs 1000 --seed 1`).
+/// lags 1..n, where larger, brought it to 95-97 %, but at 400 ms it held 86.5 % (91.0 % at
+/// 70 dB): at D = 24 the 25 Hz vibration's period is 6.7 blocks, longer than the n = 5
+/// lags. Summed over all 8 lags kept, tapered beyond n: 95.7 % (`study coverage --runs
+/// 1000 --seed 1`).
 #[test]
 fn the_firmware_u_widens_for_the_rigs_coloured_noise() {
     let (method, _) = firmware_default().unwrap();
     let rows = study("rig-noise", &method, 600, 11, &[80.0]).unwrap();
     for (t, cell) in TIMES_MS.iter().zip(&rows[0].cells) {
-        if (100..=200).contains(t) {
+        if (100..=400).contains(t) {
             let coverage = cell.coverage().unwrap();
             assert!(coverage >= 0.90, "{t} ms: {:.1} %", 100.0 * coverage);
         }

@@ -978,11 +978,12 @@ mod tests {
         );
         assert_eq!(script.respond(&line(1800, "Stable", 600)), Some(TARE_LINE));
         assert_eq!(script.respond(&line(2000, "Stable", 800)), None);
-        // The pouring (from 1.7 s): an unstable line 0.1 s in.
+        // The pouring (from 1.8 s): lines before it and 0.05 s in are not answered, an
+        // unstable line 0.15 s in is.
         assert_eq!(script.respond(&line(7000, "Estimating", 200)), None);
         assert_eq!(script.respond(&line(7400, "Stable", 200)), None);
         assert_eq!(
-            script.respond(&line(7600, "Estimating", 200)),
+            script.respond(&line(7800, "Estimating", 200)),
             Some(TARE_LINE)
         );
         // The emptied pan (from 3.1 s), settled long enough (reading 1.2 g: stable, not

@@ -187,8 +187,9 @@ pub struct StepEstimator<T: Real, const N: usize, const L: usize = 0> {
     check: Option<ResidualCheck<T>>,
     /// `Σc²` of the latest solution: the next residual's noise in block-mean variances.
     noise_gain: T,
-    /// The rows' lagged cross-products and residual sum of squares, for the uncertainty.
-    lags: LagSums<T, N, L>,
+    /// The rows' lagged cross-products and residual sum of squares, for the uncertainty
+    /// (the residuals' autocovariance over every lag kept: `true`, see `step_uncertainty`).
+    lags: LagSums<T, N, L, true>,
 }
 
 impl<T: Real, const N: usize, const L: usize> StepEstimator<T, N, L> {
