@@ -18,10 +18,10 @@
 //! `P = (ΦᵀΦ)⁻¹`. Its variance is `zᵀ·(Σ_l r_l·(S_l + S_lᵀ))·z` (the `l = 0` term once),
 //! with `r_l` the autocovariance of `ε` at lag `l` (zero beyond `n`) and
 //! `S_l = Σ_k φ_k·φ_{k−l}ᵀ` the lagged cross-products of the regression rows. `S_0 = ΦᵀΦ`
-//! needs nothing stored (`zᵀ·S_0·z` is `z`'s last entry); the lags `1..=L` are summed here,
-//! row by row, from a ring of the last `L` rows (`L ≥ n`, the lags kept). The autocovariance comes from `h` (the
-//! current `ℓ`) and the noise level from the residuals: `r_l = s²·Σ_m h_m h_{m+l} / Σ_m h_m²`,
-//! `s²` the residual mean square. The regressors' noise also biases the level, by
+//! needs nothing stored (`zᵀ·S_0·z` is `z`'s last entry); the lags `1..=n` are summed here,
+//! row by row, from a ring of the last `L` rows (`L ≥ n`, the lags kept; the step sums up
+//! to `L`, below). The autocovariance comes from `h` (the current `ℓ`) and the noise level
+//! from the residuals: `r_l = s²·Σ_m h_m h_{m+l} / Σ_m h_m²`, `s²` the residual mean square. The regressors' noise also biases the level, by
 //! `N·σ²·Σ_i z_i·(h_{n−1−i} − h_{n−i})` to first order (thesis eq. 4.15 in this form); it
 //! is added to the variance, not corrected, so the estimate stays the thesis's.
 //!
@@ -38,8 +38,9 @@
 //! column's part (`Σ` of each row and the pairs, O(n) per lag and row instead of O(n²)):
 //! the step's difference columns die out with the transient, and with the full products
 //! every cell of that study's tables for the firmware default on the rig's noise and the
-//! reference drop came out the same to 0.1 %, at 45 more instructions per sample. Not for the ramp, whose regressors do not die out (its input
-//! is a line): it sums its order's lags only.
+//! reference drop came out the same to 0.1 %, at 45 more instructions per sample. Not for
+//! the ramp, whose regressors do not die out (its input is a line), nor for IV and bias
+//! compensation: they sum their order's lags only.
 //!
 //! With few rows `s²` is itself uncertain: the stated `u` is multiplied by
 //! `t_{0.975}(ν)/2` where that exceeds 1 (ν = rows − (n + 1)), so that ±2u is a 95 %
@@ -353,15 +354,17 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool>
             n
         };
         for lag in 1..=observed_lags {
+            let index = lag - 1;
+            // The model's lags (1..=n): its moving average's autocovariance, and the rows'
+            // full cross-products. Beyond n the model's covariance is zero and only the
+            // constant column's part is kept.
+            let model_lag = lag <= n;
             let mut covariance = T::ZERO;
-            if lag <= n {
+            let mut quadratic = T::ZERO;
+            if model_lag {
                 for m in 0..=(n - lag) {
                     covariance += noise_model.at(n, m) * noise_model.at(n, m + lag);
                 }
-            }
-            let index = lag - 1;
-            let mut quadratic = T::ZERO;
-            if lag <= n {
                 for (products, &zi) in self.products[index].iter().zip(z) {
                     let mut row = T::ZERO;
                     for (&product, &zj) in products[..n].iter().zip(z) {
@@ -375,11 +378,13 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool>
                 sides += (newer + older) * zi;
             }
             quadratic += z_level * (sides + z_level * self.pairs[index]);
-            variance += T::from_f64(2.0) * noise * covariance * quadratic;
+            if model_lag {
+                variance += T::from_f64(2.0) * noise * covariance * quadratic;
+            }
             if self.residual_pairs[index] > 0 {
                 let lagged = self.residual_lags[index] / T::from_u32(self.residual_pairs[index]);
                 // Beyond the order the lags taper linearly to zero after `L` (Bartlett).
-                let taper = if lag <= n {
+                let taper = if model_lag {
                     T::ONE
                 } else {
                     T::from_u32((L + 1 - lag) as u32) / T::from_u32((L + 1 - n) as u32)
