@@ -167,6 +167,21 @@ pub struct Scale<E> {
     block_alarmed: bool,
     /// The block test saw motion at the last shown reading (`change::in_motion`).
     moving: bool,
+    /// The last squared differences of consecutive block means of this run (g²), how many
+    /// in the run, and the last block mean: the block means' scatter, for the block in
+    /// progress (`change::judge_parts`).
+    block_mean_squares_g2: [f32; change::PARTIAL_SCATTER_BLOCKS],
+    block_mean_pairs: u32,
+    last_block_mean_g: f32,
+    /// The smallest mean excess of the block in progress that is motion, g: a part of the
+    /// permissible error of the load shown at the last whole block.
+    partial_floor_g: f32,
+    /// The block in progress's sum at each of its part boundaries so far, g, and whether it
+    /// said motion at the last (`change::judge_parts`).
+    part_sums_g: [f32; change::PARTIAL_PARTS],
+    partial_moving: bool,
+    /// Samples of the block in progress to its next part boundary.
+    part_left: u32,
     /// This run began at a change only the block test saw: nothing is stable before the
     /// raw tests are armed again.
     after_slow_change: bool,
@@ -268,6 +283,13 @@ impl<E: ScaleEstimator> Scale<E> {
             ringing_sum_samples: ringing_sum_samples(&config),
             block_alarmed: false,
             moving: false,
+            block_mean_squares_g2: [0.0; change::PARTIAL_SCATTER_BLOCKS],
+            block_mean_pairs: 0,
+            last_block_mean_g: 0.0,
+            partial_floor_g: f32::INFINITY,
+            part_sums_g: [0.0; change::PARTIAL_PARTS],
+            partial_moving: false,
+            part_left: 0,
             after_slow_change: false,
             uncertain_samples: 0,
             restarted_uncertain: false,
@@ -430,7 +452,11 @@ impl<E: ScaleEstimator> Scale<E> {
         self.block_square_g2 = 0.0;
         self.block_difference_g2 = 0.0;
         self.block_filled = 0;
+        self.part_left = 0;
         self.moving = false;
+        self.block_mean_pairs = 0;
+        self.partial_floor_g = f32::INFINITY;
+        self.partial_moving = false;
         self.samples_since_change = 0;
         self.update_phase = 0;
         self.stable_samples = 0;
