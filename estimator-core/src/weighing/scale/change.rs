@@ -251,9 +251,9 @@ impl<E: ScaleEstimator> Scale<E> {
     /// last block means' scatter, from their consecutive differences, scaled to the
     /// samples in it) and more than the floor `end_block_scatter` set. The block test's own
     /// level is fixed in grams (a quarter of its threshold, 0.0375 g by default): on a quiet
-    /// pan an item of 1 e, or a tared item lifted off by hand at 0.9 g/s, took 50–120 ms to
-    /// reach it while the old mass stayed `Stable` (`host-sim torture --runs 1000 --seed
-    /// 1`, runs 867 and 421). From part boundaries, not only the block's start: an item
+    /// pan an item of 1 e took up to 55 ms to reach it, and a tared item lifted off by hand
+    /// at 0.9 g/s about 120 ms, while the old mass stayed `Stable` (the test below;
+    /// `host-sim torture --runs 1000 --seed 1`, run 421). From part boundaries, not only the block's start: an item
     /// arriving mid-block is diluted by the samples before it.
     fn judge_parts(&mut self) {
         // A countdown, not `block_filled % part`: a division on every sample. Zero at the
