@@ -21,7 +21,8 @@
 //! needs nothing stored (`zᵀ·S_0·z` is `z`'s last entry); the lags `1..=n` are summed here,
 //! row by row, from a ring of the last `L` rows (`L ≥ n`, the lags kept; the step sums up
 //! to `L`, below). The autocovariance comes from `h` (the current `ℓ`) and the noise level
-//! from the residuals: `r_l = s²·Σ_m h_m h_{m+l} / Σ_m h_m²`, `s²` the residual mean square. The regressors' noise also biases the level, by
+//! from the residuals: `r_l = s²·Σ_m h_m h_{m+l} / Σ_m h_m²`, `s²` the residual mean
+//! square. The regressors' noise also biases the level, by
 //! `N·σ²·Σ_i z_i·(h_{n−1−i} − h_{n−i})` to first order (thesis eq. 4.15 in this form); it
 //! is added to the variance, not corrected, so the estimate stays the thesis's.
 //!

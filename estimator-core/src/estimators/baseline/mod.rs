@@ -326,32 +326,25 @@ impl<T: Real, const K: usize, F: Prefilter<T>> Baseline<T, K, F> {
                 window_differences += sum;
             }
             let window_samples = K as u64 * u64::from(self.config.block);
+            let uncertainty = self.mean_uncertainty(
+                squares,
+                K as u32,
+                T::from_u32(K as u32),
+                white_block_variance(window_differences, window_samples, self.config.block),
+            );
             if self.config.mode == BaselineMode::SettledAverage {
+                // Everything in the stable window counts towards the average.
                 self.settled_differences = window_differences;
                 self.settled_difference_count = window_samples;
-                // Everything in the stable window counts towards the average.
-                let count = K as u64 * u64::from(self.config.block);
                 self.settled_origin = mean;
                 self.settled_sum = T::ZERO;
-                self.settled_count = count;
+                self.settled_count = window_samples;
                 self.settled_blocks = K as u32;
                 self.settled_block_mean = T::ZERO;
                 self.settled_block_squares = squares;
-                self.settled_uncertainty = self.mean_uncertainty(
-                    squares,
-                    K as u32,
-                    T::from_u32(K as u32),
-                    white_block_variance(window_differences, window_samples, self.config.block),
-                );
-                self.intake.state_uncertainty(self.settled_uncertainty);
-            } else {
-                self.intake.state_uncertainty(self.mean_uncertainty(
-                    squares,
-                    K as u32,
-                    T::from_u32(K as u32),
-                    white_block_variance(window_differences, window_samples, self.config.block),
-                ));
+                self.settled_uncertainty = uncertainty;
             }
+            self.intake.state_uncertainty(uncertainty);
         } else {
             self.intake.warm_up();
         }

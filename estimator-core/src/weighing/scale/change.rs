@@ -226,8 +226,8 @@ impl<E: ScaleEstimator> Scale<E> {
     /// from the last one into the run's block-mean scatter, and the floor of the motion the
     /// block in progress may show ([`PARTIAL_LAG_OF_PERMISSIBLE`] of the permissible error).
     fn end_block_scatter(&mut self, block_mean_g: f32, gross_g: f32) {
-        if self.partial_floor_g.is_finite() {
-            let difference = block_mean_g - self.last_block_mean_g;
+        if let Some(last_g) = self.last_block_mean_g {
+            let difference = block_mean_g - last_g;
             // A NaN mean never poisons the sum (the comparison fails).
             let square = difference * difference;
             if square < f32::INFINITY {
@@ -238,7 +238,7 @@ impl<E: ScaleEstimator> Scale<E> {
                 self.block_mean_pairs = self.block_mean_pairs.saturating_add(1);
             }
         }
-        self.last_block_mean_g = block_mean_g;
+        self.last_block_mean_g = Some(block_mean_g);
         self.partial_floor_g =
             PARTIAL_LAG_OF_PERMISSIBLE * self.config.permissible_error_g(gross_g - self.tare_g);
     }
@@ -373,6 +373,36 @@ mod tests {
         assert!(!cusum.step(f32::NAN, 0.5, 5.0));
     }
 
+    /// A scale settled for 3 s (plus `offset` samples) on `load_g` with `noise_g` of noise
+    /// (`seed`), then `change_g` put on at once: from `skip` samples after it on, no
+    /// reading is shown `Stable` further than `tolerance_g` from the load.
+    fn item_on_a_settled_load(
+        noise_g: f64,
+        seed: u64,
+        load_g: f64,
+        offset: usize,
+        change_g: f64,
+        skip: usize,
+        tolerance_g: f64,
+    ) {
+        let (mut scale, _) = scene(noise_g);
+        let mut cell = Cell::seeded(noise_g, seed);
+        cell.load_g = load_g;
+        run(&mut scale, &mut cell, 3 * 4000 + offset);
+        assert_eq!(scale.reading().state, ScaleState::Stable, "seed {seed}");
+        cell.load_g += change_g;
+        let after = run(&mut scale, &mut cell, 800);
+        for (index, reading) in after.iter().enumerate().skip(skip) {
+            if let (ScaleState::Stable, Some(mass)) = (reading.state, reading.mass_g) {
+                assert!(
+                    (f64::from(mass) - cell.load_g).abs() <= tolerance_g,
+                    "seed {seed}, offset {offset}: {} ms after {change_g} g, {reading:?}",
+                    index / 4
+                );
+            }
+        }
+    }
+
     /// An item of 5 e put on a settled load, wherever it lands in the block test's 100 ms
     /// blocks: 50 ms later (one readout period) the old mass is no longer shown stable. The
     /// block test judged only whole blocks, so an item landing just after a boundary left
@@ -389,22 +419,7 @@ mod tests {
             (5, 307),
             (6, 389),
         ] {
-            let (mut scale, _) = scene(0.43);
-            let mut cell = Cell::seeded(0.43, seed);
-            cell.load_g = 200.0;
-            run(&mut scale, &mut cell, 3 * 4000 + offset);
-            assert_eq!(scale.reading().state, ScaleState::Stable);
-            cell.load_g += 5.0 * e;
-            let after = run(&mut scale, &mut cell, 800);
-            for (index, reading) in after.iter().enumerate().skip(200) {
-                if let (ScaleState::Stable, Some(mass)) = (reading.state, reading.mass_g) {
-                    assert!(
-                        (f64::from(mass) - cell.load_g).abs() <= e,
-                        "offset {offset}: {} ms after the item, {reading:?}",
-                        index / 4
-                    );
-                }
-            }
+            item_on_a_settled_load(0.43, seed, 200.0, offset, 5.0 * e, 200, e);
         }
     }
 
@@ -426,23 +441,8 @@ mod tests {
             (5, 311, e),
             (6, 397, -e),
         ] {
-            let (mut scale, _) = scene(0.1);
-            let mut cell = Cell::seeded(0.1, seed);
-            cell.load_g = 100.0;
-            run(&mut scale, &mut cell, 3 * 4000 + offset);
-            assert_eq!(scale.reading().state, ScaleState::Stable, "seed {seed}");
-            cell.load_g += change;
-            let permissible = f64::from(config.permissible_error_g(cell.load_g as f32));
-            let after = run(&mut scale, &mut cell, 800);
-            for (index, reading) in after.iter().enumerate().skip(100) {
-                if let (ScaleState::Stable, Some(mass)) = (reading.state, reading.mass_g) {
-                    assert!(
-                        (f64::from(mass) - cell.load_g).abs() <= permissible,
-                        "seed {seed}, offset {offset}: {} ms after {change} g, {reading:?}",
-                        index / 4
-                    );
-                }
-            }
+            let permissible = f64::from(config.permissible_error_g((100.0 + change) as f32));
+            item_on_a_settled_load(0.1, seed, 100.0, offset, change, 100, permissible);
         }
     }
 

@@ -172,7 +172,7 @@ pub struct Scale<E> {
     /// progress (`change::judge_parts`).
     block_mean_squares_g2: [f32; change::PARTIAL_SCATTER_BLOCKS],
     block_mean_pairs: u32,
-    last_block_mean_g: f32,
+    last_block_mean_g: Option<f32>,
     /// The smallest mean excess of the block in progress that is motion, g: a part of the
     /// permissible error of the load shown at the last whole block.
     partial_floor_g: f32,
@@ -285,7 +285,7 @@ impl<E: ScaleEstimator> Scale<E> {
             moving: false,
             block_mean_squares_g2: [0.0; change::PARTIAL_SCATTER_BLOCKS],
             block_mean_pairs: 0,
-            last_block_mean_g: 0.0,
+            last_block_mean_g: None,
             partial_floor_g: f32::INFINITY,
             part_sums_g: [0.0; change::PARTIAL_PARTS],
             partial_moving: false,
@@ -455,7 +455,7 @@ impl<E: ScaleEstimator> Scale<E> {
         self.part_left = 0;
         self.moving = false;
         self.block_mean_pairs = 0;
-        self.partial_floor_g = f32::INFINITY;
+        self.last_block_mean_g = None;
         self.partial_moving = false;
         self.samples_since_change = 0;
         self.update_phase = 0;
