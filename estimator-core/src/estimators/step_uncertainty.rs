@@ -36,7 +36,7 @@
 //! window): untapered the sum's own scatter widened `u` on white noise enough to delay
 //! the command scene's tare by 0.15 s on 2 of 10 noise seeds (98.7 % at 400 ms then),
 //! tapered by 0.1 s on 1 of 10. Beyond `n` the rows' cross-products keep only their constant
-//! column's part (`Σ` of each row and the pairs, O(n) per lag and row instead of O(n²)):
+//! column's part (from the rows' running total, O(n) per row for every lag):
 //! the step's difference columns die out with the transient, and with the full products
 //! every cell of that study's tables for the firmware default on the rig's noise and the
 //! reference drop came out the same to 0.1 %, at 45 more instructions per sample. Not for
@@ -65,13 +65,16 @@ pub(crate) struct LagSums<T: Real, const N: usize, const L: usize, const BEYOND_
 {
     /// `Σ_k φ_k[i]·φ_{k−l}[j]` for the difference columns, lag `l` at index `l − 1`.
     products: [[[T; L]; L]; L],
-    /// `Σ_k φ_k[i]` over the rows that have a row `l` before them (the constant column of
-    /// the older row).
-    newer: [[T; L]; L],
-    /// `Σ_k φ_{k−l}[j]` over the same rows.
-    older: [[T; L]; L],
-    /// How many rows have a row `l` before them.
-    pairs: [T; L],
+    /// `C(K) = Σ_{k ≤ K} φ_k`, the rows' running total (padded to `L`). The sums the
+    /// sandwich needs at lag `l`, `Σ_{k=l..K} φ_k` and `Σ_{k=l..K} φ_{k−l}` (the constant
+    /// column of either row against the other's differences), are `C(K) − C(l−1)` and
+    /// `C(K−l)`: from the totals, O(n) per row instead of O(L·n) for a sum per lag.
+    total: [T; L],
+    /// `C(l−1)` for `l = 1..=L`: the total after each of the first `L` rows.
+    early: [[T; L]; L],
+    /// The total before each of the last `L` rows was added, in `history`'s slots: the slot
+    /// of row `K − l + 1` holds `C(K − l)`.
+    totals_before: [[T; L]; L],
     /// The last `L` rows, the newest at `latest` (`u32`: an index below `L`, and the
     /// bare estimator's size stays within its goal).
     history: [[T; L]; L],
@@ -100,9 +103,9 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool>
     pub(crate) fn new() -> Self {
         Self {
             products: [[[T::ZERO; L]; L]; L],
-            newer: [[T::ZERO; L]; L],
-            older: [[T::ZERO; L]; L],
-            pairs: [T::ZERO; L],
+            total: [T::ZERO; L],
+            early: [[T::ZERO; L]; L],
+            totals_before: [[T::ZERO; L]; L],
             history: [[T::ZERO; L]; L],
             latest: 0,
             rows: 0,
@@ -144,34 +147,38 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool>
     }
 
     /// One regression row `row[..n]` (the constant column implied), before it is folded.
+    ///
+    /// The rows are kept padded with zeros to `L` and the inner loops run over the constant
+    /// `L`, which the compiler unrolls: bounded by `n` they cost about 9 instructions per
+    /// product on the Cortex-M4F (a QEMU profile of `cargo xtask bench step`). The sums'
+    /// entries below `n` are the same, bit for bit: the padding adds exact zeros.
     #[inline]
     pub(crate) fn push_row(&mut self, row: &[T; N], n: usize) {
         if !Self::covers(n) || L == 0 {
             return;
         }
-        let row = &row[..n];
-        let held = (self.rows as usize).min(self.lags_for(n));
+        let row = pad::<T, N, L>(row, n);
+        // The lags' full cross-products, for the model's lags (1..=n) only.
+        let held = (self.rows as usize).min(self.lags_for(n)).min(n);
         for lag in 1..=held {
-            let before = &self.history[(self.latest as usize + L - (lag - 1)) % L][..n];
-            let index = lag - 1;
-            if lag <= n {
-                for (products, &x) in self.products[index].iter_mut().zip(row) {
-                    for (product, &y) in products[..n].iter_mut().zip(before) {
-                        *product += x * y;
-                    }
+            // A copy: held in registers across the products (a reference is reloaded).
+            let before = self.history[(self.latest as usize + L - (lag - 1)) % L];
+            for (products, &x) in self.products[lag - 1][..n].iter_mut().zip(&row) {
+                for (product, &y) in products.iter_mut().zip(&before) {
+                    *product += x * y;
                 }
             }
-            for (sum, &x) in self.newer[index][..n].iter_mut().zip(row) {
-                *sum += x;
-            }
-            for (sum, &y) in self.older[index][..n].iter_mut().zip(before) {
-                *sum += y;
-            }
-            self.pairs[index] += T::ONE;
         }
         let latest = (self.latest as usize + 1) % L;
         self.latest = latest as u32;
-        self.history[latest][..n].copy_from_slice(row);
+        self.history[latest] = row;
+        self.totals_before[latest] = self.total;
+        for (total, &x) in self.total.iter_mut().zip(&row) {
+            *total += x;
+        }
+        if let Some(early) = self.early.get_mut(self.rows as usize) {
+            *early = self.total;
+        }
         self.rows = self.rows.saturating_add(1);
     }
 
@@ -338,7 +345,8 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool>
                 mean_square = floor * power;
             }
         }
-        let z = &z[..n];
+        // Padded to `L` for the constant-bound loops (see `push_row`).
+        let z = pad::<T, N, L>(z, n);
         let mut variance = mean_square * lag0;
         // The same with the residuals' own autocovariance at lags 1..L (noise that is not
         // white: vibration near the resonance made the model's `u` over-confident, 73 % at
@@ -354,6 +362,7 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool>
         } else {
             n
         };
+        let total = self.total_along(&z);
         for lag in 1..=observed_lags {
             let index = lag - 1;
             // The model's lags (1..=n): its moving average's autocovariance, and the rows'
@@ -361,24 +370,15 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool>
             // constant column's part is kept.
             let model_lag = lag <= n;
             let mut covariance = T::ZERO;
-            let mut quadratic = T::ZERO;
             if model_lag {
-                for m in 0..=(n - lag) {
-                    covariance += noise_model.at(n, m) * noise_model.at(n, m + lag);
+                // Σ_{m=0..n−lag} h_m·h_{m+lag}, the last term's h_n kept apart (as `at` has it).
+                let h = &noise_model.h;
+                for (&early, &late) in h[..n - lag].iter().zip(&h[lag..n]) {
+                    covariance += early * late;
                 }
-                for (products, &zi) in self.products[index].iter().zip(z) {
-                    let mut row = T::ZERO;
-                    for (&product, &zj) in products[..n].iter().zip(z) {
-                        row += product * zj;
-                    }
-                    quadratic += zi * row;
-                }
+                covariance += h[n - lag] * noise_model.h_last;
             }
-            let mut sides = T::ZERO;
-            for ((&newer, &older), &zi) in self.newer[index].iter().zip(&self.older[index]).zip(z) {
-                sides += (newer + older) * zi;
-            }
-            quadratic += z_level * (sides + z_level * self.pairs[index]);
+            let quadratic = self.lag_quadratic(lag, n, &z, z_level, total);
             if model_lag {
                 variance += T::from_f64(2.0) * noise * covariance * quadratic;
             }
@@ -399,6 +399,50 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool>
             variance = observed;
         }
         Some((variance, noise))
+    }
+}
+
+impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool>
+    LagSums<T, N, L, BEYOND_ORDER>
+{
+    /// `zᵀ·C(K)` for `z` padded to `L`: the newest rows' share of every lag's
+    /// constant-column part (see `total`), the same for every lag.
+    #[inline]
+    fn total_along(&self, z: &[T; L]) -> T {
+        let mut total = T::ZERO;
+        for (&sum, &zi) in self.total.iter().zip(z) {
+            total += sum * zi;
+        }
+        total
+    }
+
+    /// `[z; z_level]ᵀ·S_lag·[z; z_level]` (module docs) for `z` padded to `L` and
+    /// `total = self.total_along(z)`: the rows' full cross-products for the model's lags
+    /// (`lag ≤ n`), and beyond them the constant column's part only, over the rows with a
+    /// row `lag` before them.
+    #[inline]
+    fn lag_quadratic(&self, lag: usize, n: usize, z: &[T; L], z_level: T, total: T) -> T {
+        let index = lag - 1;
+        let mut quadratic = T::ZERO;
+        if lag <= n {
+            for (products, &zi) in self.products[index][..n].iter().zip(z) {
+                let mut row = T::ZERO;
+                for (&product, &zj) in products.iter().zip(z) {
+                    row += product * zj;
+                }
+                quadratic += zi * row;
+            }
+        }
+        if let Some(pairs) = self.rows.checked_sub(lag as u32).filter(|&pairs| pairs > 0) {
+            // Σ_{k=lag..K} (φ_k + φ_{k−lag})·z = zᵀ·(C(K) − C(lag−1) + C(K−lag)).
+            let older = &self.totals_before[(self.latest as usize + L - index) % L];
+            let mut sides = total;
+            for ((&early, &older), &zi) in self.early[index].iter().zip(older).zip(z) {
+                sides += (older - early) * zi;
+            }
+            quadratic += z_level * (sides + z_level * T::from_u32(pairs));
+        }
+        quadratic
     }
 }
 
@@ -443,6 +487,14 @@ impl<T: Real, const L: usize> NoiseModel<T, L> {
             self.h_last
         }
     }
+}
+
+/// `v[..n]` followed by zeros, `L` long (`n ≤ L`, checked by the caller).
+#[inline]
+fn pad<T: Real, const N: usize, const L: usize>(v: &[T; N], n: usize) -> [T; L] {
+    let mut padded = [T::ZERO; L];
+    padded[..n].copy_from_slice(&v[..n]);
+    padded
 }
 
 /// `u = √variance`, times the t-factor of `degrees`; `None` for a variance that is not
@@ -519,6 +571,57 @@ mod tests {
         assert!((coverage_factor::<f64>(60) - 1.0).abs() < 1e-3);
         assert_eq!(coverage_factor::<f64>(61), 1.0);
         assert_eq!(coverage_factor::<f64>(10_000), 1.0);
+    }
+
+    /// The lag sums kept per row (full cross-products up to the order, running totals for
+    /// the constant column) give each lag's quadratic form as the rows themselves do, before
+    /// and after the ring of kept rows wraps and for every lag kept.
+    #[test]
+    fn each_lags_quadratic_form_matches_the_rows_summed_directly() {
+        use crate::weighing::test_scene::unit_noise;
+        const L: usize = 5;
+        let n = 3;
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut noise = move || unit_noise(&mut state);
+        let mut sums = LagSums::<f64, 4, L, true>::new();
+        let mut rows = [[0.0; 4]; 20];
+        let z = pad::<f64, 4, L>(&[noise(), noise(), noise(), 0.0], n);
+        let z_level = noise();
+        for count in 1..=rows.len() {
+            let row = [noise(), noise(), noise(), 0.0];
+            sums.push_row(&row, n);
+            rows[count - 1] = row;
+            let rows = &rows[..count];
+            let total = sums.total_along(&z);
+            for lag in 1..=L {
+                // [φ_k; 1]ᵀ·w · [φ_{k−lag}; 1]ᵀ·w summed, leading entries beyond n dropped.
+                let along = |row: &[f64; 4], full: bool| -> f64 {
+                    let lead: f64 = (0..n).map(|i| row[i] * z[i]).sum();
+                    if full {
+                        lead + z_level
+                    } else {
+                        z_level
+                    }
+                };
+                let mut direct = 0.0;
+                for k in lag..rows.len() {
+                    let (newer, older) = (&rows[k], &rows[k - lag]);
+                    direct += if lag <= n {
+                        along(newer, true) * along(older, true)
+                    } else {
+                        // Beyond the order: the constant column against the other row.
+                        along(newer, true) * z_level + z_level * along(older, true)
+                            - z_level * z_level
+                    };
+                }
+                let kept = sums.lag_quadratic(lag, n, &z, z_level, total);
+                assert!(
+                    (kept - direct).abs() <= 1e-9 * (1.0 + direct.abs()),
+                    "rows {}, lag {lag}: kept {kept}, direct {direct}",
+                    rows.len()
+                );
+            }
+        }
     }
 
     #[test]

@@ -555,13 +555,26 @@ pub fn bench() -> Result<()> {
     result
 }
 
-/// `cargo xtask bench bank`: only the model bank's line of [`bench`] (its QEMU image built
-/// and run, its STM32 image's size), for a quicker loop on the bank's cost.
-pub fn bench_bank() -> Result<()> {
+/// Which of [`bench`]'s other methods [`bench_one`] benches alone.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BenchOne {
+    /// `cargo xtask bench step`: the step estimator at n = 7, D = 16.
+    Step,
+    /// `cargo xtask bench bank`: the model bank.
+    Bank,
+}
+
+/// `cargo xtask bench step` / `bench bank`: only that method's line of [`bench`] (its QEMU
+/// image built and run, its STM32 image's size), for a quicker loop on its cost.
+pub fn bench_one(which: BenchOne) -> Result<()> {
     let result = (|| -> Result<()> {
         let shipped = shipped_config()?;
-        let [_, bank] = bench_variants(&shipped)?;
-        bench_variant(&shipped, &bank)
+        let [step, bank] = bench_variants(&shipped)?;
+        let variant = match which {
+            BenchOne::Step => step,
+            BenchOne::Bank => bank,
+        };
+        bench_variant(&shipped, &variant)
     })();
     // Leave the images as the shipped config builds them.
     build(Board::Qemu, true)?;

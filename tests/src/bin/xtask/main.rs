@@ -30,6 +30,7 @@ commands:
   demo                    run the firmware demo in QEMU and print the live readout
   monitor                 the QEMU demo in host-sim's live monitor (plot of mass and u, CSV log)
   bench                   print host and on-target benchmark figures and estimator sizes
+  bench step              only the step estimator's at n = 7, D = 16 on-target figures
   bench bank              only the model bank's on-target figures (a quicker loop)
   install                 install what a fresh machine lacks (thumb target, QEMU, flip-link)
 ";
@@ -44,7 +45,12 @@ fn main() -> ExitCode {
         ["demo"] => install::ensure_tools().and_then(|()| firmware::demo()),
         ["monitor"] => install::ensure_tools().and_then(|()| firmware::monitor()),
         ["bench"] => bench::run(),
-        ["bench", "bank"] => install::ensure_tools().and_then(|()| firmware::bench_bank()),
+        ["bench", "step"] => {
+            install::ensure_tools().and_then(|()| firmware::bench_one(firmware::BenchOne::Step))
+        }
+        ["bench", "bank"] => {
+            install::ensure_tools().and_then(|()| firmware::bench_one(firmware::BenchOne::Bank))
+        }
         ["install"] => install::ensure_tools(),
         ["help"] | ["--help"] | ["-h"] => {
             print!("{USAGE}");
