@@ -40,7 +40,7 @@
 use crate::estimators::consistency::{NoiseReference, ResidualCheck};
 use crate::estimators::input::{Decimator, DifferenceWindow};
 use crate::estimators::intake::{estimator_via_intake, intake_config_builders, Intake};
-use crate::estimators::step_uncertainty::LagSums;
+use crate::estimators::step_uncertainty::{Hankel, LagSums};
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
 use crate::reading::{ConfigError, InvalidReason};
@@ -189,7 +189,7 @@ pub struct StepEstimator<T: Real, const N: usize, const L: usize = 0> {
     noise_gain: T,
     /// The rows' lagged cross-products and residual sum of squares, for the uncertainty
     /// (the residuals' autocovariance over every lag kept: `true`, see `step_uncertainty`).
-    lags: LagSums<T, N, L, true>,
+    lags: LagSums<T, N, L, true, Hankel>,
 }
 
 impl<T: Real, const N: usize, const L: usize> StepEstimator<T, N, L> {
