@@ -165,12 +165,14 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
         let held = (self.rows as usize).min(self.lags_for(n)).min(n);
         F::push(
             &mut self.cross,
-            &row,
-            n,
-            held,
-            self.rows,
-            &self.history,
-            self.latest as usize,
+            &NewRow {
+                row: &row,
+                n,
+                held,
+                number: self.rows,
+                history: &self.history,
+                latest: self.latest as usize,
+            },
         );
         let latest = (self.latest as usize + 1) % L;
         self.latest = latest as u32;
@@ -441,7 +443,16 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
         let index = lag - 1;
         let has_pairs = self.rows > lag as u32;
         let mut quadratic = if lag <= n {
-            F::lag_products(&self.cross, forms, lag, n, z, has_pairs)
+            F::lag_products(
+                &self.cross,
+                forms,
+                &Lag {
+                    lag,
+                    n,
+                    z,
+                    has_pairs,
+                },
+            )
         } else {
             T::ZERO
         };
@@ -470,30 +481,40 @@ pub(crate) trait CrossForm<T: Real, const L: usize> {
     type Forms;
     /// Nothing summed yet.
     fn zero() -> Self::Sums;
-    /// Fold the padded `row` (row number `rows`, 0 for the first) for the lags `1..=held`
-    /// (`held ≤ n`, the rows with a row `lag` before them); `history[latest]` is the
-    /// previous row, `history[latest − (lag − 1)]` the one `lag` rows back.
-    fn push(
-        sums: &mut Self::Sums,
-        row: &[T; L],
-        n: usize,
-        held: usize,
-        rows: u32,
-        history: &[[T; L]; L],
-        latest: usize,
-    );
+    /// Fold a new row.
+    fn push(sums: &mut Self::Sums, new: &NewRow<'_, T, L>);
     /// The products along `z` (padded to `L`) for an order `n`.
     fn forms(sums: &Self::Sums, n: usize, z: &[T; L]) -> Self::Forms;
-    /// `zᵀ·S_lag·z` over the leading columns (`lag ≤ n`); `has_pairs`: a row `lag` before
-    /// the newest exists.
-    fn lag_products(
-        sums: &Self::Sums,
-        forms: &Self::Forms,
-        lag: usize,
-        n: usize,
-        z: &[T; L],
-        has_pairs: bool,
-    ) -> T;
+    /// `zᵀ·S_lag·z` over the leading columns (`lag ≤ n`).
+    fn lag_products(sums: &Self::Sums, forms: &Self::Forms, lag: &Lag<'_, T, L>) -> T;
+}
+
+/// A row for [`CrossForm::push`]: the padded `row` (row number `number`, 0 for the first),
+/// to fold for the lags `1..=held` (`held ≤ n`, those with a row `lag` before it);
+/// `history[latest]` is the previous row, `history[latest − (lag − 1)]` the one `lag` back.
+pub(crate) struct NewRow<'a, T, const L: usize> {
+    row: &'a [T; L],
+    n: usize,
+    held: usize,
+    number: u32,
+    history: &'a [[T; L]; L],
+    latest: usize,
+}
+
+impl<T: Copy, const L: usize> NewRow<'_, T, L> {
+    /// The row `lag` rows before this one.
+    fn before(&self, lag: usize) -> &[T; L] {
+        &self.history[(self.latest + L - (lag - 1)) % L]
+    }
+}
+
+/// A lag for [`CrossForm::lag_products`]: `lag ≤ n`, `z` padded to `L`, and whether a row
+/// `lag` before the newest exists (`has_pairs`).
+pub(crate) struct Lag<'a, T, const L: usize> {
+    lag: usize,
+    n: usize,
+    z: &'a [T; L],
+    has_pairs: bool,
 }
 
 /// Each lag's `S_l`, lag `l` at index `l − 1`: O(n²) per lag and row.
@@ -509,18 +530,11 @@ impl<T: Real, const L: usize> CrossForm<T, L> for PerLag {
     }
 
     #[inline]
-    fn push(
-        products: &mut Self::Sums,
-        row: &[T; L],
-        n: usize,
-        held: usize,
-        _rows: u32,
-        history: &[[T; L]; L],
-        latest: usize,
-    ) {
+    fn push(products: &mut Self::Sums, new: &NewRow<'_, T, L>) {
+        let &NewRow { row, n, held, .. } = new;
         for lag in 1..=held {
             // A copy: held in registers across the products (a reference is reloaded).
-            let before = history[(latest + L - (lag - 1)) % L];
+            let before = *new.before(lag);
             for (products, &x) in products[lag - 1][..n].iter_mut().zip(row) {
                 for (product, &y) in products.iter_mut().zip(&before) {
                     *product += x * y;
@@ -532,14 +546,8 @@ impl<T: Real, const L: usize> CrossForm<T, L> for PerLag {
     fn forms(_: &Self::Sums, _: usize, _: &[T; L]) -> Self::Forms {}
 
     #[inline]
-    fn lag_products(
-        products: &Self::Sums,
-        _: &Self::Forms,
-        lag: usize,
-        n: usize,
-        z: &[T; L],
-        _: bool,
-    ) -> T {
+    fn lag_products(products: &Self::Sums, _: &Self::Forms, lag: &Lag<'_, T, L>) -> T {
+        let &Lag { lag, n, z, .. } = lag;
         let mut quadratic = T::ZERO;
         for (products, &zi) in products[lag - 1][..n].iter().zip(z) {
             let mut row = T::ZERO;
@@ -595,27 +603,26 @@ impl<T: Real, const L: usize> CrossForm<T, L> for Hankel {
     }
 
     #[inline]
-    fn push(
-        sums: &mut Self::Sums,
-        row: &[T; L],
-        n: usize,
-        held: usize,
-        rows: u32,
-        history: &[[T; L]; L],
-        latest: usize,
-    ) {
+    fn push(sums: &mut Self::Sums, new: &NewRow<'_, T, L>) {
+        let &NewRow {
+            row,
+            n,
+            held,
+            number,
+            ..
+        } = new;
         for (products, &x) in sums.square[..n].iter_mut().zip(row) {
             for (product, &y) in products.iter_mut().zip(row) {
                 *product += x * y;
             }
         }
         for lag in 1..=held {
-            let y = history[(latest + L - (lag - 1)) % L][0];
+            let y = new.before(lag)[0];
             for (product, &x) in sums.first_column[lag - 1].iter_mut().zip(row) {
                 *product += x * y;
             }
         }
-        if let Some(first) = sums.first_rows.get_mut(rows as usize) {
+        if let Some(first) = sums.first_rows.get_mut(number as usize) {
             *first = *row;
         }
     }
@@ -655,14 +662,13 @@ impl<T: Real, const L: usize> CrossForm<T, L> for Hankel {
     /// `S_l[i][j]` is `S_{l−j}[i][0]` (j < l) or `S_0[i][j−l]` (j ≥ l), less the first
     /// rows' products `Σ_{t=1..min(l,j)} d(l−t+i)·d(j−t)`; with no pair yet `S_l` is zero.
     #[inline]
-    fn lag_products(
-        _: &Self::Sums,
-        forms: &Self::Forms,
-        lag: usize,
-        n: usize,
-        z: &[T; L],
-        has_pairs: bool,
-    ) -> T {
+    fn lag_products(_: &Self::Sums, forms: &Self::Forms, lag: &Lag<'_, T, L>) -> T {
+        let &Lag {
+            lag,
+            n,
+            z,
+            has_pairs,
+        } = lag;
         if !has_pairs {
             return T::ZERO;
         }
