@@ -164,7 +164,7 @@ impl<T: Real> StepConfig<T> {
 
 /// The data-driven step-input estimator with capacity for orders up to `N`, stating the
 /// standard uncertainty of its level for orders up to `L` (the default 0 states none and
-/// keeps the bare estimator's size: the lag sums take `L³ + 3L² + L` numbers, see
+/// keeps the bare estimator's size: the lag sums take `6L² + 3L` numbers, see
 /// `crate::estimators::step_uncertainty`).
 ///
 /// Fixed size, no allocation, never panics on data. See the module docs for the method.

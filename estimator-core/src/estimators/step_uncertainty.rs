@@ -58,8 +58,9 @@ use crate::numerics::real::Real;
 pub const MIN_DEGREES_OF_FREEDOM: u32 = 3;
 
 /// The lagged cross-products of the regression rows for lags `1..=L`, and the residual
-/// sum of squares, for orders `n ≤ L` (`L³ + 3L² + L` numbers, whatever the estimator's
-/// capacity `N`). `L = 0` keeps nothing and gives no uncertainty.
+/// sum of squares, for orders `n ≤ L` (`L³ + 3L² + 3L` numbers with [`PerLag`], `6L² + 3L`
+/// with [`Hankel`], whatever the estimator's capacity `N`). `L = 0` keeps nothing and gives
+/// no uncertainty.
 #[derive(Clone, Debug)]
 pub(crate) struct LagSums<
     T: Real,
@@ -161,8 +162,9 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
             return;
         }
         let row = pad::<T, N, L>(row, n);
-        // The lags' full cross-products, for the model's lags (1..=n) only.
-        let held = (self.rows as usize).min(self.lags_for(n)).min(n);
+        // The lags' full cross-products, for the model's lags (1..=n) only, those with a row
+        // `lag` before this one.
+        let held = (self.rows as usize).min(n);
         F::push(
             &mut self.cross,
             &NewRow {
@@ -209,7 +211,7 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
         }
         let held = (self.residuals as usize).min(self.lags_for(n));
         for lag in 1..=held {
-            let before = self.residual_history[(self.residual_latest as usize + L - (lag - 1)) % L];
+            let before = self.residual_history[ring_back::<L>(self.residual_latest as usize, lag)];
             self.residual_lags[lag - 1] += posterior * before;
         }
         let latest = (self.residual_latest as usize + 1) % L;
@@ -441,7 +443,9 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
         forms: &F::Forms,
     ) -> T {
         let index = lag - 1;
-        let has_pairs = self.rows > lag as u32;
+        // The rows with a row `lag` before them.
+        let pairs = self.rows.saturating_sub(lag as u32);
+        let has_pairs = pairs > 0;
         let mut quadratic = if lag <= n {
             F::lag_products(
                 &self.cross,
@@ -456,9 +460,9 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
         } else {
             T::ZERO
         };
-        if let Some(pairs) = self.rows.checked_sub(lag as u32).filter(|&pairs| pairs > 0) {
+        if has_pairs {
             // Σ_{k=lag..K} (φ_k + φ_{k−lag})·z = zᵀ·(C(K) − C(lag−1) + C(K−lag)).
-            let older = &self.totals_before[(self.latest as usize + L - index) % L];
+            let older = &self.totals_before[ring_back::<L>(self.latest as usize, lag)];
             let mut sides = total;
             for ((&early, &older), &zi) in self.early[index].iter().zip(older).zip(z) {
                 sides += (older - early) * zi;
@@ -504,7 +508,7 @@ pub(crate) struct NewRow<'a, T, const L: usize> {
 impl<T: Copy, const L: usize> NewRow<'_, T, L> {
     /// The row `lag` rows before this one.
     fn before(&self, lag: usize) -> &[T; L] {
-        &self.history[(self.latest + L - (lag - 1)) % L]
+        &self.history[ring_back::<L>(self.latest, lag)]
     }
 }
 
@@ -564,8 +568,8 @@ impl<T: Real, const L: usize> CrossForm<T, L> for PerLag {
 /// `S_l[i][j] = S_{l−1}[i][j−1] − d(l−1+i)·d(j−1)` (the sum over rows `l−1..K` less its
 /// first row), so every `S_l` follows from `S_0`, each lag's first column and the first `L`
 /// rows (`d(p + i) = φ_p[i]`): O(n²) per row for all lags instead of O(n³), and O(n²) per
-/// uncertainty instead of O(n³). At n = 7, D = 16 on the Cortex-M4F: 1,008.5 → 988.3
-/// instructions per sample (`cargo xtask bench step`).
+/// uncertainty instead of O(n³). At n = 7, D = 16 on the Cortex-M4F: 1,008.5 → 977.3
+/// instructions per sample (`cargo xtask bench step`, stop 29).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Hankel;
 
@@ -729,6 +733,13 @@ impl<T: Real, const L: usize> NoiseModel<T, L> {
             self.h_last
         }
     }
+}
+
+/// The slot of a ring of `L` whose newest entry is at `latest`, `lag` entries before it
+/// counted from 1 (`lag = 1`: the newest itself).
+#[inline]
+fn ring_back<const L: usize>(latest: usize, lag: usize) -> usize {
+    (latest + L - (lag - 1)) % L
 }
 
 /// `v[..n]` followed by zeros, `L` long (`n ≤ L`, checked by the caller).
