@@ -10,9 +10,14 @@ use crate::reading::{ConfigError, Estimator, Reading};
 
 use super::{WeighingConfig, WeighingMethod};
 
-/// The configured step method states its uncertainty up to this order (the lag sums
-/// take `L³ + 3L² + L` numbers: 2.8 KB in f32 at 8); tuning's orders above it read with
-/// no `u`.
+/// The configured step method states its uncertainty up to this order (the lag sums take
+/// `6L² + 3L` numbers: 1.6 KB in f32 at 8); tuning's orders above it read with no `u`, which
+/// the scale never shows stable. Instrumental variables and bias compensation are built
+/// without lag sums: on the load cell neither could state a `u` (weak instruments; a
+/// compensation never resolved five times over, `estimators::iv_uncertainty`,
+/// `bc_uncertainty`), and the sums would cost IV a third more per sample (`cargo xtask
+/// bench iv` with them built in: 1,299 against 970 instructions at n = 5, D = 24) and each
+/// 3 KB, for readings the scale shows as estimating either way.
 pub const UNCERTAINTY_ORDERS: usize = 8;
 
 /// The largest data-driven order a board's estimator is built to hold whatever its

@@ -132,8 +132,9 @@ impl<E: ScaleEstimator> Scale<E> {
     ///
     /// Stable (and empty) are claims that the reading is right: they need the estimate to
     /// have held its band for `stable_hold_samples`, [`super::VOUCHING_COVERAGE_FACTOR`]
-    /// times its standard uncertainty (where the estimator states one) within the
-    /// permissible error of the net load, and no
+    /// times its standard uncertainty within the permissible error of the net load (a
+    /// reading that states no `u`, or no bound on it, is never stable: instrumental
+    /// variables with weak instruments, a barely resolved compensation), and no
     /// motion building up in the block test. A fresh fit near zero with a `u` of grams is
     /// not an empty pan, and a reading creeping with a trickle is not stable.
     fn show(&mut self, estimate_g: f32) -> bool {
@@ -149,11 +150,9 @@ impl<E: ScaleEstimator> Scale<E> {
             self.stable_centre_g = estimate_g;
             self.stable_samples = 0;
         }
-        let certain = match (self.gross_u_g, self.gross_u_bound_g) {
-            (None, _) => true,
-            (Some(_), Some(bound)) => self.within_permissible(estimate_g - self.tare_g, bound),
-            (Some(_), None) => false,
-        };
+        let certain = self
+            .gross_u_bound_g
+            .is_some_and(|bound| self.within_permissible(estimate_g - self.tare_g, bound));
         // Final once twice the upper confidence bound of `u` meets the target (see
         // `Reading::uncertainty_bound`: on `u` itself the first final readings at 40 dB
         // were wrong a quarter of the time), and only when the scale could show it stable
@@ -169,8 +168,9 @@ impl<E: ScaleEstimator> Scale<E> {
         // ramp) keeps that ramp in its fit for good: its `u` stays above the permissible
         // error on a load that has long come to rest. Once per load change, after
         // `raw_arm_samples` of valid readings that never became certain, start over on
-        // data of the resting load.
-        if !certain && !self.restarted_uncertain {
+        // data of the resting load. Readings with no `u` at all do not count: a fit too
+        // young to state one, or a method that never does (restarting would not help).
+        if !certain && self.gross_u_g.is_some() && !self.restarted_uncertain {
             self.uncertain_samples = self.uncertain_samples.saturating_add(1);
             if self.uncertain_samples >= self.config.raw_arm_samples {
                 self.restart();
@@ -373,11 +373,13 @@ mod tests {
     }
 
     /// The step estimator, its readings flagged `IllConditioned` (not latched) from the
-    /// `from`-th to before the `to`-th sample of each run, as IV can be on a fresh drop.
+    /// `from`-th to before the `to`-th sample of each run, as IV can be on a fresh drop;
+    /// with `unstated`, every reading without its `u`, as IV's with weak instruments.
     struct FlaggedWindow {
         inner: StepEstimator<f32, 8, 8>,
         from: u32,
         to: u32,
+        unstated: bool,
     }
 
     impl Estimator<f32> for FlaggedWindow {
@@ -387,6 +389,9 @@ mod tests {
                 reading.state = State::Invalid(InvalidReason::IllConditioned);
                 reading.estimate = None;
                 reading.residual = None;
+            }
+            if self.unstated {
+                reading.uncertainty = None;
             }
             reading
         }
@@ -418,8 +423,49 @@ mod tests {
             inner: StepScale::<8>::step_estimator(7, 16, 1.0).unwrap(),
             from,
             to,
+            unstated: false,
         };
         Scale::new(ScaleConfig::weighing_default(FS), estimator, calibration()).unwrap()
+    }
+
+    /// A reading with no `u` is a number nobody vouches for: the scale shows it, never as
+    /// stable, empty or final, however still it holds; with its `u` the same weighing is
+    /// stable. (Before, a method stating no `u` — instrumental variables on the load cell,
+    /// whose instruments are weak — was shown `Stable` with no `u` at all.)
+    #[test]
+    fn a_reading_without_its_uncertainty_is_never_shown_stable() {
+        for unstated in [false, true] {
+            let estimator = FlaggedWindow {
+                inner: StepScale::<8>::step_estimator(7, 16, 1.0).unwrap(),
+                from: u32::MAX,
+                to: u32::MAX,
+                unstated,
+            };
+            let mut scale =
+                Scale::new(ScaleConfig::weighing_default(FS), estimator, calibration()).unwrap();
+            let mut cell = Cell::new(0.4);
+            let mut readings = run(&mut scale, &mut cell, 2000);
+            cell.load_g = 138.32;
+            readings.extend(run(&mut scale, &mut cell, 8000));
+            let last = readings.last().unwrap();
+            assert!((last.mass_g.unwrap() - 138.32).abs() < 0.14, "{last:?}");
+            let vouched = |r: &ScaleReading| {
+                matches!(r.state, ScaleState::Stable | ScaleState::Empty) || r.is_final
+            };
+            if unstated {
+                assert!(
+                    !readings.iter().any(vouched),
+                    "{:?}",
+                    readings.iter().find(|r| vouched(r))
+                );
+                assert_eq!(last.state, ScaleState::Estimating, "{last:?}");
+            } else {
+                assert_eq!(last.state, ScaleState::Stable, "{last:?}");
+                assert!(readings[..2000]
+                    .iter()
+                    .any(|r| r.state == ScaleState::Empty));
+            }
+        }
     }
 
     #[test]

@@ -87,8 +87,8 @@ macro_rules! scale_estimator {
 scale_estimator! {
     [const N: usize, const L: usize] StepEstimator<f32, N, L> => |e| e.config().decimation,
         set_white_noise_variance;
-    [const N: usize] BiasCompensatedStepEstimator<f32, N> => |e| e.config().step.decimation;
-    [const N: usize] IvStepEstimator<f32, N> => |e| e.config().step.decimation;
+    [const N: usize, const L: usize] BiasCompensatedStepEstimator<f32, N, L> => |e| e.config().step.decimation;
+    [const N: usize, const L: usize] IvStepEstimator<f32, N, L> => |e| e.config().step.decimation;
     [const S: usize, const K: usize] ModelBank<f32, S, K> => |e| e.decimation();
 }
 

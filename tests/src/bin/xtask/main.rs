@@ -31,6 +31,7 @@ commands:
   monitor                 the QEMU demo in host-sim's live monitor (plot of mass and u, CSV log)
   bench                   print host and on-target benchmark figures and estimator sizes
   bench step              only the step estimator's at n = 7, D = 16 on-target figures
+  bench bc | bench iv     only bias compensation's / instrumental variables' at the shipped n, D
   bench bank              only the model bank's on-target figures (a quicker loop)
   install                 install what a fresh machine lacks (thumb target, QEMU, flip-link)
 ";
@@ -48,6 +49,10 @@ fn main() -> ExitCode {
         ["bench", "step"] => {
             install::ensure_tools().and_then(|()| firmware::bench_one(firmware::BenchOne::Step))
         }
+        ["bench", "bc"] => install::ensure_tools()
+            .and_then(|()| firmware::bench_one(firmware::BenchOne::BiasCompensated)),
+        ["bench", "iv"] => install::ensure_tools()
+            .and_then(|()| firmware::bench_one(firmware::BenchOne::InstrumentalVariable)),
         ["bench", "bank"] => {
             install::ensure_tools().and_then(|()| firmware::bench_one(firmware::BenchOne::Bank))
         }
