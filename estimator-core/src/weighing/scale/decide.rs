@@ -195,8 +195,9 @@ impl<E: ScaleEstimator> Scale<E> {
         // load may still be moving, and a fresh fit of a ramp reads the step model's
         // extrapolation of it: nothing is shown stable until the raw tests are armed again
         // and see no motion.
-        // Decided once per sample and kept for `reading` (which asks again for `final`).
-        self.moving = self.in_motion();
+        // Decided once per sample and kept for `reading` (which asks again for `final`);
+        // asked only where it decides something: a reading that could be stable or final.
+        self.moving = (held || self.final_bound_met) && self.in_motion();
         let stable = held && !self.moving && (self.raw_armed || !self.after_slow_change);
         let empty = estimate_g.abs() <= self.config.empty_band_g;
         self.state = if empty && stable {
