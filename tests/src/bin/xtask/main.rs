@@ -4,8 +4,8 @@
 //!   everything CI checks and prints a summary; it exits non-zero if any step failed.
 //! - `cargo xtask demo` runs the firmware demo (see `firmware.rs`).
 //! - `cargo xtask bench` prints benchmark figures (host updates/s, on-target instructions per
-//!   update, estimator sizes); it asserts nothing about speed. `cargo xtask bench bank` runs
-//!   only the model bank's on-target part.
+//!   update, estimator sizes); it asserts nothing about speed. `cargo xtask bench step`,
+//!   `bench bc`, `bench iv` and `bench bank` run only that method's on-target part.
 //! - `cargo xtask install` only installs the tools.
 //!
 //! It must never hide a failure: every step's outcome is in the summary and the exit status.
