@@ -54,11 +54,15 @@ pub enum ScaleFault {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ScaleState {
-    /// The gross mass is within `empty_band_g` of zero.
+    /// Stable (below), the gross mass within `empty_band_g` of zero.
     Empty,
-    /// A load changed recently; the mass (if any) is the estimator's current answer.
+    /// A load changed recently, or nothing vouches for the reading yet: the mass (if any)
+    /// is the estimator's current answer, with no claim that it is right.
     Estimating,
-    /// The estimate has stayed within the stability band for `stable_hold_samples`.
+    /// The estimate has stayed within the stability band for `stable_hold_samples`, states
+    /// a `u` whose upper bound, [`super::VOUCHING_COVERAGE_FACTOR`] times, is within the
+    /// permissible error, and no motion is building up. A reading without a `u` is never
+    /// stable (nor empty, nor final).
     Stable,
     /// No mass can be shown, and why.
     Invalid(ScaleFault),
@@ -71,8 +75,8 @@ pub struct ScaleReading {
     /// Net mass in grams (gross minus tare); `None` while warming up or invalid.
     pub mass_g: Option<f32>,
     /// The standard uncertainty of `mass_g` in grams (GUM; ±2u is a 95 % interval): the
-    /// estimator's, converted with the gain. `None` without a mass, or when the configured
-    /// method states none. The tare's own uncertainty is not included.
+    /// estimator's, converted with the gain, and the tare's in quadrature when a tare is
+    /// in use. `None` without a mass, or when the configured method states none.
     pub uncertainty_g: Option<f32>,
     /// The reading is final: a mass, estimating or stable, whose 95 % interval (±2u) is
     /// within the configured target ([`super::ScaleConfig::final_target_g`]) and four of

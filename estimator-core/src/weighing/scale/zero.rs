@@ -77,16 +77,15 @@ impl<E: ScaleEstimator> Scale<E> {
 
     /// What tare and zero setting both need of the reading: stable (or empty) with a gross
     /// mass, and known to within ±[`TARE_ACCURACY_E`] e (twice its `u`'s upper bound); the
-    /// gross mass, its `u` and that bound (both zero for a method that states no `u`).
+    /// gross mass, its `u` and that bound. A reading with no `u` is never stable; were one
+    /// to get here, it is refused as uncertain, never taken as known exactly.
     fn settled_reading(&self) -> Result<(f32, f32, f32), Unsettled> {
         let (ScaleState::Stable | ScaleState::Empty, Some(gross)) = (self.state, self.gross_g)
         else {
             return Err(Unsettled::NotStable);
         };
-        let (u, bound) = match (self.gross_u_g, self.gross_u_bound_g) {
-            (None, _) => (0.0, 0.0),
-            (Some(u), Some(bound)) => (u, bound),
-            (Some(_), None) => return Err(Unsettled::Uncertain),
+        let (Some(u), Some(bound)) = (self.gross_u_g, self.gross_u_bound_g) else {
+            return Err(Unsettled::Uncertain);
         };
         // Written so a NaN bound is refused (the tare's own test, `>`, let one through).
         if !(2.0 * bound <= TARE_ACCURACY_E * self.config.scale_interval_g) {
@@ -172,8 +171,9 @@ mod tests {
         assert_eq!(scale.set_zero(), Err(ZeroError::Tared));
     }
 
-    /// A stable reading whose `u` bound is not a number is not known to a quarter of e:
-    /// tare and zero setting refuse it (the tare's own test, `2u > 0.25 e`, took it).
+    /// A stable reading whose `u` bound is not a number, or that has no `u`, is not known
+    /// to a quarter of e: tare and zero setting refuse it (the tare's own test,
+    /// `2u > 0.25 e`, took a NaN).
     #[test]
     fn a_reading_of_unknown_uncertainty_is_neither_tare_nor_zero() {
         let (mut scale, mut cell) = scene(0.2);
@@ -182,6 +182,12 @@ mod tests {
         assert_eq!(scale.reading().state, ScaleState::Stable);
         scale.gross_u_g = Some(f32::NAN);
         scale.gross_u_bound_g = Some(f32::NAN);
+        assert_eq!(scale.tare(), Err(TareError::Uncertain));
+        assert_eq!(scale.set_zero(), Err(ZeroError::Uncertain));
+        // No `u` at all is not an exact reading: refused too (it used to be taken with
+        // u = 0, the tare then claiming to be exact in every net reading).
+        scale.gross_u_g = None;
+        scale.gross_u_bound_g = None;
         assert_eq!(scale.tare(), Err(TareError::Uncertain));
         assert_eq!(scale.set_zero(), Err(ZeroError::Uncertain));
     }
