@@ -317,6 +317,20 @@ pub fn score_line(score: &CandidateScore, mass_g: f64, target_relative: f64) -> 
     let scored = score.loads.iter().flatten().count();
     let verdict = if score.meets {
         format!("MEETS at all {scored} loads")
+    } else if let (true, None, Some(check)) = (
+        score.states_no_uncertainty,
+        &score.failed_load,
+        &score.recorded,
+    ) {
+        let why = "states no u on a board, so its scale never shows a reading stable";
+        if check.failing == 0 {
+            format!("met the target, but {why}")
+        } else {
+            format!(
+                "recorded drop {} outside ({:+.4} g); {why}",
+                check.worst_drop, check.errors_g[check.worst_drop as usize]
+            )
+        }
     } else if let (Some(region), None, Some(check)) =
         (&score.outside_region, &score.failed_load, &score.recorded)
     {

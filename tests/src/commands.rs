@@ -98,12 +98,13 @@ fn settle_samples() -> u32 {
 
 /// The console lines typed first, on the empty pan before the drop: every console
 /// command that does not touch the load (a unit, a rate, a refused rate, a method too
-/// large for the board's estimator and one outside the valid region, both refused, then
+/// large for the board's estimator, one outside the valid region and one that states no
+/// `u` on a board, all refused, then
 /// [`UPLOADED_METHOD`], a configuration change that leaves this scene's weighing as it is,
 /// the configuration listed).
 pub const SETUP_LINES: &str = concat!(
     "help\nunit kg\nrate 50\nrate 3\n",
-    "method step:n=12,D=16\nmethod step:n=7,D=1\nmethod step:n=7,D=16\n",
+    "method step:n=12,D=16\nmethod step:n=7,D=1\nmethod iv:n=7,D=16\nmethod step:n=7,D=16\n",
     "config set capacity_g 620\nconfig show\n"
 );
 /// The method the setup lines upload (the firmware ships n = 5, D = 24): the rest of the

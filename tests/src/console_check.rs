@@ -24,7 +24,7 @@ use crate::commands::{CommandLine, CommandReport};
 use crate::e2e::{ReadoutLine, RunLog, SAMPLE_RATE_HZ};
 
 /// The answers expected, in order: (what the line starts with, what it stands for).
-const ANSWERS: [(&str, &str); 13] = [
+const ANSWERS: [(&str, &str); 14] = [
     ("OK help", "help"),
     ("OK unit kg", "unit kg"),
     ("OK rate 50", "rate 50"),
@@ -36,6 +36,10 @@ const ANSWERS: [(&str, &str); 13] = [
     (
         "ERR method outside_valid_region; expected D of at least",
         "method step:n=7,D=1 (refused)",
+    ),
+    (
+        "ERR method no_uncertainty; expected least squares with lambda=1",
+        "method iv:n=7,D=16 (refused)",
     ),
     ("OK method step:n=7,D=16", "method step:n=7,D=16"),
     ("OK config set capacity_g 620", "config set capacity_g 620"),

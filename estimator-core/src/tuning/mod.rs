@@ -221,12 +221,15 @@ pub struct CandidateScore {
     pub failed_load: Option<LoadScore>,
     /// The recorded drops' figures (only for a method the Monte Carlo accepted).
     pub recorded: Option<RecordedCheck>,
-    /// Meets the target: in the Monte Carlo at every scene and on every recorded drop, and
-    /// lies inside the valid region.
+    /// Meets the target: in the Monte Carlo at every scene and on every recorded drop, lies
+    /// inside the valid region and states a `u` on a board.
     pub meets: bool,
     /// Why the method lies outside the stability map's valid region
     /// ([`WeighingConfig::check_region`]); such a method is never chosen, whatever it scored.
     pub outside_region: Option<RegionError>,
+    /// The method states no `u` on a board, so its scale could never show a reading stable
+    /// ([`WeighingMethod::states_uncertainty_on_board`]); never chosen, whatever it scored.
+    pub states_no_uncertainty: bool,
 }
 
 impl CandidateScore {
@@ -476,6 +479,49 @@ mod tests {
         );
     }
 
+    /// A method that meets the target but states no `u` on a board (forgetting, bias
+    /// compensation, instrumental variables) is scored, never chosen: its scale would show
+    /// the right mass, never stable. The choice is one that states a `u`.
+    #[test]
+    fn a_method_the_scale_could_never_show_stable_is_not_chosen() {
+        let mut drops = [recording(1), recording(2), recording(3)];
+        let settings = TuningSettings {
+            evaluate_all: true,
+            ..settings()
+        };
+        let grid = CandidateGrid {
+            max_order: 4,
+            forgetting_memory_s: Some(0.05),
+            bias_compensated: true,
+            instrumental_variable: true,
+            ..small_grid()
+        };
+        let mut unvouched_meeting = 0;
+        let calibrated = run(&mut drops, &settings, &grid, 100, |score| {
+            assert_eq!(
+                score.states_no_uncertainty,
+                !score.method.states_uncertainty_on_board()
+            );
+            let met = score.failed_load.is_none()
+                && score.recorded.is_some_and(|c| c.failing == 0)
+                && score.outside_region.is_none();
+            if score.states_no_uncertainty {
+                assert!(!score.meets, "{}", score.method);
+                unvouched_meeting += usize::from(met);
+            } else {
+                assert_eq!(score.meets, met, "{}", score.method);
+            }
+        })
+        .unwrap();
+        // The premise: some such method did meet the target here.
+        assert!(unvouched_meeting > 0);
+        assert!(calibrated.config.method.states_uncertainty_on_board());
+        assert!(matches!(
+            calibrated.config.method,
+            WeighingMethod::Step { forgetting, .. } if forgetting == 1.0
+        ));
+    }
+
     #[test]
     fn a_wrong_given_gain_is_caught_by_the_scores() {
         let mut drops = [recording(4), recording(5), recording(6)];
@@ -685,7 +731,9 @@ mod tests {
             match score.failed_load {
                 Some(failed) => assert!(failed.bound_over_target(0.002) > 1.0),
                 None => assert!(
-                    score.recorded.is_some_and(|c| c.failing > 0) || score.outside_region.is_some()
+                    score.recorded.is_some_and(|c| c.failing > 0)
+                        || score.outside_region.is_some()
+                        || score.states_no_uncertainty
                 ),
             }
         }

@@ -482,8 +482,11 @@ impl<T: Real, const S: usize> Search<'_, '_, T, S> {
         // scored: its failures there would not be flagged at run time
         // (`WeighingConfig::check_region`).
         let outside_region = candidate.check_region().err();
-        let meets =
-            matches!(recorded, Some(check) if check.failing == 0) && outside_region.is_none();
+        // Nor one a board's scale could never show stable (no `u` there).
+        let states_no_uncertainty = !method.states_uncertainty_on_board();
+        let meets = matches!(recorded, Some(check) if check.failing == 0)
+            && outside_region.is_none()
+            && !states_no_uncertainty;
         let scored = CandidateScore {
             index,
             method,
@@ -494,6 +497,7 @@ impl<T: Real, const S: usize> Search<'_, '_, T, S> {
             recorded,
             meets,
             outside_region,
+            states_no_uncertainty,
         };
         Ok((scored, method_variance))
     }

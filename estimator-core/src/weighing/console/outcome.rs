@@ -126,8 +126,8 @@ pub fn write_spec_error(out: &mut impl Write, error: &SpecError) -> fmt::Result 
 }
 
 /// `ERR method <reason>; expected …` for a method the board cannot run: outside the valid
-/// region of its model (`outside_valid_region`), or more than its estimator holds
-/// (`too_large`, `not_built`).
+/// region of its model (`outside_valid_region`), more than its estimator holds
+/// (`too_large`, `not_built`), or one it could never show stable (`no_uncertainty`).
 pub fn write_method_refusal(out: &mut impl Write, refusal: &MethodRefusal) -> fmt::Result {
     out.write_str("ERR method ")?;
     match *refusal {
@@ -157,6 +157,9 @@ pub fn write_method_refusal(out: &mut impl Write, refusal: &MethodRefusal) -> fm
         MethodRefusal::Estimator(error) => write!(out, "refused; expected {error}"),
         MethodRefusal::Fixed => out.write_str(
             "fixed; expected a data-driven method, on an image built with one (a model bank is built at boot only, from the compiled-in weighing.toml)",
+        ),
+        MethodRefusal::NoUncertainty => out.write_str(
+            "no_uncertainty; expected least squares with lambda=1 (forgetting, bc and iv state no u on a board: never shown stable)",
         ),
     }?;
     out.write_str("\r\n")

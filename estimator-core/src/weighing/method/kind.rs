@@ -56,6 +56,24 @@ impl WeighingMethod {
         }
     }
 
+    /// Whether a board's scale can ever show this method's readings stable, empty or
+    /// final: only with a stated `u` ([`crate::weighing::Scale`]). The step estimator states
+    /// one with a growing window up to [`super::UNCERTAINTY_ORDERS`], the model bank from
+    /// its model; with forgetting (λ < 1) the step states none, and a board builds bias
+    /// compensation and instrumental variables without the lag sums their `u` needs
+    /// ([`super::WeighingEstimator`]): they run, shown as estimating only. Calibration never
+    /// chooses a method without it.
+    pub fn states_uncertainty_on_board(&self) -> bool {
+        match *self {
+            WeighingMethod::Step {
+                order, forgetting, ..
+            } => forgetting == 1.0 && order <= super::UNCERTAINTY_ORDERS,
+            WeighingMethod::BiasCompensated { .. }
+            | WeighingMethod::InstrumentalVariable { .. } => false,
+            WeighingMethod::ModelBank { .. } => true,
+        }
+    }
+
     /// Block length D.
     pub fn decimation(&self) -> u16 {
         match *self {

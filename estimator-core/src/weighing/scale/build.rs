@@ -131,6 +131,11 @@ pub enum MethodRefusal {
     /// A model bank, or any method on an image built with one: a bank is built only at
     /// boot, from the compiled-in configuration.
     Fixed,
+    /// A method that states no `u` on a board (forgetting; bias compensation and
+    /// instrumental variables, built without their lag sums:
+    /// [`WeighingMethod::states_uncertainty_on_board`]): the scale could never show its
+    /// readings stable, empty or final.
+    NoUncertainty,
 }
 
 impl fmt::Display for MethodRefusal {
@@ -146,6 +151,9 @@ impl fmt::Display for MethodRefusal {
             MethodRefusal::Estimator(error) => write!(f, "{error}"),
             MethodRefusal::Fixed => f.write_str(
                 "a model bank is built only at boot, from the compiled-in configuration, and an image built with one runs only it",
+            ),
+            MethodRefusal::NoUncertainty => f.write_str(
+                "it states no uncertainty on this board, so no reading of it could be shown stable",
             ),
         }
     }
@@ -163,6 +171,15 @@ impl<E: ConfiguredEstimator> Scale<E> {
             return Err(MethodRefusal::Fixed);
         }
         weighing.check_region().map_err(MethodRefusal::Region)?;
+        // An order beyond what states a `u` is beyond what a board's estimator holds too
+        // (`UPLOAD_ORDER_CAPACITY`): that refusal, from the rebuild, says more.
+        let held = weighing
+            .method
+            .order()
+            .is_none_or(|order| order <= crate::weighing::UNCERTAINTY_ORDERS);
+        if held && !weighing.method.states_uncertainty_on_board() {
+            return Err(MethodRefusal::NoUncertainty);
+        }
         self.estimator
             .rebuild(weighing)
             .map_err(MethodRefusal::Estimator)?;
@@ -383,6 +400,28 @@ mod tests {
             ratio_max: 1.1,
         });
         assert_eq!(asked_wrong.set_method(&bank), Err(MethodRefusal::Fixed));
+        // Methods it runs but could never show stable (no `u` on a board) are refused too.
+        for unvouched in [
+            WeighingMethod::Step {
+                order: 7,
+                decimation: 24,
+                forgetting: 0.99,
+            },
+            WeighingMethod::BiasCompensated {
+                order: 7,
+                decimation: 24,
+            },
+            WeighingMethod::InstrumentalVariable {
+                order: 7,
+                decimation: 24,
+            },
+        ] {
+            assert_eq!(
+                asked_wrong.set_method(&weighing(unvouched)),
+                Err(MethodRefusal::NoUncertainty),
+                "{unvouched}"
+            );
+        }
         assert_eq!(asked_wrong.estimator().samples_per_update(), 16);
         // The change restarted `changed`'s run: its raw tests re-arm once the pan has
         // settled again (1.5 s), as `built_new`'s did at boot.

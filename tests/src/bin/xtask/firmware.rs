@@ -274,7 +274,7 @@ fn e2e_demo(elf: &Path) -> Result<()> {
 /// The command scene, the harness typing on UART 0, meets `tests::commands::check`.
 fn e2e_commands(elf: &Path) -> Result<()> {
     println!(
-        "command scene: the harness types on the serial console (UART 0): help, unit kg, rate 50, rate 3, method step:n=12,D=16, method step:n=7,D=1, method step:n=7,D=16, config set capacity_g 620, config show (empty pan), tare (stable), tare (sliding load), cal 200 (empty pan)"
+        "command scene: the harness types on the serial console (UART 0): help, unit kg, rate 50, rate 3, method step:n=12,D=16, method step:n=7,D=1, method iv:n=7,D=16, method step:n=7,D=16, config set capacity_g 620, config show (empty pan), tare (stable), tare (sliding load), cal 200 (empty pan)"
     );
     let mut script = CommandScript::new();
     // The board's flash kept in a file, so a second run (a reset) boots with what this one
