@@ -311,34 +311,32 @@ pub fn scene_name(scene: &LoadScene) -> String {
     format!("{:.4} g at {:.3}x f_n", scene.mass_g, scene.frequency_ratio)
 }
 
+/// Why a candidate is never chosen whatever it scores, in words: outside the valid region,
+/// or no `u` on a board.
+fn passed_over(score: &CandidateScore) -> Option<String> {
+    match (&score.outside_region, score.states_no_uncertainty) {
+        (Some(region), _) => Some(format!("outside the valid region: {region}")),
+        (None, true) => {
+            Some("states no u on a board, so its scale never shows a reading stable".to_string())
+        }
+        (None, false) => None,
+    }
+}
+
 /// One line per scored candidate, for the log.
 pub fn score_line(score: &CandidateScore, mass_g: f64, target_relative: f64) -> String {
     let p = &score.prediction;
     let scored = score.loads.iter().flatten().count();
     let verdict = if score.meets {
         format!("MEETS at all {scored} loads")
-    } else if let (true, None, Some(check)) = (
-        score.states_no_uncertainty,
-        &score.failed_load,
-        &score.recorded,
-    ) {
-        let why = "states no u on a board, so its scale never shows a reading stable";
+    } else if let (Some(why), None, Some(check)) =
+        (passed_over(score), &score.failed_load, &score.recorded)
+    {
         if check.failing == 0 {
             format!("met the target, but {why}")
         } else {
             format!(
                 "recorded drop {} outside ({:+.4} g); {why}",
-                check.worst_drop, check.errors_g[check.worst_drop as usize]
-            )
-        }
-    } else if let (Some(region), None, Some(check)) =
-        (&score.outside_region, &score.failed_load, &score.recorded)
-    {
-        if check.failing == 0 {
-            format!("met the target, but outside the valid region: {region}")
-        } else {
-            format!(
-                "recorded drop {} outside ({:+.4} g); outside the valid region: {region}",
                 check.worst_drop, check.errors_g[check.worst_drop as usize]
             )
         }
