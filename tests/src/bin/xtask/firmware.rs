@@ -595,7 +595,12 @@ fn bench_variant(
     ),
     variant: &BenchVariant,
 ) -> Result<()> {
-    let config = variant_config(shipped, variant)?;
+    let (shipped, precision) = shipped;
+    let weighing = estimator_core::weighing::WeighingConfig {
+        method: variant.method,
+        ..*shipped
+    };
+    let config = variant_config(&weighing, *precision, variant)?;
     let elf = build_with_config(Board::Qemu, true, Some(&config))?;
     let stm32 = image_size(&build_with_config(Board::Stm32f411, false, Some(&config))?)?;
     println!(
@@ -610,10 +615,6 @@ fn bench_variant(
     );
     // What the scale did with it on the same scene (host replay of the same `Scale`): a cost
     // measured on a scale that shows nothing, or nothing stable, is not a weighing's cost.
-    let weighing = estimator_core::weighing::WeighingConfig {
-        method: variant.method,
-        ..shipped.0
-    };
     let shown = replay_check::Shown::of(&replay_check::qemu_demo_rows_with(&weighing)?);
     println!(
         "  on the demo scene (host replay): {} of {} readout lines with a mass, {} stable or empty, {} final",
@@ -680,22 +681,17 @@ fn bench_variants(
     let bank = shipped
         .bank_covering_loads(BankCandidate::REFERENCE)
         .context("the shipped load range gives no resonance ratios for a bank")?;
-    let (order, decimation) = match shipped.method {
-        WeighingMethod::Step {
-            order, decimation, ..
-        }
-        | WeighingMethod::BiasCompensated { order, decimation }
-        | WeighingMethod::InstrumentalVariable { order, decimation } => (order, decimation),
-        // A shipped bank: the data-driven methods at the step default's order and D.
-        WeighingMethod::ModelBank { .. } => {
-            match estimator_core::weighing::ScaleConfig::DEFAULT_METHOD {
-                WeighingMethod::Step {
-                    order, decimation, ..
-                } => (order, decimation),
-                _ => bail!("the step default is not a step method"),
-            }
-        }
+    // The shipped order and D; for a shipped bank, the step default's.
+    let data_driven = match shipped.method.order() {
+        Some(_) => shipped.method,
+        None => estimator_core::weighing::ScaleConfig::DEFAULT_METHOD,
     };
+    let (order, decimation) = (
+        data_driven
+            .order()
+            .context("the step default is not a data-driven method")?,
+        data_driven.decimation(),
+    );
     Ok([
         BenchVariant {
             label: "the step estimator at n = 7, D = 16".to_string(),
@@ -725,24 +721,17 @@ fn bench_variants(
 /// The shipped weighing configuration with the method replaced by `variant`'s, written under
 /// the target directory (a build input, regenerated on every bench).
 fn variant_config(
-    (config, precision): &(
-        estimator_core::weighing::WeighingConfig,
-        host_sim::montecarlo::Precision,
-    ),
+    config: &estimator_core::weighing::WeighingConfig,
+    precision: host_sim::montecarlo::Precision,
     variant: &BenchVariant,
 ) -> Result<PathBuf> {
-    let config = estimator_core::weighing::WeighingConfig {
-        method: variant.method,
-        ..*config
-    };
-    let precision = *precision;
     let dir = target_dir().join("xtask");
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let path = dir.join(format!("{}.toml", variant.stem));
     let text = format!(
         "# The shipped firmware/weighing.toml with {} as its method (cargo xtask bench).\n{}",
         variant.label,
-        host_sim::calibrate::config_toml(&config, precision)
+        host_sim::calibrate::config_toml(config, precision)
     );
     std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
     Ok(path)
@@ -808,20 +797,22 @@ fn bench_run(bench_elf: &Path, handoff: bool) -> Result<()> {
         if field(&checked, "dropped")? != 0 {
             bail!("the checked replay lost samples; its count would mean nothing");
         }
-        if field(&checked, "metered")? == 0 {
-            // The shipped method must reach it; another method may never show the empty
-            // pan stable (no `u`, or flagged), so the scale never meters it.
-            if handoff {
-                bail!("the checked replay was never checked; its count would mean nothing");
-            }
-            println!("  with the consistency check live: never live (the scale never metered the empty pan)");
-        } else {
-            println!(
-            "  with the consistency check live (the checked demo, from its first drop on): {:>7.1} instructions per 4 kHz sample ({} samples)",
-            per_event(&checked)?,
-            field(&checked, "events")?
-        );
+        // The shipped method must reach it; another method may never show the empty pan
+        // stable (no `u`, or flagged), so the scale never meters it.
+        let metered = field(&checked, "metered")? != 0;
+        if !metered && handoff {
+            bail!("the checked replay was never checked; its count would mean nothing");
         }
+        let figure = if metered {
+            format!(
+                " (the checked demo, from its first drop on): {:>7.1} instructions per 4 kHz sample ({} samples)",
+                per_event(&checked)?,
+                field(&checked, "events")?
+            )
+        } else {
+            ": never live (the scale never metered the empty pan)".to_string()
+        };
+        println!("  with the consistency check live{figure}");
     }
     if let Ok(restart) = find_fields(&run, "bench restart") {
         println!(
