@@ -33,6 +33,7 @@ impl<E: ScaleEstimator> Scale<E> {
         if let State::Invalid(reason) = reading.state {
             return self.flagged(reason);
         }
+        self.judge_residual_motion(reading.residual);
         let changed = self.residual_alarm(reading.residual) || self.raw_alarm(counts);
         let trend = core::mem::take(&mut self.trend_alarmed);
         if changed || trend {

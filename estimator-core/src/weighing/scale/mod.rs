@@ -31,6 +31,12 @@
 //!   changes; a significant slope that makes the reading lag is a (slow) change. A trickle
 //!   hides from both CUSUM tests on a noisy pan, the reading lagging behind it.
 //!
+//! Motion short of a change keeps a reading from being shown stable or final: the block
+//! test's sums building up, the block in progress judged on its own scatter, and the
+//! residual motion test (`residual_motion`): the residuals' mean over the last stretches
+//! against their block means' scatter, which sees an item arrive on a load still ringing
+//! by grams (the raw tests must allow for that ringing; the model explains it).
+//!
 //! Neither CUSUM test runs on a flagged reading (a flagged fit has no residual to trust, and no
 //! mass to compare with). So a flag that persists after the run showed a valid reading —
 //! the fit of one load broke down, typically because a new load arrived before the
@@ -64,6 +70,7 @@ mod fields;
 mod fuzz;
 mod noise;
 mod reading;
+mod residual_motion;
 #[cfg(test)]
 pub(crate) mod test_scene;
 mod trend;
@@ -81,6 +88,7 @@ use crate::estimators::step::StepEstimator;
 use crate::reading::ConfigError;
 use change::TwoSidedCusum;
 use noise::NoiseMetering;
+use residual_motion::ResidualMotion;
 use trend::Trend;
 use white::WhiteNoise;
 use zero::round_to_i32;
@@ -167,6 +175,9 @@ pub struct Scale<E> {
     block_alarmed: bool,
     /// The block test saw motion at the last shown reading (`change::in_motion`).
     moving: bool,
+    /// The residual motion test (`residual_motion`): the residuals' stretches against
+    /// their own scatter, which a ringing the model explains does not widen.
+    residual_motion: ResidualMotion,
     /// The last squared differences of consecutive block means of this run (g²), how many
     /// in the run, and the last block mean: the block means' scatter, for the block in
     /// progress (`change::judge_parts`).
@@ -283,6 +294,7 @@ impl<E: ScaleEstimator> Scale<E> {
             ringing_sum_samples: ringing_sum_samples(&config),
             block_alarmed: false,
             moving: false,
+            residual_motion: ResidualMotion::default(),
             block_mean_squares_g2: [0.0; change::PARTIAL_SCATTER_BLOCKS],
             block_mean_pairs: 0,
             last_block_mean_g: None,
@@ -454,6 +466,7 @@ impl<E: ScaleEstimator> Scale<E> {
         self.block_filled = 0;
         self.part_left = 0;
         self.moving = false;
+        self.residual_motion = ResidualMotion::default();
         self.block_mean_pairs = 0;
         self.last_block_mean_g = None;
         self.partial_moving = false;

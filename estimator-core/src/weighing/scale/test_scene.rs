@@ -41,6 +41,9 @@ pub(crate) struct Cell {
     pub(crate) offset_counts: f64,
     /// The cell's true gain over the scale's calibration (a replaced cell when not 1).
     gain_factor: f64,
+    /// Its mode: natural frequency (Hz) and damping ratio.
+    ring_hz: f64,
+    damping: f64,
 }
 
 impl Cell {
@@ -53,6 +56,18 @@ impl Cell {
             noise_g,
             offset_counts: ZERO as f64,
             gain_factor: 1.0,
+            ring_hz: 25.0,
+            damping: 0.03,
+        }
+    }
+
+    /// The cell with a heavy load on: the reference cell's mode at 400 g of its 600 g
+    /// (25 Hz at 138 g, frequency ∝ 1/√mass: about 13 Hz, the same ζ), so a load's ringing
+    /// takes twice as long to die down.
+    pub(crate) fn heavy(noise_g: f64, seed: u64) -> Self {
+        Self {
+            ring_hz: 13.0,
+            ..Self::seeded(noise_g, seed)
         }
     }
 
@@ -79,12 +94,12 @@ impl Cell {
     }
 
     pub(crate) fn sample(&mut self) -> RawSample {
-        let omega = 2.0 * std::f64::consts::PI * 25.0;
+        let omega = 2.0 * std::f64::consts::PI * self.ring_hz;
         let dt = 1.0 / FS as f64;
         // Semi-implicit Euler is plenty for a decision test.
         for _ in 0..4 {
             let accel = omega * omega * (self.load_g - self.position_g)
-                - 2.0 * 0.03 * omega * self.velocity;
+                - 2.0 * self.damping * omega * self.velocity;
             self.velocity += accel * dt / 4.0;
             self.position_g += self.velocity * dt / 4.0;
         }
