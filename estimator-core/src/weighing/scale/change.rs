@@ -104,15 +104,16 @@ impl<E: ScaleEstimator> Scale<E> {
         let Some(residual_counts) = residual_counts.filter(|_| self.update_phase == 0) else {
             return;
         };
+        if self.residual_motion.at_block_start() {
+            let shown_g = self.last_shown_gross_g - self.tare_g;
+            let permissible_g = self.config.permissible_error_g(shown_g);
+            self.residual_motion
+                .set_floor(PARTIAL_LAG_OF_PERMISSIBLE * permissible_g);
+        }
         let updates_per_block = self.config.block_samples / self.samples_per_update;
-        let floor_g = PARTIAL_LAG_OF_PERMISSIBLE
-            * self
-                .config
-                .permissible_error_g(self.last_shown_gross_g - self.tare_g);
         self.residual_motion.push(
             residual_counts * self.grams_per_count.abs(),
             updates_per_block,
-            floor_g,
         );
     }
 

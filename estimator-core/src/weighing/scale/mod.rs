@@ -466,7 +466,7 @@ impl<E: ScaleEstimator> Scale<E> {
         self.block_filled = 0;
         self.part_left = 0;
         self.moving = false;
-        self.residual_motion = ResidualMotion::default();
+        self.residual_motion.clear();
         self.block_mean_pairs = 0;
         self.last_block_mean_g = None;
         self.partial_moving = false;

@@ -57,6 +57,11 @@ pub(super) struct ResidualMotion {
     squares_g2: [f32; SCATTER_BLOCKS],
     pairs: u32,
     last_mean_g: Option<f32>,
+    /// Set at each block's start, for the updates of the block: the least mean residual
+    /// that is motion (g), and `Z²` times one update's share of the block means'
+    /// variance (g², +∞ while the scatter is not known).
+    floor_g: f32,
+    z2_variance_g2: f32,
     /// The last judgement.
     pub(super) moving: bool,
 }
@@ -74,23 +79,53 @@ impl Default for ResidualMotion {
             squares_g2: [0.0; SCATTER_BLOCKS],
             pairs: 0,
             last_mean_g: None,
+            floor_g: f32::INFINITY,
+            z2_variance_g2: f32::INFINITY,
             moving: false,
         }
     }
 }
 
 impl ResidualMotion {
+    /// Start over for a new run. Only what marks the arrays' filling is cleared: a restart
+    /// is on the firmware's budget, and entries past `parts` or `pairs` are never read.
+    pub(super) fn clear(&mut self) {
+        self.part_sum_g = 0.0;
+        self.part_filled = 0;
+        self.parts = 0;
+        self.block_sum_g = 0.0;
+        self.block_filled = 0;
+        self.block_moving = false;
+        self.pairs = 0;
+        self.last_mean_g = None;
+        self.z2_variance_g2 = f32::INFINITY;
+        self.moving = false;
+    }
+
+    /// A block is about to start: the caller hands over its floor (`at_block_start` says
+    /// when, so the permissible error is worked out once per block, not per update).
+    pub(super) fn at_block_start(&self) -> bool {
+        self.block_filled == 0
+    }
+
+    /// The least mean residual that is motion for the block about to start, g.
+    pub(super) fn set_floor(&mut self, floor_g: f32) {
+        self.floor_g = floor_g;
+    }
+
     /// One a-priori residual `residual_g` (grams) of a run whose blocks hold
-    /// `updates_per_block` updates; `floor_g` is the least mean residual that is motion.
-    /// Returns the judgement (also kept in `moving`).
-    pub(super) fn push(&mut self, residual_g: f32, updates_per_block: u32, floor_g: f32) -> bool {
+    /// `updates_per_block` updates. Returns the judgement (also kept in `moving`).
+    pub(super) fn push(&mut self, residual_g: f32, updates_per_block: u32) -> bool {
         if !residual_g.is_finite() {
             // Nothing to judge on; the stretches start over, the scatter stays.
-            *self = Self {
-                squares_g2: self.squares_g2,
-                pairs: self.pairs,
-                ..Self::default()
-            };
+            self.part_sum_g = 0.0;
+            self.part_filled = 0;
+            self.parts = 0;
+            self.block_sum_g = 0.0;
+            self.block_filled = 0;
+            self.block_moving = false;
+            self.last_mean_g = None;
+            self.moving = false;
             return false;
         }
         let block = updates_per_block.max(1);
@@ -99,7 +134,7 @@ impl ResidualMotion {
         self.part_filled += 1;
         self.block_sum_g += residual_g;
         self.block_filled += 1;
-        self.moving = self.pairs >= MIN_PAIRS && self.judge(part, block, floor_g);
+        self.moving = self.judge(part);
         self.block_moving |= self.moving;
         if self.part_filled >= part {
             self.part_sums_g[self.parts as usize % REACH] = self.part_sum_g;
@@ -108,33 +143,31 @@ impl ResidualMotion {
             self.part_filled = 0;
         }
         if self.block_filled >= block {
-            self.end_block();
+            self.end_block(block);
         }
         self.moving
     }
 
     /// Whether a stretch from the part in progress's start, or from one of the last
-    /// [`REACH`] part boundaries, to now lies out (see the module docs).
-    fn judge(&self, part: u32, block: u32, floor_g: f32) -> bool {
-        let pairs = (self.pairs as usize).min(SCATTER_BLOCKS);
-        let squares: f32 = self.squares_g2[..pairs].iter().sum();
-        let block_variance_g2 = 0.5 * squares / pairs as f32;
+    /// [`REACH`] part boundaries, to now lies out (see the module docs): its sum beyond
+    /// `floor · n` and its square beyond `Z² · variance · block · n` (no divisions).
+    fn judge(&self, part: u32) -> bool {
+        if self.z2_variance_g2 == f32::INFINITY {
+            return false;
+        }
         let reach = (self.parts as usize).min(REACH);
         let mut sum_g = self.part_sum_g;
         let mut updates = self.part_filled;
         for back in 0..=reach {
             if back > 0 {
-                let slot = (self.parts as usize - back) % REACH;
-                sum_g += self.part_sums_g[slot];
+                sum_g += self.part_sums_g[(self.parts as usize - back) % REACH];
                 updates += part;
-            }
-            if updates == 0 {
-                continue;
             }
             let n = updates as f32;
             let excess_g = sum_g.abs();
-            if excess_g > floor_g * n
-                && excess_g * excess_g > Z * Z * block_variance_g2 * block as f32 * n
+            if updates > 0
+                && excess_g > self.floor_g * n
+                && excess_g * excess_g > self.z2_variance_g2 * n
             {
                 return true;
             }
@@ -142,9 +175,9 @@ impl ResidualMotion {
         false
     }
 
-    /// A whole block: its mean's difference from the last still block's into the scatter,
-    /// unless it held motion.
-    fn end_block(&mut self) {
+    /// A whole block of `block` updates: its mean's difference from the last still
+    /// block's into the scatter, unless it held motion; the threshold for the next.
+    fn end_block(&mut self, block: u32) {
         let mean_g = self.block_sum_g / self.block_filled as f32;
         if self.block_moving {
             self.last_mean_g = None;
@@ -157,6 +190,13 @@ impl ResidualMotion {
             }
             self.last_mean_g = Some(mean_g);
         }
+        if self.pairs >= MIN_PAIRS {
+            let pairs = (self.pairs as usize).min(SCATTER_BLOCKS);
+            let squares: f32 = self.squares_g2[..pairs].iter().sum();
+            // One block mean's variance is half the mean squared difference; a stretch of
+            // n updates has variance `block / n` times that.
+            self.z2_variance_g2 = Z * Z * 0.5 * squares / pairs as f32 * block as f32;
+        }
         self.block_sum_g = 0.0;
         self.block_filled = 0;
         self.block_moving = false;
@@ -165,6 +205,7 @@ impl ResidualMotion {
 
 #[cfg(test)]
 mod tests {
+    extern crate std;
     use super::*;
 
     /// A deterministic zero-mean "noise" of about `amplitude` (a fixed pseudo-random walk).
@@ -173,15 +214,34 @@ mod tests {
         amplitude * ((x % 2001) as f32 / 1000.0 - 1.0)
     }
 
+    /// Push as the scale does: blocks of 16 updates, `floor_g` handed over at each start.
+    fn push(test: &mut ResidualMotion, residual_g: f32, floor_g: f32) -> bool {
+        if test.at_block_start() {
+            test.set_floor(floor_g);
+        }
+        test.push(residual_g, 16)
+    }
+
     #[test]
     fn still_residuals_are_not_motion_and_an_offset_is() {
         let mut test = ResidualMotion::default();
         for index in 0..16 * 20 {
-            assert!(!test.push(noise(index, 0.3), 16, 0.0125), "update {index}");
+            assert!(
+                !push(&mut test, noise(index, 0.3), 0.0125),
+                "update {index}"
+            );
         }
-        // A 0.5 g item: within a part of a block (4 updates) it is motion.
-        let seen = (0..8).position(|index| test.push(0.5 + noise(1000 + index, 0.3), 16, 0.0125));
-        assert!(seen.is_some_and(|at| at < 6), "{seen:?}");
+        // A 0.5 g item: within a part of a block (4 updates) it is motion, and it stays
+        // motion across the next block boundary.
+        let seen: std::vec::Vec<bool> = (0..24)
+            .map(|index| push(&mut test, 0.5 + noise(1000 + index, 0.3), 0.0125))
+            .collect();
+        let first = seen.iter().position(|&moving| moving);
+        assert!(first.is_some_and(|at| at < 6), "{seen:?}");
+        assert!(
+            seen[first.unwrap()..].iter().all(|&moving| moving),
+            "{seen:?}"
+        );
     }
 
     #[test]
@@ -189,9 +249,9 @@ mod tests {
         let mut test = ResidualMotion::default();
         // Three whole blocks give two differences: too few.
         for _ in 0..16 * 3 {
-            assert!(!test.push(5.0, 16, 0.0));
+            assert!(!push(&mut test, 5.0, 0.0));
         }
-        assert!(!test.push(f32::NAN, 16, 0.0));
+        assert!(!push(&mut test, f32::NAN, 0.0));
         assert!(!test.moving);
     }
 
@@ -199,9 +259,21 @@ mod tests {
     fn the_floor_keeps_a_tiny_offset_on_a_quiet_fit_from_being_motion() {
         let mut test = ResidualMotion::default();
         for index in 0..16 * 20 {
-            test.push(noise(index, 0.001), 16, 0.0125);
+            push(&mut test, noise(index, 0.001), 0.0125);
         }
         // 0.01 g: far out in the scatter's terms, but below the floor.
-        assert!(!(0..32).any(|index| test.push(0.01 + noise(index, 0.001), 16, 0.0125)));
+        assert!(!(0..32).any(|index| push(&mut test, 0.01 + noise(index, 0.001), 0.0125)));
+        // 0.02 g is above it.
+        assert!((0..32).any(|index| push(&mut test, 0.02 + noise(index, 0.001), 0.0125)));
+    }
+
+    #[test]
+    fn a_cleared_test_judges_nothing_until_it_has_a_scatter_again() {
+        let mut test = ResidualMotion::default();
+        for index in 0..16 * 20 {
+            push(&mut test, noise(index, 0.3), 0.0125);
+        }
+        test.clear();
+        assert!(!(0..16 * 4).any(|index| push(&mut test, 1.0 + noise(index, 0.3), 0.0125)));
     }
 }
