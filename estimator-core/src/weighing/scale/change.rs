@@ -516,7 +516,7 @@ mod shown_settled {
     extern crate std;
     use std::collections::VecDeque;
 
-    use super::super::test_scene::{scene, Cell};
+    use super::super::test_scene::{run, scene, Cell};
     use super::super::{Scale, ScaleEstimator, ScaleState};
 
     const PERIOD: usize = 200;
@@ -618,6 +618,48 @@ mod shown_settled {
                 ramp,
                 &std::format!("{item_g} g put on, seed {seed}"),
             );
+        }
+    }
+
+    /// Items of 0.3-2 g arriving by hand (over 50-300 ms) on 150 g still ringing: a reading
+    /// is final only while its estimate has held its band for the hold time. Final asked
+    /// only for the bound and no motion, and the estimate of an arriving item could jump out
+    /// of its band (the state `estimating`) and still be final, 0.55 g away from where it
+    /// was 50 ms before (12 of these 64 scenes; `host-sim torture --runs 10000 --seed 1`,
+    /// run 9291: final 0.21 g off, permissible 0.08 g).
+    #[test]
+    fn a_reading_whose_estimate_left_its_band_is_not_final() {
+        for seed in 25..41u64 {
+            for (item_g, arrive) in [(0.3, 200usize), (1.0, 400), (2.0, 800), (0.5, 1200)] {
+                let (mut scale, _) = scene(0.3);
+                let mut cell = Cell::heavy(0.3, seed);
+                run(&mut scale, &mut cell, 4000);
+                cell.load_g = 150.0;
+                run(&mut scale, &mut cell, 8000 + (seed as usize * 37) % 400);
+                let band = 2.0
+                    * (scale.config().stable_band_g + 150.0 * scale.config().stable_band_relative);
+                let mut recent = VecDeque::new();
+                for k in 0..3000 {
+                    cell.load_g = 150.0 + item_g * (k as f64 / arrive as f64).min(1.0);
+                    let reading = scale.push(cell.sample());
+                    match reading.mass_g {
+                        Some(mass) => recent.push_back(mass),
+                        None => recent.clear(),
+                    }
+                    if recent.len() > PERIOD {
+                        recent.pop_front();
+                    }
+                    if reading.is_final {
+                        let low = recent.iter().cloned().fold(f32::INFINITY, f32::min);
+                        let high = recent.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+                        assert!(
+                            high - low <= band,
+                            "seed {seed}, {item_g} g, sample {k}: final over {} g ({reading:?})",
+                            high - low
+                        );
+                    }
+                }
+            }
         }
     }
 

@@ -381,11 +381,14 @@ impl<E: ScaleEstimator> Scale<E> {
             .and(self.gross_u_g)
             .map(|u| with_tare(u, self.tare_u_g));
         // Final once the bound of `u` meets the target and is vouched for (decided with
-        // the reading, `decide::show`), the load not in motion, and not after a change only
+        // the reading, `decide::show`), the estimate has held its band for the hold time
+        // (an estimate jumping with an arriving item was final 0.55 g from where it was
+        // 50 ms before), the load not in motion, and not after a change only
         // the trend test saw (a trickle) before the raw tests are armed again, as for
         // stable: a fresh fit of a ramp's few hundred samples was final 0.09 g off with
         // u = 0.004 g.
         let is_final = matches!(self.state, ScaleState::Estimating | ScaleState::Stable)
+            && self.stable_samples >= self.config.stable_hold_samples
             && !self.moving
             && (self.raw_armed || !self.after_trend_change)
             && mass_g.is_some()

@@ -80,7 +80,9 @@ pub struct ScaleReading {
     pub uncertainty_g: Option<f32>,
     /// The reading is final: a mass, estimating or stable, whose 95 % interval (±2u) is
     /// within the configured target ([`super::ScaleConfig::final_target_g`]) and four of
-    /// whose `u` are within the permissible error ([`super::VOUCHING_COVERAGE_FACTOR`]).
+    /// whose `u` are within the permissible error ([`super::VOUCHING_COVERAGE_FACTOR`]),
+    /// its estimate held within the stability band for the hold time and the load not in
+    /// motion.
     pub is_final: bool,
     /// What the pan holds.
     pub state: ScaleState,
