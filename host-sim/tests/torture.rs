@@ -107,3 +107,18 @@ fn runs_that_showed_wrong_readings_settled_show_none() {
         assert!(ok && wrong == 0 && shown > 0, "run {run}: {report}");
     }
 }
+
+/// Runs of `host-sim torture --runs 10000 --seed 1` that showed wrong readings settled at
+/// stop 30, each for a reason since removed: runs 4700 and 5430, items of about 1 g put on
+/// by hand 1.9 s after 479 g and 341 g were dropped, the cell still ringing by grams (the
+/// raw tests allowed for it; the residual motion test sees through it), shown stable 0.72
+/// and 0.66 g off; run 9291, an arriving item's estimate jumping out of its band while the
+/// reading stayed final, 0.21 g off.
+#[test]
+fn runs_of_ten_thousand_that_showed_wrong_readings_settled_show_none() {
+    for run in ["4700", "5430", "9291"] {
+        let (report, ok) = torture(&["--runs", "10000", "--seed", "1", "--only-run", run]);
+        let (wrong, shown, _) = last_line(&report);
+        assert!(ok && wrong == 0 && shown > 0, "run {run}: {report}");
+    }
+}
