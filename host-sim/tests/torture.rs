@@ -101,11 +101,7 @@ fn one_run_alone_gives_its_share_and_a_trace_of_truth_and_readings() {
 /// its `u` just within 0.5 e; run 761, a load placed by hand shown stable at its old mass.
 #[test]
 fn runs_that_showed_wrong_readings_settled_show_none() {
-    for run in ["72", "401", "761"] {
-        let (report, ok) = torture(&["--runs", "1000", "--seed", "1", "--only-run", run]);
-        let (wrong, shown, _) = last_line(&report);
-        assert!(ok && wrong == 0 && shown > 0, "run {run}: {report}");
-    }
+    show_none_settled_wrong("1000", &["72", "401", "761"]);
 }
 
 /// Runs of `host-sim torture --runs 10000 --seed 1` that showed wrong readings settled at
@@ -116,9 +112,15 @@ fn runs_that_showed_wrong_readings_settled_show_none() {
 /// reading stayed final, 0.21 g off.
 #[test]
 fn runs_of_ten_thousand_that_showed_wrong_readings_settled_show_none() {
-    for run in ["4700", "5430", "9291"] {
-        let (report, ok) = torture(&["--runs", "10000", "--seed", "1", "--only-run", run]);
+    show_none_settled_wrong("10000", &["4700", "5430", "9291"]);
+}
+
+/// Each of `runs` of `host-sim torture --runs <of> --seed 1`, alone, shows readings settled
+/// and none of them wrong.
+fn show_none_settled_wrong(of: &str, runs: &[&str]) {
+    for run in runs {
+        let (report, ok) = torture(&["--runs", of, "--seed", "1", "--only-run", run]);
         let (wrong, shown, _) = last_line(&report);
-        assert!(ok && wrong == 0 && shown > 0, "run {run}: {report}");
+        assert!(ok && wrong == 0 && shown > 0, "run {run} of {of}: {report}");
     }
 }

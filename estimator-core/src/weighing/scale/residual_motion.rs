@@ -90,15 +90,20 @@ impl ResidualMotion {
     /// Start over for a new run. Only what marks the arrays' filling is cleared: a restart
     /// is on the firmware's budget, and entries past `parts` or `pairs` are never read.
     pub(super) fn clear(&mut self) {
+        self.start_stretches_over();
+        self.pairs = 0;
+        self.z2_variance_g2 = f32::INFINITY;
+    }
+
+    /// The stretches and the block in progress start over; the scatter stays.
+    fn start_stretches_over(&mut self) {
         self.part_sum_g = 0.0;
         self.part_filled = 0;
         self.parts = 0;
         self.block_sum_g = 0.0;
         self.block_filled = 0;
         self.block_moving = false;
-        self.pairs = 0;
         self.last_mean_g = None;
-        self.z2_variance_g2 = f32::INFINITY;
         self.moving = false;
     }
 
@@ -117,15 +122,8 @@ impl ResidualMotion {
     /// `updates_per_block` updates. Returns the judgement (also kept in `moving`).
     pub(super) fn push(&mut self, residual_g: f32, updates_per_block: u32) -> bool {
         if !residual_g.is_finite() {
-            // Nothing to judge on; the stretches start over, the scatter stays.
-            self.part_sum_g = 0.0;
-            self.part_filled = 0;
-            self.parts = 0;
-            self.block_sum_g = 0.0;
-            self.block_filled = 0;
-            self.block_moving = false;
-            self.last_mean_g = None;
-            self.moving = false;
+            // Nothing to judge on.
+            self.start_stretches_over();
             return false;
         }
         let block = updates_per_block.max(1);
