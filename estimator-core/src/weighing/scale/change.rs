@@ -8,7 +8,9 @@
 //!
 //! A NaN deviation must never poison the sums: it resets them.
 
-use super::trend::{TREND_LAG_OF_PERMISSIBLE, TREND_LAG_S, TREND_T};
+use super::trend::{
+    TREND_LAG_OF_PERMISSIBLE, TREND_LAG_S, TREND_MIN_BLOCKS, TREND_PROOF_OF_PERMISSIBLE, TREND_T,
+};
 use super::{Scale, ScaleEstimator, ScaleReading, ScaleState};
 use crate::numerics::real::Real;
 
@@ -209,8 +211,6 @@ impl<E: ScaleEstimator> Scale<E> {
         raw || block
     }
 
-    /// The block test's sums are past [`MOTION_OVER_THRESHOLD`] of its threshold: the load is moving (a trickle, a
-    /// creep) though the test has not alarmed yet. No reading is shown stable or final then.
     /// What the block test allows the sum of `filled` deviations (g·samples): its drift on
     /// each, and a ringing of `ringing_g` for at most `ringing_sum_samples` of them.
     fn block_allowance_g(&self, filled: u32, ringing_g: f32) -> f32 {
@@ -223,8 +223,12 @@ impl<E: ScaleEstimator> Scale<E> {
         filled * self.config.block_drift_g + ringing_samples * ringing_g
     }
 
+    /// The load may be moving, though no test has alarmed: the residual motion test sees
+    /// motion, the trend window cannot vouch for the reading (`trend`), or the block
+    /// test's sums are past [`MOTION_OVER_THRESHOLD`] of its threshold (a trickle, a
+    /// creep). No reading is shown stable or final then.
     pub(super) fn in_motion(&self) -> bool {
-        if self.residual_motion.moving {
+        if self.residual_motion.moving || self.trend_unproven {
             return true;
         }
         if !(self.raw_armed || self.held_in_run) {
@@ -338,7 +342,8 @@ impl<E: ScaleEstimator> Scale<E> {
 
     /// One good sample into the trend test (`trend`): at the end of each block, a slope
     /// that is significant and lags the reading by more than its part of the permissible
-    /// error is an alarm, taken at the next valid reading.
+    /// error is an alarm, taken at the next valid reading; and whether the window vouches
+    /// for the reading shown (gross, against the calibrated zero like its blocks).
     pub(super) fn push_trend(&mut self, counts: i32) {
         let gross_g = (counts as f32 - self.calibrated_zero_counts) * self.grams_per_count;
         let Some(slope) = self.trend.push(gross_g, self.config.block_samples) else {
@@ -350,7 +355,16 @@ impl<E: ScaleEstimator> Scale<E> {
         let permissible = self
             .config
             .permissible_error_g(self.last_shown_gross_g - self.tare_g);
-        if slope.t.abs() > TREND_T && lag_g > TREND_LAG_OF_PERMISSIBLE * permissible {
+        let shown_g = self.last_shown_gross_g
+            + (self.zero_counts - self.calibrated_zero_counts) * self.grams_per_count;
+        self.trend_unproven = self
+            .trend
+            .distance_bound_g(shown_g)
+            .is_some_and(|bound| !(bound <= TREND_PROOF_OF_PERMISSIBLE * permissible));
+        if slope.blocks >= TREND_MIN_BLOCKS
+            && slope.t.abs() > TREND_T
+            && lag_g > TREND_LAG_OF_PERMISSIBLE * permissible
+        {
             // The blocks to come are judged against the line: a trickle goes on along it;
             // one that stopped (or a ramp the CUSUM tests cut short) leaves it, and what
             // came before is dropped instead of alarming until it leaves the window.
@@ -739,6 +753,43 @@ mod shown_settled {
                 trickle,
                 &what,
             );
+        }
+    }
+
+    /// A trickle begun soon after a change on a noisy pan (0.85 g of raw noise): 2 s of
+    /// empty pan, `load_g` set down (none: the empty pan goes on), and `after_s` later
+    /// sand trickling on at `rate_g_per_s`. No test can see the slope before the reading
+    /// lags by the permissible error (see the test above), and each of these was shown
+    /// `Stable` or `Empty` 0.05-0.07 g behind (`host-sim torture --runs 10000 --seed 1`:
+    /// 91 of 138 silent wrong readings were trickles, 44 of them shown `Empty`, each begun
+    /// within a few seconds of a load change). The trend window now vouches for a settled
+    /// reading: the load now, by the lines through its last blocks, within the permissible
+    /// error of it. Not every such scene passes: over seeds 100-129 of these four kinds of
+    /// scene, 15 of 120 were shown settled wrong before and 3 are now (slopes no span of
+    /// the window tells from its noise yet).
+    #[test]
+    fn a_trickle_begun_soon_after_a_change_is_not_shown_settled_behind() {
+        for (seed, load_g, after_s, rate_g_per_s) in [
+            (105u64, 20.0, 1.7, 0.04),
+            (105, 5.0, 2.0, 0.03),
+            (106, 0.0, 2.0, 0.04),
+            (120, 0.0, 1.5, 0.03),
+            (121, 0.0, 1.5, 0.03),
+        ] {
+            let (mut scale, _) = scene(0.85);
+            let mut cell = Cell::seeded(0.85, seed);
+            let mut recent = VecDeque::new();
+            let what = std::format!("{rate_g_per_s} g/s onto {load_g} g after {after_s} s");
+            checked((&mut scale, &mut cell, &mut recent), 8000, |_| 0.0, &what);
+            let before = (after_s * 4000.0) as usize;
+            checked(
+                (&mut scale, &mut cell, &mut recent),
+                before,
+                |_| load_g,
+                &what,
+            );
+            let trickle = |k: usize| load_g + rate_g_per_s * k as f64 / 4000.0;
+            checked((&mut scale, &mut cell, &mut recent), 24_000, trickle, &what);
         }
     }
 

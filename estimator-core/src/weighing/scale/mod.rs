@@ -35,7 +35,10 @@
 //! test's sums building up, the block in progress judged on its own scatter, and the
 //! residual motion test (`residual_motion`): the residuals' mean over the last stretches
 //! against their block means' scatter, which sees an item arrive on a load still ringing
-//! by grams (the raw tests must allow for that ringing; the model explains it).
+//! by grams (the raw tests must allow for that ringing; the model explains it). And the
+//! trend test's window must vouch for it: the load now, by the lines through its newest
+//! blocks, within the permissible error of the reading (`trend`; a trickle begun soon
+//! after a change is not seen by any test before it matters, on a noisy pan).
 //!
 //! Neither CUSUM test runs on a flagged reading (a flagged fit has no residual to trust, and no
 //! mass to compare with). So a flag that persists after the run showed a valid reading —
@@ -237,6 +240,9 @@ pub struct Scale<E> {
     /// This run began at a change only the trend test saw: nothing is final before the raw
     /// tests are armed again.
     after_trend_change: bool,
+    /// The trend test's window cannot vouch for the reading: the load now, by the lines
+    /// through its last blocks, may lie beyond the permissible error (`trend`).
+    trend_unproven: bool,
 }
 
 /// The scale around the step estimator of capacity `N` (the firmware's method before the
@@ -321,6 +327,7 @@ impl<E: ScaleEstimator> Scale<E> {
             trend: Trend::new(0),
             trend_alarmed: false,
             after_trend_change: false,
+            trend_unproven: false,
         };
         scale.start_with(calibration);
         Ok(scale)
@@ -494,6 +501,7 @@ impl<E: ScaleEstimator> Scale<E> {
         self.restart_pending = false;
         self.trend_alarmed = false;
         self.after_trend_change = false;
+        self.trend_unproven = false;
     }
 
     /// Count `samples` more raw samples in this run without pushing them (tests of runs
