@@ -357,11 +357,9 @@ impl<E: ScaleEstimator> Scale<E> {
             .permissible_error_g(self.last_shown_gross_g - self.tare_g);
         let shown_g = self.last_shown_gross_g
             + (self.zero_counts - self.calibrated_zero_counts) * self.grams_per_count;
-        self.trend_unproven = self
-            .trend
-            .distance_bound_g(shown_g)
-            .is_some_and(|bound| !(bound <= TREND_PROOF_OF_PERMISSIBLE * permissible));
-        if slope.blocks >= TREND_MIN_BLOCKS
+        let bound_g = self.trend.distance_bound_g(&slope, shown_g);
+        self.trend_unproven = !(bound_g <= TREND_PROOF_OF_PERMISSIBLE * permissible);
+        if slope.blocks() >= TREND_MIN_BLOCKS
             && slope.t.abs() > TREND_T
             && lag_g > TREND_LAG_OF_PERMISSIBLE * permissible
         {

@@ -108,7 +108,8 @@ pub(super) const STEP_DECISION_BLOCKS: usize = 3;
 /// make it a step.
 const STEP_T: f32 = 4.0;
 
-/// A fitted slope and its t statistic, and the blocks it was fitted to.
+/// A fitted slope and its t statistic, and the line through the whole window it is the
+/// slope of (`Trend::distance_bound_g` asks it again).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Slope {
     /// Grams per block.
@@ -116,13 +117,19 @@ pub(super) struct Slope {
     /// The slope over its standard error (infinite for a noise-free ramp, 0 for a
     /// noise-free constant).
     pub(super) t: f32,
+    whole: Line,
+}
+
+impl Slope {
     /// Blocks in the window.
-    pub(super) blocks: usize,
+    pub(super) fn blocks(&self) -> usize {
+        self.whole.blocks
+    }
 }
 
 /// A line fitted to some blocks of the window: its value at the blocks' mean time, its
 /// slope per block, and the residual variance (`None` below three blocks).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 struct Line {
     time: f32,
     level: f32,
@@ -234,19 +241,17 @@ impl Trend {
         Some(Slope {
             per_block_g: line.per_block,
             t,
-            blocks: self.filled,
+            whole: line,
         })
     }
 
     /// How far `value_g` may be from the load now, by the lines through the window's
     /// last [`PROOF_SPANS`] blocks (each of at least [`TREND_PROOF_MIN_BLOCKS`]): the
-    /// largest distance from a line's value at the last block plus
-    /// [`TREND_PROOF_T`] of its standard errors; `None` with too few blocks or while a
-    /// step is judged.
-    pub(super) fn distance_bound_g(&self, value_g: f32) -> Option<f32> {
-        if self.split.is_some() || self.filled < TREND_PROOF_MIN_BLOCKS {
-            return None;
-        }
+    /// largest distance from a line's value at the last block plus [`TREND_PROOF_T`] of
+    /// its standard errors. Asked with the `slope` the block just gave (`push`: none with
+    /// too few blocks or while a step is judged), whose line through the whole window is
+    /// the longest span's.
+    pub(super) fn distance_bound_g(&self, slope: &Slope, value_g: f32) -> f32 {
         let last = self.at(self.filled - 1).0.wrapping_sub(self.at(0).0) as f32;
         let mut widest = 0.0_f32;
         // The spans longer than the window are all the window: one line for them.
@@ -260,8 +265,16 @@ impl Trend {
                 continue;
             }
             longest = blocks;
-            let line = self.line(self.filled - blocks, self.filled);
-            let variance = line.variance?;
+            let line = if blocks == self.filled {
+                slope.whole
+            } else {
+                self.line(self.filled - blocks, self.filled)
+            };
+            // Every span has at least three blocks; a line without a variance vouches
+            // for nothing.
+            let Some(variance) = line.variance else {
+                return f32::INFINITY;
+            };
             let ahead = last - line.time;
             let end = line.level + line.per_block * ahead;
             let se = crate::numerics::real::Real::sqrt(
@@ -269,7 +282,7 @@ impl Trend {
             );
             widest = widest.max((end - value_g).abs() + TREND_PROOF_T * se);
         }
-        Some(widest)
+        widest
     }
 
     /// The blocks after the alarm against the line through those before: a step when
@@ -424,18 +437,21 @@ mod tests {
     /// The bound on the load now: a reading on a flat window is vouched for to a few of
     /// its blocks' standard errors; a reading left behind by a ramp that began 1.2 s ago in
     /// a 6 s flat window is not (the line through the whole window barely rises; the
-    /// newest blocks' does); none while a step is judged or with too few blocks.
+    /// newest blocks' does); none while a step is judged or with too few blocks (no slope
+    /// to ask it with).
     #[test]
     fn the_bound_on_the_load_now_sees_a_ramp_begun_in_a_flat_window() {
         let mut trend = Trend::new(0);
-        fill(&mut trend, TREND_PROOF_MIN_BLOCKS - 1, 10, wobble);
-        assert_eq!(trend.distance_bound_g(0.0), None);
-        fill(&mut trend, 60 - TREND_PROOF_MIN_BLOCKS + 1, 10, wobble);
-        let flat = trend.distance_bound_g(0.0).unwrap();
+        assert_eq!(
+            fill(&mut trend, TREND_PROOF_MIN_BLOCKS - 1, 10, wobble),
+            None
+        );
+        let slope = fill(&mut trend, 60 - TREND_PROOF_MIN_BLOCKS + 1, 10, wobble).unwrap();
+        let flat = trend.distance_bound_g(&slope, 0.0);
         assert!(flat < 0.02, "flat: {flat}");
         // 0.005 g per block (0.05 g/s) for 12 blocks: 0.06 g on the pan now.
-        fill(&mut trend, 12, 10, |k| 0.0005 * k as f32 + wobble(k));
-        let behind = trend.distance_bound_g(0.0).unwrap();
+        let slope = fill(&mut trend, 12, 10, |k| 0.0005 * k as f32 + wobble(k)).unwrap();
+        let behind = trend.distance_bound_g(&slope, 0.0);
         assert!(behind > 0.05, "behind the ramp: {behind}");
         let whole = trend.line(0, trend.filled);
         let whole_end = whole.level + whole.per_block * (71.0 - whole.time);
@@ -444,7 +460,7 @@ mod tests {
             "the whole window's line ends at {whole_end}"
         );
         trend.changed(0);
-        assert_eq!(trend.distance_bound_g(0.0), None);
+        assert_eq!(fill(&mut trend, 1, 10, wobble), None);
     }
 
     #[test]
