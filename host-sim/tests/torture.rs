@@ -99,9 +99,12 @@ fn one_run_alone_gives_its_share_and_a_trace_of_truth_and_readings() {
 /// 0.09 g behind the load at the fit's first certain reading, before the block test had
 /// judged a block (7 of 21 shown); run 401, a trickle shown final 2.5 u off with twice
 /// its `u` just within 0.5 e; run 761, a load placed by hand shown stable at its old mass.
+/// At stop 32: run 219, a trickle of 0.03 g/s onto the empty pan, shown stable at 0.000 g
+/// with 0.052-0.059 g on it (the trend window vouched for the reading by two standard
+/// errors of its lines; now by Student's t at z = 2.5).
 #[test]
 fn runs_that_showed_wrong_readings_settled_show_none() {
-    show_none_settled_wrong("1000", &["72", "401", "761"]);
+    show_none_settled_wrong("1000", &["72", "401", "761", "219"]);
 }
 
 /// Runs of `host-sim torture --runs 10000 --seed 1` that showed wrong readings settled at
@@ -112,10 +115,16 @@ fn runs_that_showed_wrong_readings_settled_show_none() {
 /// reading stayed final, 0.21 g off. At stop 31: runs 2371 and 4912, trickles of about
 /// 0.04-0.05 g/s begun 1.7 and 2.5 s after a removal, on pans with 0.86 and 0.94 g of raw
 /// noise, shown `Empty` 0.05-0.07 g behind before any test could see the slope
-/// (the trend window now vouches for a settled reading).
+/// (the trend window now vouches for a settled reading). At stop 32: runs 9139 and 8837,
+/// trickles onto the empty pan (0.85 g of raw noise in 9139) shown `Empty` 0.05-0.06 g
+/// behind, the window's lines taken within two standard errors (Student's t at z = 2.5
+/// now, for each line's degrees of freedom).
 #[test]
 fn runs_of_ten_thousand_that_showed_wrong_readings_settled_show_none() {
-    show_none_settled_wrong("10000", &["4700", "5430", "9291", "2371", "4912"]);
+    show_none_settled_wrong(
+        "10000",
+        &["4700", "5430", "9291", "2371", "4912", "9139", "8837"],
+    );
 }
 
 /// Each of `runs` of `host-sim torture --runs <of> --seed 1`, alone, shows readings settled

@@ -53,6 +53,7 @@
 //! which is not kept, and the estimator states no `u`.
 
 use crate::numerics::real::Real;
+use crate::numerics::student::t_quantile;
 
 /// Fewer residual degrees of freedom than this: no uncertainty is stated.
 pub const MIN_DEGREES_OF_FREEDOM: u32 = 3;
@@ -774,10 +775,8 @@ fn moving_average<T: Real, const N: usize>(lead: &[T; N], n: usize, m: usize) ->
 }
 
 /// `max(1, t_{0.975}(ν)/2)`: the factor that makes ±2u a 95 % interval when the noise
-/// level rests on ν degrees of freedom. The quantile by its Cornish–Fisher series in 1/ν
-/// (within 0.5 % of the tables from ν = 3; 3.18 at ν = 3 against 3.182), evaluated at
-/// compile time into [`COVERAGE_FACTORS`]: the target has no double-precision FPU, and the
-/// series in soft `f64` cost more than the rest of the uncertainty.
+/// level rests on ν degrees of freedom ([`t_quantile`]: 3.16 at ν = 3 against 3.182),
+/// evaluated at compile time into [`COVERAGE_FACTORS`].
 pub(crate) fn coverage_factor<T: Real>(degrees: u32) -> T {
     let index = degrees.max(1) as usize;
     T::from_f64(match COVERAGE_FACTORS.get(index) {
@@ -793,16 +792,7 @@ const fn coverage_factors() -> [f64; 61] {
     let mut table = [1.0; 61];
     let mut degrees = 1;
     while degrees < 61 {
-        let z = 1.959_964;
-        let v = degrees as f64;
-        let z3 = z * z * z;
-        let z5 = z3 * z * z;
-        let z7 = z5 * z * z;
-        let t = z
-            + (z3 + z) / (4.0 * v)
-            + (5.0 * z5 + 16.0 * z3 + 3.0 * z) / (96.0 * v * v)
-            + (3.0 * z7 + 19.0 * z5 + 17.0 * z3 - 15.0 * z) / (384.0 * v * v * v);
-        let half = t / 2.0;
+        let half = t_quantile(1.959_964, degrees as f64) / 2.0;
         table[degrees] = if half > 1.0 { half } else { 1.0 };
         degrees += 1;
     }

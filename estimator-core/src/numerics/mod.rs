@@ -10,3 +10,4 @@ pub mod expm;
 pub(crate) mod factor;
 pub(crate) mod real;
 pub(crate) mod square;
+pub(crate) mod student;

@@ -754,17 +754,45 @@ mod shown_settled {
         }
     }
 
-    /// A trickle begun soon after a change on a noisy pan (0.85 g of raw noise): 2 s of
-    /// empty pan, `load_g` set down (none: the empty pan goes on), and `after_s` later
-    /// sand trickling on at `rate_g_per_s`. No test can see the slope before the reading
-    /// lags by the permissible error (see the test above), and each of these was shown
-    /// `Stable` or `Empty` 0.05-0.07 g behind (`host-sim torture --runs 10000 --seed 1`:
-    /// 91 of 138 silent wrong readings were trickles, 44 of them shown `Empty`, each begun
-    /// within a few seconds of a load change). The trend window now vouches for a settled
-    /// reading: the load now, by the lines through its last blocks, within the permissible
-    /// error of it. Not every such scene passes: over seeds 100-129 of these four kinds of
-    /// scene, 15 of 120 were shown settled wrong before and 3 are now (slopes no span of
-    /// the window tells from its noise yet).
+    /// A trickle begun soon after a change on a noisy pan (0.85 g of raw noise, cell seeded
+    /// by `seed`): 2 s of empty pan, `load_g` set down (none: the empty pan goes on), and
+    /// `after_s` later sand trickling on at `rate_g_per_s` for 6 s, every settled reading
+    /// checked against the truth.
+    fn trickle_after_a_change(seed: u64, load_g: f64, after_s: f64, rate_g_per_s: f64) {
+        let (mut scale, _) = scene(0.85);
+        let mut cell = Cell::seeded(0.85, seed);
+        let mut recent = VecDeque::new();
+        let what = std::format!("{rate_g_per_s} g/s onto {load_g} g after {after_s} s");
+        checked((&mut scale, &mut cell, &mut recent), 8000, |_| 0.0, &what);
+        let before = (after_s * 4000.0) as usize;
+        checked(
+            (&mut scale, &mut cell, &mut recent),
+            before,
+            |_| load_g,
+            &what,
+        );
+        let trickle = |k: usize| load_g + rate_g_per_s * k as f64 / 4000.0;
+        checked((&mut scale, &mut cell, &mut recent), 24_000, trickle, &what);
+    }
+
+    /// The kinds of scene of [`trickle_after_a_change`] the tests below draw on: load,
+    /// delay and rate.
+    const TRICKLES_AFTER_A_CHANGE: [(f64, f64, f64); 4] = [
+        (20.0, 1.7, 0.04),
+        (5.0, 2.0, 0.03),
+        (0.0, 2.0, 0.04),
+        (0.0, 1.5, 0.03),
+    ];
+
+    /// No test can see the slope of these trickles before the reading lags by the
+    /// permissible error (see the test above), and each was shown `Stable` or `Empty`
+    /// 0.05-0.07 g behind (`host-sim torture --runs 10000 --seed 1`: 91 of 138 silent wrong
+    /// readings were trickles, 44 of them shown `Empty`, each begun within a few seconds of
+    /// a load change). The trend window vouches for a settled reading: the load now, by
+    /// the lines through its last blocks, within the permissible error of it. The first
+    /// five scenes were wrong before it did; the last three (seeds 101 and 123) while each
+    /// line's last value was taken within two standard errors, not Student's t at
+    /// z = 2.5 for its degrees of freedom (`trend::PROOF_T`).
     #[test]
     fn a_trickle_begun_soon_after_a_change_is_not_shown_settled_behind() {
         for (seed, load_g, after_s, rate_g_per_s) in [
@@ -773,22 +801,39 @@ mod shown_settled {
             (106, 0.0, 2.0, 0.04),
             (120, 0.0, 1.5, 0.03),
             (121, 0.0, 1.5, 0.03),
+            (101, 0.0, 2.0, 0.04),
+            (101, 0.0, 1.5, 0.03),
+            (123, 5.0, 2.0, 0.03),
         ] {
-            let (mut scale, _) = scene(0.85);
-            let mut cell = Cell::seeded(0.85, seed);
-            let mut recent = VecDeque::new();
-            let what = std::format!("{rate_g_per_s} g/s onto {load_g} g after {after_s} s");
-            checked((&mut scale, &mut cell, &mut recent), 8000, |_| 0.0, &what);
-            let before = (after_s * 4000.0) as usize;
-            checked(
-                (&mut scale, &mut cell, &mut recent),
-                before,
-                |_| load_g,
-                &what,
-            );
-            let trickle = |k: usize| load_g + rate_g_per_s * k as f64 / 4000.0;
-            checked((&mut scale, &mut cell, &mut recent), 24_000, trickle, &what);
+            trickle_after_a_change(seed, load_g, after_s, rate_g_per_s);
         }
+    }
+
+    /// The same four kinds of scene on 100 seeds none of the settings was chosen on
+    /// (130-229): at most one scene in 50 may be shown settled wrong. Figures:
+    /// `cargo test -p estimator-core --lib trickles_begun_soon_after_a_change_on_fresh_seeds -- --nocapture`:
+    /// 3 of 400 with Student's t at z = 2.5; 22 of 400 with two standard errors; seeds
+    /// 100-129 (where the test above found its scenes): 0 and 3 of 120.
+    #[test]
+    fn trickles_begun_soon_after_a_change_on_fresh_seeds() {
+        let mut wrong = std::vec::Vec::new();
+        let mut scenes = 0;
+        for seed in 130..230u64 {
+            for (load_g, after_s, rate_g_per_s) in TRICKLES_AFTER_A_CHANGE {
+                scenes += 1;
+                let outcome = std::panic::catch_unwind(|| {
+                    trickle_after_a_change(seed, load_g, after_s, rate_g_per_s);
+                });
+                if outcome.is_err() {
+                    wrong.push((seed, load_g, after_s, rate_g_per_s));
+                }
+            }
+        }
+        std::eprintln!(
+            "{} of {scenes} scenes shown settled wrong: {wrong:?}",
+            wrong.len()
+        );
+        assert!(wrong.len() * 50 <= scenes, "{wrong:?}");
     }
 
     /// On a pan with 0.43 g of raw noise (cell seeded by `seed`): 1 s empty, `load_g` set
