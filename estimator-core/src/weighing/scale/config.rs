@@ -85,6 +85,11 @@ pub struct ScaleConfig {
     /// 4 % of Max for zero setting and tracking together; see
     /// [`Self::weighing_default`] for why the default is far tighter.
     pub zero_tracking_range_g: f32,
+    /// The fastest the zero may drift while nothing tracks it (a load on the pan), g/s:
+    /// every reading's `u` carries that drift since the zero was last seen (tracked on
+    /// the empty pan, set, or taken over by a tare), as a rectangular distribution of
+    /// half-width this rate times that time. 0: the cell's zero does not drift.
+    pub zero_drift_g_per_s: f32,
     /// Check every run after the first metered empty period against the noise metered on
     /// the empty pan (`crate::estimators::consistency`; see the `Scale` module docs, "The consistency check").
     pub consistency_check: bool,
@@ -109,7 +114,8 @@ impl ScaleConfig {
     /// The fastest zero drift an approved instrument may have, in scale intervals per
     /// second: OIML R 76-1 lets the no-load indication of a class III instrument move 1 e
     /// per 5 °C (3.9.2.3), and a room swinging 10 °C in 10 minutes moves it 2 e in 600 s.
-    /// What zero tracking must follow, and what `host-sim torture` drifts by at most.
+    /// What zero tracking must follow, what every reading's `u` allows for since the zero
+    /// was last seen, and what `host-sim torture` drifts by at most.
     pub const FASTEST_ZERO_DRIFT_E_PER_S: f32 = 2.0 / 600.0;
     /// The reference cell's resonance with [`Self::REFERENCE_RING_LOAD_G`] on, Hz
     /// (host-sim's reference cell; `firmware/weighing.toml` identifies 25.0 Hz).
@@ -187,7 +193,14 @@ impl ScaleConfig {
     ///   `host-sim torture --runs 300` counted 2,785 silent wrong readings with drifting
     ///   zeros, 472 at 0.02 e/s. Nothing is tracked until the pan has been settled for
     ///   `raw_arm_samples` after a start (the first readings of a noisy pan moved the zero
-    ///   for the whole run).
+    ///   for the whole run);
+    /// - the zero's drift in every reading's `u`: at [`Self::FASTEST_ZERO_DRIFT_E_PER_S`]
+    ///   since the zero was last seen (tracked, set, or taken into a tare), rectangular.
+    ///   A load on the pan hides the zero, and nothing tracks it: after a minute at 0.5 e
+    ///   permissible (loads up to 500 e) a reading is no longer certain enough to show
+    ///   stable, after three at 1.5 e. Without it `host-sim torture --runs 10000` counted
+    ///   73 silent wrong readings, 41 with the drift taken out of its scenes. A cell whose
+    ///   zero is known to hold better sets a smaller rate (0 for none).
     pub fn weighing_default(sample_rate_hz: f32) -> Self {
         Self {
             sample_rate_hz,
@@ -220,6 +233,7 @@ impl ScaleConfig {
                 * Self::FASTEST_ZERO_DRIFT_E_PER_S
                 * Self::SCALE_INTERVAL_G,
             zero_tracking_range_g: 2.0 * Self::SCALE_INTERVAL_G,
+            zero_drift_g_per_s: Self::FASTEST_ZERO_DRIFT_E_PER_S * Self::SCALE_INTERVAL_G,
             consistency_check: true,
             noise_window_samples: (0.3 * sample_rate_hz) as u32,
             noise_guard_samples: (0.05 * sample_rate_hz) as u32,
@@ -314,6 +328,10 @@ impl ScaleConfig {
                 "zero_tracking_range_g",
                 finite_non_negative(self.zero_tracking_range_g),
             ),
+            (
+                "zero_drift_g_per_s",
+                finite_non_negative(self.zero_drift_g_per_s),
+            ),
             ("noise_window_samples", self.noise_window_samples > 0),
         ];
         match checks.iter().find(|(_, ok)| !ok) {
@@ -335,6 +353,7 @@ impl ScaleConfig {
             zero_tracking_band_g: self.zero_tracking_band_g * per_e,
             zero_tracking_rate_g_per_s: self.zero_tracking_rate_g_per_s * per_e,
             zero_tracking_range_g: self.zero_tracking_range_g * per_e,
+            zero_drift_g_per_s: self.zero_drift_g_per_s * per_e,
             block_drift_g: self.block_drift_g * per_e,
             block_threshold_g: self.block_threshold_g * per_e,
             ..self
@@ -409,7 +428,7 @@ mod tests {
         let good = ScaleConfig::weighing_default(FS);
         assert_eq!(good.validate(), Ok(()));
         type Set = fn(&mut ScaleConfig, f32);
-        let fields: [(&str, Set); 18] = [
+        let fields: [(&str, Set); 19] = [
             ("accuracy_target_relative", |c, v| {
                 c.accuracy_target_relative = v
             }),
@@ -434,6 +453,7 @@ mod tests {
             ("zero_tracking_rate_g_per_s", |c, v| {
                 c.zero_tracking_rate_g_per_s = v
             }),
+            ("zero_drift_g_per_s", |c, v| c.zero_drift_g_per_s = v),
         ];
         for (name, set) in fields {
             for bad in [f32::NAN, -1.0, f32::NEG_INFINITY] {

@@ -4,7 +4,7 @@
 //!
 //! Never a number the estimator flagged, never a number without its state.
 
-use super::{with_tare, RawSample, Scale, ScaleEstimator, ScaleFault, ScaleReading, ScaleState};
+use super::{RawSample, Scale, ScaleEstimator, ScaleFault, ScaleReading, ScaleState};
 use crate::reading::{InvalidReason, State};
 
 impl<E: ScaleEstimator> Scale<E> {
@@ -58,14 +58,16 @@ impl<E: ScaleEstimator> Scale<E> {
         let zero_shift_g = (self.zero_counts - self.run_zero_counts as f32) * self.grams_per_count;
         let estimate_g = estimate_counts * self.grams_per_count - zero_shift_g;
         let gross_u_g = reading.uncertainty.map(|u| u * self.grams_per_count.abs());
-        // The bound (a square root and two divisions) only when `u` changed: it changes
-        // once per block of the estimator, not on every sample.
+        // The bound (a square root and two divisions) and the net `u` (the tare's and the
+        // zero's drift with it) only when `u` changed: it changes once per block of the
+        // estimator, not on every sample, and the drift moves far slower.
         if gross_u_g != self.gross_u_g {
             self.gross_u_bound_g = reading
                 .uncertainty_bound()
                 .map(|u| u * self.grams_per_count.abs());
+            self.gross_u_g = gross_u_g;
+            self.refresh_net_u();
         }
-        self.gross_u_g = gross_u_g;
         if estimate_g > self.overload_limit_g() {
             return self.overloaded();
         }
@@ -88,13 +90,13 @@ impl<E: ScaleEstimator> Scale<E> {
             RawSample::Saturated => {
                 self.white.gap();
                 self.restart_pending = true;
-                self.trend.clear(0);
+                self.clear_trend(0);
                 Err(ScaleFault::Saturated)
             }
             RawSample::Lost => {
                 self.white.gap();
                 self.restart_pending = true;
-                self.trend.clear(0);
+                self.clear_trend(0);
                 Err(ScaleFault::SampleLost)
             }
         }
@@ -152,7 +154,7 @@ impl<E: ScaleEstimator> Scale<E> {
             self.stable_samples = 0;
         }
         let certain = self
-            .gross_u_bound_g
+            .net_u_bound_g
             .is_some_and(|bound| self.within_permissible(estimate_g - self.tare_g, bound));
         // Final once twice the upper confidence bound of `u` meets the target (see
         // `Reading::uncertainty_bound`: on `u` itself the first final readings at 40 dB
@@ -160,9 +162,9 @@ impl<E: ScaleEstimator> Scale<E> {
         // by its `u` (a target looser than the permissible error does not let a final
         // reading lie outside it). Decided here, once, for `reading`.
         self.final_bound_met = certain
-            && self.gross_u_bound_g.is_some_and(|bound| {
-                2.0 * with_tare(bound, self.tare_u_bound_g) <= self.config.final_target_g
-            });
+            && self
+                .net_u_bound_g
+                .is_some_and(|bound| 2.0 * bound <= self.config.final_target_g);
         let in_band = self.stable_samples >= self.config.stable_hold_samples;
         let held = in_band && certain;
         // A run that began mid-change (a load lifted off by hand, the restart caught its
@@ -170,14 +172,23 @@ impl<E: ScaleEstimator> Scale<E> {
         // error on a load that has long come to rest. Once per load change, after
         // `raw_arm_samples` of valid readings that never became certain, start over on
         // data of the resting load. Readings with no `u` at all do not count: a fit too
-        // young to state one, or a method that never does (restarting would not help).
+        // young to state one, or a method that never does (restarting would not help), nor
+        // readings uncertain by the zero's drift alone (asked once, when the restart is
+        // due: a fresh fit would not help either, and it is asked again 1.5 s on).
         if !certain && self.gross_u_g.is_some() && !self.restarted_uncertain {
             self.uncertain_samples = self.uncertain_samples.saturating_add(1);
             if self.uncertain_samples >= self.config.raw_arm_samples {
-                self.restart();
-                self.restarted_uncertain = true;
-                self.state = ScaleState::Estimating;
-                return false;
+                let drift_alone = self
+                    .net_u_bound_without_drift_g()
+                    .is_some_and(|bound| self.within_permissible(estimate_g - self.tare_g, bound));
+                if drift_alone {
+                    self.uncertain_samples = 0;
+                } else {
+                    self.restart();
+                    self.restarted_uncertain = true;
+                    self.state = ScaleState::Estimating;
+                    return false;
+                }
             }
         } else {
             self.uncertain_samples = 0;

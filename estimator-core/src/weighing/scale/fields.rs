@@ -95,7 +95,7 @@ macro_rules! samples {
 impl ScaleConfig {
     /// Every field by name, in the order `config show` lists them: the instrument (Max, e,
     /// targets), stability and the empty pan, zero tracking, then the change tests.
-    pub const FIELDS: [ConfigField; 27] = [
+    pub const FIELDS: [ConfigField; 28] = [
         real!(capacity_g),
         real!(scale_interval_g),
         real!(final_target_g),
@@ -109,6 +109,7 @@ impl ScaleConfig {
         real!(zero_tracking_band_g),
         real!(zero_tracking_rate_g_per_s),
         real!(zero_tracking_range_g),
+        real!(zero_drift_g_per_s),
         ConfigField {
             name: "consistency_check",
             kind: Kind::Switch,

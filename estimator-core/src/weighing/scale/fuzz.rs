@@ -128,7 +128,7 @@ proptest! {
     fn an_arbitrary_configuration_builds_or_is_refused(
         values in proptest::collection::vec(
             prop_oneof![any::<f32>(), -10.0f32..1000.0, Just(f32::NAN), Just(0.0)],
-            19,
+            20,
         ),
         counts in proptest::collection::vec(any::<u32>(), 7),
         codes in proptest::collection::vec(any::<i32>(), 0..500),
@@ -153,6 +153,7 @@ proptest! {
             accuracy_target_relative: values[16],
             accuracy_target_mass_g: values[17],
             ringing_min_hz: values[18],
+            zero_drift_g_per_s: values[19],
             block_samples: counts[6] % 10_000,
             stable_hold_samples: counts[0],
             residual_arm_samples: counts[1],

@@ -75,8 +75,9 @@ pub struct ScaleReading {
     /// Net mass in grams (gross minus tare); `None` while warming up or invalid.
     pub mass_g: Option<f32>,
     /// The standard uncertainty of `mass_g` in grams (GUM; ±2u is a 95 % interval): the
-    /// estimator's, converted with the gain, and the tare's in quadrature when a tare is
-    /// in use. `None` without a mass, or when the configured method states none.
+    /// estimator's, converted with the gain, the tare's when a tare is in use, and the
+    /// zero's possible drift since it was last seen (`ScaleConfig::zero_drift_g_per_s`),
+    /// in quadrature. `None` without a mass, or when the configured method states none.
     pub uncertainty_g: Option<f32>,
     /// The reading is final: a mass, estimating or stable, whose 95 % interval (±2u) is
     /// within the configured target ([`super::ScaleConfig::final_target_g`]) and four of

@@ -206,6 +206,11 @@ impl Trend {
         }
     }
 
+    /// Blocks ended since the window started.
+    pub(super) fn clock(&self) -> u32 {
+        self.clock
+    }
+
     /// Start over (a fault, a new calibration): nothing before it counts.
     pub(super) fn clear(&mut self, skip_blocks: u32) {
         *self = Self::new(skip_blocks);

@@ -44,6 +44,9 @@ impl<E: ScaleEstimator> Scale<E> {
         self.tare_g = gross;
         self.tare_u_g = u;
         self.tare_u_bound_g = bound;
+        // The zero's drift so far is in the tare: net readings drift from here on.
+        self.reference_block = self.blocks_now();
+        self.refresh_reference_u();
         self.final_bound_met = false;
         Ok(())
     }
@@ -71,17 +74,21 @@ impl<E: ScaleEstimator> Scale<E> {
         self.power_up_zero_counts = zero_counts;
         self.zero_tracked_counts = 0.0;
         self.zero_counts = zero_counts;
+        self.zero_seen();
+        self.refresh_reference_u();
         self.final_bound_met = false;
         Ok(())
     }
 
     /// What tare and zero setting both need of the reading: stable (or empty) with a gross
-    /// mass, and known to within ±[`TARE_ACCURACY_E`] e (twice its `u`'s upper bound); the
-    /// gross mass, its `u` and that bound. A reading with no `u` is never stable; were one
-    /// to get here, it is refused as uncertain, never taken as known exactly.
+    /// mass, or so but for the zero's drift (`settled_but_for_drift`), and known to within
+    /// ±[`TARE_ACCURACY_E`] e (twice its `u`'s upper bound); the gross mass, its `u` and
+    /// that bound. A reading with no `u` is never stable; were one to get here, it is
+    /// refused as uncertain, never taken as known exactly.
     fn settled_reading(&self) -> Result<(f32, f32, f32), Unsettled> {
-        let (ScaleState::Stable | ScaleState::Empty, Some(gross)) = (self.state, self.gross_g)
-        else {
+        let settled = matches!(self.state, ScaleState::Stable | ScaleState::Empty)
+            || self.settled_but_for_drift();
+        let (true, Some(gross)) = (settled, self.gross_g) else {
             return Err(Unsettled::NotStable);
         };
         let (Some(u), Some(bound)) = (self.gross_u_g, self.gross_u_bound_g) else {
@@ -94,20 +101,48 @@ impl<E: ScaleEstimator> Scale<E> {
         Ok((gross, u, bound))
     }
 
+    /// The reading would be stable but that the zero may have drifted beyond what a
+    /// stable reading allows since it was last seen: it holds its band, nothing moves,
+    /// and its `u` without the drift is certain. Zero setting and a tare take the drift
+    /// into themselves, so they are not refused for it: a load left on for minutes would
+    /// otherwise leave a zero that drifted out of the tracking band unsettable.
+    fn settled_but_for_drift(&self) -> bool {
+        let certain = self.net_u_bound_without_drift_g().is_some_and(|bound| {
+            self.gross_g
+                .is_some_and(|gross| self.within_permissible(gross - self.tare_g, bound))
+        });
+        self.state == ScaleState::Estimating
+            && certain
+            && self.stable_samples >= self.config.stable_hold_samples
+            && (self.raw_armed || !self.after_slow_change)
+            && !self.in_motion()
+    }
+
     /// Remove the tare.
     pub fn clear_tare(&mut self) {
         self.tare_g = 0.0;
         self.tare_u_g = 0.0;
         self.tare_u_bound_g = 0.0;
+        // Gross readings again: the zero's drift since it was last seen.
+        self.reference_block = self.zero_seen_block;
+        self.refresh_reference_u();
         self.final_bound_met = false;
+    }
+
+    /// Whether zero tracking may pull the zero at the gross reading `estimate_g`: the pan
+    /// settled since the start and within the tracking band of zero. On a pan shown empty
+    /// the zero is then seen (`Scale::zero_seen`, asked once a block by the block test,
+    /// not per sample: a block late at most, which only ages the zero).
+    pub(super) fn zero_trackable(&self, estimate_g: f32) -> bool {
+        self.settled_samples >= self.config.raw_arm_samples
+            && estimate_g.abs() <= self.config.zero_tracking_band_g
     }
 
     /// Zero tracking on an empty, stable reading: only a pan near zero and settled since
     /// the start pulls the zero, slowly, and never further than the tracking range from
     /// the power-up zero (see [`super::ScaleConfig::weighing_default`]).
     pub(super) fn track_zero(&mut self, estimate_g: f32) {
-        let settled = self.settled_samples >= self.config.raw_arm_samples;
-        if !(settled && estimate_g.abs() <= self.config.zero_tracking_band_g) {
+        if !self.zero_trackable(estimate_g) {
             return;
         }
         let max_step_g = self.config.zero_tracking_rate_g_per_s / self.config.sample_rate_hz;
