@@ -178,10 +178,7 @@ impl<E: ScaleEstimator> Scale<E> {
         if !certain && self.gross_u_g.is_some() && !self.restarted_uncertain {
             self.uncertain_samples = self.uncertain_samples.saturating_add(1);
             if self.uncertain_samples >= self.config.raw_arm_samples {
-                let drift_alone = self
-                    .net_u_bound_without_drift_g()
-                    .is_some_and(|bound| self.within_permissible(estimate_g - self.tare_g, bound));
-                if drift_alone {
+                if self.certain_but_for_drift(estimate_g - self.tare_g) {
                     self.uncertain_samples = 0;
                 } else {
                     self.restart();

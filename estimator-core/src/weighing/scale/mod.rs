@@ -412,7 +412,8 @@ impl<E: ScaleEstimator> Scale<E> {
             .gross_g
             .filter(|_| shown)
             .map(|gross| gross - self.tare_g);
-        // The net reading's `u` carries the tare's: both are estimates of the same cell.
+        // The net reading's `u` carries the tare's (both are estimates of the same cell)
+        // and the zero's drift since it was last seen.
         let uncertainty_g = mass_g.and(self.net_u_g);
         // Final once the bound of `u` meets the target and is vouched for (decided with
         // the reading, `decide::show`), the estimate has held its band for the hold time
@@ -660,13 +661,15 @@ impl<E: ScaleEstimator> Scale<E> {
             .map(|bound| crate::numerics::real::Real::sqrt(bound * bound + bound2_g2));
     }
 
-    /// The net reading's `u` bound without the zero's drift: what zero setting, a tare
-    /// and the restart of a fit that never became certain ask.
-    fn net_u_bound_without_drift_g(&self) -> Option<f32> {
-        self.gross_u_bound_g.map(|bound| {
-            crate::numerics::real::Real::sqrt(
+    /// Whether the net reading `net_g` would be certain (`within_permissible`) but for
+    /// the zero's drift: its bound from the gross reading's and the tare's alone. What
+    /// zero setting, a tare and the restart of a fit that never became certain ask.
+    fn certain_but_for_drift(&self, net_g: f32) -> bool {
+        self.gross_u_bound_g.is_some_and(|bound| {
+            let net_bound_g = crate::numerics::real::Real::sqrt(
                 bound * bound + self.tare_u_bound_g * self.tare_u_bound_g,
-            )
+            );
+            self.within_permissible(net_g, net_bound_g)
         })
     }
 }

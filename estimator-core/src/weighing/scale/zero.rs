@@ -107,12 +107,10 @@ impl<E: ScaleEstimator> Scale<E> {
     /// into themselves, so they are not refused for it: a load left on for minutes would
     /// otherwise leave a zero that drifted out of the tracking band unsettable.
     fn settled_but_for_drift(&self) -> bool {
-        let certain = self.net_u_bound_without_drift_g().is_some_and(|bound| {
-            self.gross_g
-                .is_some_and(|gross| self.within_permissible(gross - self.tare_g, bound))
-        });
         self.state == ScaleState::Estimating
-            && certain
+            && self
+                .gross_g
+                .is_some_and(|gross| self.certain_but_for_drift(gross - self.tare_g))
             && self.stable_samples >= self.config.stable_hold_samples
             && (self.raw_armed || !self.after_slow_change)
             && !self.in_motion()
