@@ -199,7 +199,7 @@ impl ScaleConfig {
     ///   A load on the pan hides the zero, and nothing tracks it: after a minute at 0.5 e
     ///   permissible (loads up to 500 e) a reading is no longer certain enough to show
     ///   stable, after three at 1.5 e. Without it `host-sim torture --runs 10000` counted
-    ///   73 silent wrong readings, 41 with the drift taken out of its scenes. A cell whose
+    ///   73 silent wrong readings, 37 with it. A cell whose
     ///   zero is known to hold better sets a smaller rate (0 for none).
     pub fn weighing_default(sample_rate_hz: f32) -> Self {
         Self {
