@@ -547,6 +547,52 @@ pub fn settle_against_snr(results: &[StudyResult], names: &[String]) -> Chart {
     )
 }
 
+/// (k) Median time to the first final reading (twice `u` at its upper 95 % bound within the
+/// study's target) against SNR, with the CRLB's earliest final: the information limit for
+/// a method whose `u` is honest. Methods that state no `u`, or are never final, draw
+/// nothing and take no legend entry.
+pub fn final_against_snr(results: &[StudyResult], names: &[String]) -> Chart {
+    let Some(first) = results.first() else {
+        return empty("(k) no results");
+    };
+    let Some(target) = first.final_target_g else {
+        return empty("(k) no final target");
+    };
+    let mut series: Vec<Series> = names
+        .iter()
+        .enumerate()
+        .map(|(index, name)| Series {
+            name: name.clone(),
+            points: results
+                .iter()
+                .map(|r| (r.snr_db, r.setups[index].final_quantile(0.5) * 1e3))
+                .collect(),
+            reference: false,
+        })
+        .collect();
+    series.push(Series {
+        name: "CRLB: earliest final (2 × bound within the target)".into(),
+        points: results
+            .iter()
+            .map(|r| (r.snr_db, crate::montecarlo::crlb_final_s(r, target) * 1e3))
+            .collect(),
+        reference: true,
+    });
+    series.push(Series {
+        name: "goal: final by 50 ms".into(),
+        points: results.iter().map(|r| (r.snr_db, 50.0)).collect(),
+        reference: true,
+    });
+    against_snr(
+        format!(
+            "(k) {}: median time to a final reading, 2u ≤ {target} g ({} runs per point)",
+            first.scene, first.runs
+        ),
+        "time after the drop, ms (missing: half the runs not final by 1.5 s)",
+        series,
+    )
+}
+
 /// Labels at 1, 2 and 5 times a power of ten only, so a log axis stays readable.
 fn log_label(y: f64) -> String {
     if !(y > 0.0) {

@@ -185,6 +185,13 @@ pub struct SetupStats {
     /// Per tolerance in [`TOLERANCES`], per run: the time the estimate reached and stayed
     /// within the tolerance, s (infinite if it never did within the window).
     pub settle_s: [Vec<f64>; 3],
+    /// Per run, with a final target ([`Study::final_target_g`]): the time of the first
+    /// reading final by the estimator's own rule (twice `u` at its upper 95 % bound within
+    /// the target), s, and that reading's error, g; `(∞, NaN)` for a run never final
+    /// within the window. Empty without a target.
+    pub finals: Vec<(f64, f64)>,
+    /// Runs in which the method stated a `u` at least once (with a target).
+    pub runs_with_u: usize,
 }
 
 impl SetupStats {
@@ -195,6 +202,8 @@ impl SetupStats {
             sum_squared: vec![0.0; samples],
             valid: vec![0; samples],
             settle_s: [Vec::new(), Vec::new(), Vec::new()],
+            finals: Vec::new(),
+            runs_with_u: 0,
         }
     }
 
@@ -207,6 +216,8 @@ impl SetupStats {
         for (mine, theirs) in self.settle_s.iter_mut().zip(other.settle_s) {
             mine.extend(theirs);
         }
+        self.finals.extend(other.finals);
+        self.runs_with_u += other.runs_with_u;
     }
 
     /// Bias at sample index k, g (NaN without valid runs).
@@ -238,6 +249,40 @@ impl SetupStats {
         let index = ((times.len() as f64 * quantile).ceil() as usize).clamp(1, times.len()) - 1;
         times[index]
     }
+
+    /// The `quantile` (0..1) of the time to the first final reading over all runs, s
+    /// (infinite when fewer runs than that became final; NaN without a target).
+    pub fn final_quantile(&self, quantile: f64) -> f64 {
+        let mut times: Vec<f64> = self.finals.iter().map(|(t, _)| *t).collect();
+        times.sort_by(f64::total_cmp);
+        if times.is_empty() {
+            return f64::NAN;
+        }
+        let index = ((times.len() as f64 * quantile).ceil() as usize).clamp(1, times.len()) - 1;
+        times[index]
+    }
+
+    /// The share of runs whose first final reading came by `time_s` and lay within
+    /// `tolerance_g` of the truth (NaN without a target).
+    pub fn final_within_by(&self, time_s: f64, tolerance_g: f64) -> f64 {
+        let hits = self
+            .finals
+            .iter()
+            .filter(|(t, e)| *t <= time_s && e.abs() <= tolerance_g)
+            .count();
+        hits as f64 / self.finals.len() as f64
+    }
+
+    /// The share of runs whose first final reading lay further than `tolerance_g` from the
+    /// truth (NaN without a target).
+    pub fn finals_beyond(&self, tolerance_g: f64) -> f64 {
+        let beyond = self
+            .finals
+            .iter()
+            .filter(|(t, e)| t.is_finite() && !(e.abs() <= tolerance_g))
+            .count();
+        beyond as f64 / self.finals.len() as f64
+    }
 }
 
 /// A finished study at one SNR.
@@ -262,6 +307,8 @@ pub struct StudyResult {
     pub crlb_g2: Vec<f64>,
     /// The same with the tare unknown (centred form), g².
     pub crlb_unknown_tare_g2: Vec<f64>,
+    /// The study's final target, g ([`Study::final_target_g`]).
+    pub final_target_g: Option<f64>,
     /// The noise-free sensor's own time to reach and stay within each tolerance, s.
     pub sensor_settle_s: [f64; 3],
     /// One run's relative errors per configuration (run 0), for chart (a).
@@ -281,6 +328,9 @@ pub struct Study {
     pub seed: u64,
     /// Samples after the onset to study (at most the scene's window).
     pub samples: usize,
+    /// With a target, g: each run's first final reading is recorded
+    /// ([`SetupStats::finals`]).
+    pub final_target_g: Option<f64>,
 }
 
 /// Samples of empty pan metered before each run for the methods that take the tare noise
@@ -345,10 +395,10 @@ impl Study {
         let noise_variance = raw_noise_variance(scene);
         let context = self.validated_context(noise_variance)?;
         let rate = chain.sample_rate_hz;
-        let run_one = |run: usize| -> Vec<Vec<Option<f64>>> {
-            let errors = self.run_errors(run, &context, onset, samples, truth_g);
+        let run_one = |run: usize| -> Vec<RunTrace> {
+            let traces = self.run_errors(run, &context, onset, samples, truth_g);
             progress.inc(1);
-            errors
+            traces
         };
         let empty = || -> Vec<SetupStats> {
             self.setups
@@ -364,7 +414,13 @@ impl Study {
                 let mut stats = empty();
                 let first = chunk * RUNS_PER_CHUNK;
                 for run in first..(first + RUNS_PER_CHUNK).min(self.runs) {
-                    accumulate(&mut stats, &run_one(run), truth_g, rate);
+                    accumulate(
+                        &mut stats,
+                        &run_one(run),
+                        truth_g,
+                        rate,
+                        self.final_target_g,
+                    );
                 }
                 stats
             })
@@ -377,8 +433,9 @@ impl Study {
         }
         let example_relative_error = run_one(0)
             .iter()
-            .map(|errors| {
-                errors
+            .map(|trace| {
+                trace
+                    .errors
                     .iter()
                     .map(|e| e.map(|e| e / truth_g).unwrap_or(f64::NAN))
                     .collect()
@@ -396,6 +453,7 @@ impl Study {
             setups: stats,
             crlb_g2: crlb_g2(scene, truth_g, samples),
             crlb_unknown_tare_g2: crlb::white_unknown_tare(&unit_step, gain, noise_variance),
+            final_target_g: self.final_target_g,
             sensor_settle_s: sensor_settle_s(scene, truth_g),
             example_relative_error,
         })
@@ -434,7 +492,8 @@ impl Study {
     }
 
     /// One run: every method on the same record from the onset, its error per sample
-    /// (`None` while not valid), g. Each method with a tare meter gets the run's own tare.
+    /// (`None` while not valid), g, and its first final reading. Each method with a tare
+    /// meter gets the run's own tare.
     fn run_errors(
         &self,
         run: usize,
@@ -442,7 +501,7 @@ impl Study {
         onset: usize,
         samples: usize,
         truth_g: f64,
-    ) -> Vec<Vec<Option<f64>>> {
+    ) -> Vec<RunTrace> {
         let scene = &self.scene;
         let needs_tare = self.setups.iter().any(|m| m.tare_decimation().is_some());
         let mut adc = scene.adc(run_seed(self.seed, run as u64));
@@ -463,13 +522,44 @@ impl Study {
                 };
                 // Validated above (the tare is long enough for the meter's D).
                 let mut estimator = method.build(&context).expect("validated");
-                record
+                let mut first_final = None;
+                let mut stated_u = false;
+                let errors = record
                     .iter()
-                    .map(|&sample| estimator.push(sample).estimate.map(|e| e - truth_g))
-                    .collect()
+                    .enumerate()
+                    .map(|(k, &sample)| {
+                        let reading = estimator.push(sample);
+                        let error = reading.estimate.map(|e| e - truth_g);
+                        stated_u |= error.is_some() && reading.uncertainty.is_some();
+                        if let (None, Some(target), Some(error), Some(bound)) = (
+                            first_final,
+                            self.final_target_g,
+                            error,
+                            reading.uncertainty_bound(),
+                        ) {
+                            if 2.0 * bound <= target {
+                                first_final = Some((k, error));
+                            }
+                        }
+                        error
+                    })
+                    .collect();
+                RunTrace {
+                    errors,
+                    first_final,
+                    stated_u,
+                }
             })
             .collect()
     }
+}
+
+/// One method's run: its error per sample index (`None` while not valid), g, and the
+/// sample index and error of its first final reading (with the study's target).
+struct RunTrace {
+    errors: Vec<Option<f64>>,
+    first_final: Option<(usize, f64)>,
+    stated_u: bool,
 }
 
 /// The raw-sample noise variance of the scene's white noise and quantisation (LSB²/12 per
@@ -482,9 +572,17 @@ fn raw_noise_variance(scene: &Scene) -> f64 {
     oversampling * (white_counts * white_counts + 1.0 / 12.0)
 }
 
-/// Add one run's errors to the statistics: sums per sample index and the settling times.
-fn accumulate(stats: &mut [SetupStats], errors: &[Vec<Option<f64>>], truth_g: f64, rate: f64) {
-    for (stat, errors) in stats.iter_mut().zip(errors) {
+/// Add one run's errors to the statistics: sums per sample index, the settling times and,
+/// with a final target, the first final reading.
+fn accumulate(
+    stats: &mut [SetupStats],
+    traces: &[RunTrace],
+    truth_g: f64,
+    rate: f64,
+    final_target_g: Option<f64>,
+) {
+    for (stat, trace) in stats.iter_mut().zip(traces) {
+        let errors = &trace.errors;
         for (k, error) in errors.iter().enumerate() {
             if let Some(e) = error {
                 stat.sum_error[k] += e;
@@ -495,7 +593,26 @@ fn accumulate(stats: &mut [SetupStats], errors: &[Vec<Option<f64>>], truth_g: f6
         for (t, tolerance) in TOLERANCES.iter().enumerate() {
             stat.settle_s[t].push(settle_time(errors, truth_g, *tolerance, rate));
         }
+        if final_target_g.is_some() {
+            stat.runs_with_u += usize::from(trace.stated_u);
+            // Sample index k is the (k + 1)-th sample after the onset, as in `settle_time`.
+            stat.finals.push(match trace.first_final {
+                Some((k, error)) => ((k + 1) as f64 / rate, error),
+                None => (f64::INFINITY, f64::NAN),
+            });
+        }
     }
+}
+
+/// The earliest time after the onset at which twice the CRLB is within `target_g`: no
+/// estimator whose `u` is honest (at least its own standard deviation, which the bound
+/// bounds) can call a reading final sooner, s (infinite: not within the window).
+pub fn crlb_final_s(result: &StudyResult, target_g: f64) -> f64 {
+    result
+        .crlb_g2
+        .iter()
+        .position(|v| 2.0 * v.sqrt() <= target_g)
+        .map_or(f64::INFINITY, |k| (k + 1) as f64 / result.sample_rate_hz)
 }
 
 /// The next `samples` conversions of `adc` with `zero` removed, counts; a failed conversion

@@ -123,14 +123,22 @@ pub struct SpeedStudy {
     pub results: Vec<StudyResult>,
 }
 
-/// Run the Monte Carlo: `runs` runs per SNR, seeded from `seed`, every entry on every run.
-pub fn run(entries: Vec<Entry>, runs: usize, seed: u64, snrs_db: &[f64]) -> Result<SpeedStudy> {
+/// Run the Monte Carlo: `runs` runs per SNR, seeded from `seed`, every entry on every run,
+/// each run's first final reading at `final_target_g` recorded.
+pub fn run(
+    entries: Vec<Entry>,
+    runs: usize,
+    seed: u64,
+    snrs_db: &[f64],
+    final_target_g: f64,
+) -> Result<SpeedStudy> {
     let study = Study {
         scene: Scene::load("reference-step")?,
         setups: entries.iter().map(|e| e.method).collect(),
         runs,
         seed,
         samples: usize::MAX,
+        final_target_g: Some(final_target_g),
     };
     let results = montecarlo::run_studies(&study, snrs_db)?;
     Ok(SpeedStudy { entries, results })
@@ -175,6 +183,67 @@ pub struct Row {
     pub share_within_at_goal: f64,
     /// At [`READOUTS_S`].
     pub readouts: Vec<AtReadout>,
+    /// The time to a final reading.
+    pub finals: Finals,
+}
+
+/// When a method's readings became final (twice `u` at its upper 95 % bound within the
+/// study's target, the estimator's own rule; the scale's adds its hold and vouching).
+#[derive(Clone, Copy, Debug)]
+pub struct Finals {
+    /// Median and 95th percentile of the time to the first final reading, s (infinite:
+    /// fewer runs than that became final within the window; NaN: no target).
+    pub median_s: f64,
+    /// See `median_s`.
+    pub p95_s: f64,
+    /// Share of runs final by 50 ms with that first final reading within 0.1 %.
+    pub within_by_50ms: f64,
+    /// Share of runs final by 100 ms with that first final reading within 0.1 %.
+    pub within_by_100ms: f64,
+    /// Share of runs whose first final reading lay beyond 0.1 %.
+    pub beyond: f64,
+    /// The earliest time twice the CRLB is within the target, s.
+    pub crlb_s: f64,
+    /// The target, g (NaN: none).
+    pub target_g: f64,
+    /// The method stated a `u` in some run.
+    pub states_u: bool,
+}
+
+impl Finals {
+    /// "median / 95th pct" of the time to final.
+    fn times_text(&self) -> String {
+        if !self.states_u {
+            return "no u".to_string();
+        }
+        format!(
+            "{} / {}",
+            final_time_text(self.median_s),
+            final_time_text(self.p95_s)
+        )
+    }
+
+    /// "by 50 ms / by 100 ms" shares final and within 0.1 %.
+    fn shares_text(&self) -> String {
+        if self.within_by_50ms.is_nan() || !self.states_u {
+            return String::new();
+        }
+        format!(
+            "{:.1}% / {:.1}%",
+            100.0 * self.within_by_50ms,
+            100.0 * self.within_by_100ms
+        )
+    }
+}
+
+/// A time to final for a table: ms, "never" when not final within the window, empty
+/// without a target.
+fn final_time_text(time_s: f64) -> String {
+    if time_s.is_nan() {
+        String::new()
+    } else {
+        time_text(time_s)
+    }
 }
 
 fn sample_index(result: &StudyResult, time_s: f64) -> usize {
@@ -188,6 +257,22 @@ fn at_readout(result: &StudyResult, stats: &SetupStats, time_s: f64) -> AtReadou
         valid_share: f64::from(stats.valid[k]) / result.runs as f64,
         rms_g: stats.rms(k),
         crlb_g: result.crlb_g2[k].sqrt(),
+    }
+}
+
+fn finals(result: &StudyResult, stats: &SetupStats) -> Finals {
+    let tolerance_g = montecarlo::TOLERANCES[TOLERANCE_INDEX] * result.truth_g;
+    Finals {
+        median_s: stats.final_quantile(0.5),
+        p95_s: stats.final_quantile(0.95),
+        within_by_50ms: stats.final_within_by(0.05, tolerance_g),
+        within_by_100ms: stats.final_within_by(GOAL_READOUT_S, tolerance_g),
+        beyond: stats.finals_beyond(tolerance_g),
+        crlb_s: result
+            .final_target_g
+            .map_or(f64::NAN, |target| montecarlo::crlb_final_s(result, target)),
+        target_g: result.final_target_g.unwrap_or(f64::NAN),
+        states_u: stats.runs_with_u > 0,
     }
 }
 
@@ -212,6 +297,7 @@ impl SpeedStudy {
                         .iter()
                         .map(|&t| at_readout(result, stats, t))
                         .collect(),
+                    finals: finals(result, stats),
                 });
             }
         }
@@ -272,6 +358,17 @@ impl SpeedStudy {
                 ),
                 pass: improvement >= 20.0,
             },
+            Goal {
+                what: format!(
+                    "95% of runs final (2u <= {} g) and within 0.1% by 50 ms: {:.1}% (by 100 ms {:.1}%; time to final median / 95th pct {}; the CRLB allows a final reading from {})",
+                    default.finals.target_g,
+                    100.0 * default.finals.within_by_50ms,
+                    100.0 * default.finals.within_by_100ms,
+                    default.finals.times_text(),
+                    time_text(default.finals.crlb_s),
+                ),
+                pass: default.finals.within_by_50ms >= 0.95,
+            },
         ]
     }
 }
@@ -307,7 +404,10 @@ pub fn write_csv(rows: &[Row], out: &mut impl Write) -> Result<()> {
             ",valid_share_{ms}ms,rms_g_{ms}ms,crlb_g_{ms}ms,rms_over_crlb_{ms}ms"
         )?;
     }
-    writeln!(out)?;
+    writeln!(
+        out,
+        ",final_target_g,median_time_to_final_s,p95_time_to_final_s,final_within_0.1pct_by_50ms,final_within_0.1pct_by_100ms,first_finals_beyond_0.1pct,crlb_earliest_final_s"
+    )?;
     let time = |t: f64| {
         if t.is_finite() {
             format!("{t:.5}")
@@ -336,7 +436,27 @@ pub fn write_csv(rows: &[Row], out: &mut impl Write) -> Result<()> {
                 r.valid_share, r.rms_g, r.crlb_g
             )?;
         }
-        writeln!(out)?;
+        let f = &row.finals;
+        // Without a target every final column is empty; without a `u` the times are empty.
+        let share = |v: f64| {
+            if v.is_nan() {
+                String::new()
+            } else {
+                format!("{v:.4}")
+            }
+        };
+        let final_time = |t: f64| if t.is_nan() { String::new() } else { time(t) };
+        writeln!(
+            out,
+            ",{},{},{},{},{},{},{}",
+            share(f.target_g),
+            final_time(f.median_s),
+            final_time(f.p95_s),
+            share(f.within_by_50ms),
+            share(f.within_by_100ms),
+            share(f.beyond),
+            final_time(f.crlb_s)
+        )?;
     }
     Ok(())
 }
@@ -376,13 +496,18 @@ pub fn markdown_at(rows: &[Row], snr_db: f64, out: &mut impl Write) -> Result<()
     };
     writeln!(
         out,
-        "| method | spec | time to 0.1%: median / 95th pct | within 0.1% by 100 ms | RMS at 50 ms (× CRLB) | RMS at 100 ms (× CRLB) | RMS at 200 ms (× CRLB) |"
+        "| method | spec | time to 0.1%: median / 95th pct | within 0.1% by 100 ms | RMS at 50 ms (× CRLB) | RMS at 100 ms (× CRLB) | RMS at 200 ms (× CRLB) | time to final: median / 95th pct | final and within 0.1% by 50 / 100 ms | first finals beyond 0.1% |"
     )?;
-    writeln!(out, "|---|---|---|---|---|---|---|")?;
+    writeln!(out, "|---|---|---|---|---|---|---|---|---|---|")?;
     for row in &rows {
+        let beyond = if row.finals.beyond.is_nan() || !row.finals.states_u {
+            String::new()
+        } else {
+            format!("{:.1}%", 100.0 * row.finals.beyond)
+        };
         writeln!(
             out,
-            "| {} | `{}` | {} / {} | {:.1}% | {} | {} | {} |",
+            "| {} | `{}` | {} / {} | {:.1}% | {} | {} | {} | {} | {} | {beyond} |",
             row.name,
             row.spec,
             time_text(row.median_s),
@@ -391,14 +516,17 @@ pub fn markdown_at(rows: &[Row], snr_db: f64, out: &mut impl Write) -> Result<()
             rms_cell(&row.readouts[0]),
             rms_cell(&row.readouts[1]),
             rms_cell(&row.readouts[2]),
+            row.finals.times_text(),
+            row.finals.shares_text(),
         )?;
     }
     writeln!(
         out,
-        "| CRLB (known model, onset, tare) | | | | {} | {} | {} |",
+        "| CRLB (known model, onset, tare) | | | | {} | {} | {} | earliest final: {} | | |",
         grams(first.readouts[0].crlb_g),
         grams(first.readouts[1].crlb_g),
-        grams(first.readouts[2].crlb_g)
+        grams(first.readouts[2].crlb_g),
+        final_time_text(first.finals.crlb_s),
     )?;
     Ok(())
 }
@@ -423,7 +551,7 @@ pub fn markdown_by_snr(rows: &[Row], out: &mut impl Write) -> Result<()> {
         Ok(())
     };
     type Cell = fn(&Row) -> String;
-    let tables: [(&str, Cell); 2] = [
+    let tables: [(&str, Cell); 4] = [
         ("median / 95th pct time to 0.1%", |row| {
             format!("{} / {}", time_text(row.median_s), time_text(row.p95_s))
         }),
@@ -432,6 +560,12 @@ pub fn markdown_by_snr(rows: &[Row], out: &mut impl Write) -> Result<()> {
                 .ratio()
                 .map(ratio_text)
                 .unwrap_or_else(|| format!("n/v ({:.0}%)", 100.0 * row.readouts[1].valid_share))
+        }),
+        ("median / 95th pct time to final", |row| {
+            row.finals.times_text()
+        }),
+        ("final and within 0.1% by 50 / 100 ms", |row| {
+            row.finals.shares_text()
         }),
     ];
     for (what, cell) in tables {
@@ -443,6 +577,20 @@ pub fn markdown_by_snr(rows: &[Row], out: &mut impl Write) -> Result<()> {
                     .iter()
                     .find(|r| r.name == *name && r.snr_db == *snr)
                     .map(cell)
+                    .unwrap_or_default();
+                write!(out, " {text} |")?;
+            }
+            writeln!(out)?;
+        }
+        if what == "median / 95th pct time to final" {
+            // The information limit: an honest `u` is at least the estimate's standard
+            // deviation, which the bound bounds.
+            write!(out, "| CRLB: earliest final (2 × CRLB within the target) |")?;
+            for snr in &snrs {
+                let text = rows
+                    .iter()
+                    .find(|r| r.snr_db == *snr)
+                    .map(|r| final_time_text(r.finals.crlb_s))
                     .unwrap_or_default();
                 write!(out, " {text} |")?;
             }
@@ -463,6 +611,9 @@ pub fn write_markdown(study: &SpeedStudy, command: &str, out: &mut impl Write) -
         first.scene, first.truth_g, first.runs, first.seed
     )?;
     writeln!(out, "Time to 0.1%: the time after which the estimate stays within 0.1% until the end of the 1.5 s window (\"never\": outside at the end). RMS over all runs; a method not yet valid in every run shows the share that is. The CRLB assumes the model, onset and tare known.\n")?;
+    if let Some(target) = first.final_target_g {
+        writeln!(out, "Time to final: the first reading whose `u`, at its upper 95 % bound, is within half the final target ({target} g, `[scale] final_target_g` of firmware/weighing.toml): the estimator's own rule, with the onset known (the firmware's scale adds its onset detection, a 50 ms hold and four `u` within the permissible error). \"no u\": the method stated no `u` in any run; \"never\": fewer than half (or 95 %) of the runs final within the 1.5 s window. The CRLB's earliest final is the first time twice the bound is within the target: a method whose `u` is honest (at least its own standard deviation) cannot be final sooner.\n")?;
+    }
     for result in &study.results {
         writeln!(out, "### {} dB\n", result.snr_db)?;
         markdown_at(&rows, result.snr_db, out)?;
@@ -534,7 +685,7 @@ fn searched_baselines(runs: usize, seed: u64, command: &str, out: &Path) -> Resu
 }
 
 /// `host-sim study speed`: search the baselines' tuning, run, write `speed-study.{csv,md}`,
-/// `baseline-search.md`, the charts (e) and (f), print the goals.
+/// `baseline-search.md`, the charts (e), (f) and (k), print the goals.
 pub fn speed_command(
     runs: usize,
     seed: u64,
@@ -560,7 +711,8 @@ pub fn speed_command(
         snrs_db.len()
     );
     let start = Instant::now();
-    let study = run(entries, runs, seed, snrs_db)?;
+    let (_, config) = firmware_default()?;
+    let study = run(entries, runs, seed, snrs_db, config.final_target_g)?;
     let elapsed = start.elapsed().as_secs_f64();
     let rows = study.rows();
     let mut csv = create(&out.join("speed-study.csv"))?;
@@ -576,6 +728,7 @@ pub fn speed_command(
     }
     chart::settle_against_snr(&study.results, &names)
         .write(&out.join("f-time-to-0p1pct-vs-snr"))?;
+    chart::final_against_snr(&study.results, &names).write(&out.join("k-time-to-final-vs-snr"))?;
     let mut stdout = std::io::stdout();
     if snrs_db.contains(&GOAL_SNR_DB) {
         markdown_at(&rows, GOAL_SNR_DB, &mut stdout)?;
@@ -593,7 +746,7 @@ pub fn speed_command(
         );
     }
     println!(
-        "{:.1} s on {} threads; wrote {}/speed-study.{{csv,md}}, baseline-search.md, e-rms-vs-readout-time.{{svg,png}}, f-time-to-0p1pct-vs-snr.{{svg,png}}",
+        "{:.1} s on {} threads; wrote {}/speed-study.{{csv,md}}, baseline-search.md, e-rms-vs-readout-time.{{svg,png}}, f-time-to-0p1pct-vs-snr.{{svg,png}}, k-time-to-final-vs-snr.{{svg,png}}",
         elapsed,
         rayon::current_num_threads(),
         out.display()

@@ -502,14 +502,23 @@ fn speed_study_is_reproducible_across_thread_counts() {
                 .args(["--snr-db", "50", "--out"])
                 .arg(&dir),
         );
+        // Three goals of the firmware default, and issue 14's final reading by 50 ms.
         assert_eq!(
             stdout.matches("PASS: ").count() + stdout.matches("GAP: ").count(),
-            3,
+            4,
+            "{stdout}"
+        );
+        assert!(
+            stdout.contains("the CRLB allows a final reading from"),
             "{stdout}"
         );
         let csv = std::fs::read_to_string(dir.join("speed-study.csv")).unwrap();
         let markdown = std::fs::read_to_string(dir.join("speed-study.md")).unwrap();
-        for chart in ["e-rms-vs-readout-time", "f-time-to-0p1pct-vs-snr"] {
+        for chart in [
+            "e-rms-vs-readout-time",
+            "f-time-to-0p1pct-vs-snr",
+            "k-time-to-final-vs-snr",
+        ] {
             for extension in ["svg", "png"] {
                 assert!(dir.join(format!("{chart}.{extension}")).exists());
             }

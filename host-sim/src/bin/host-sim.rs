@@ -684,6 +684,7 @@ fn montecarlo(args: MontecarloArgs) -> Result<()> {
         setups,
         runs: args.runs,
         seed: args.seed,
+        final_target_g: None,
     };
     let results = montecarlo::run_studies(&study, &args.snr_db)?;
     if let Some(out) = args.out {
@@ -1141,6 +1142,7 @@ fn table(runs: usize, seed: u64, snr_db: f64, readout_s: f64) -> Result<()> {
         runs,
         seed,
         samples: usize::MAX,
+        final_target_g: None,
     };
     let results = montecarlo::run_studies(&study, &[])?;
     let mut stdout = std::io::stdout();
@@ -1198,6 +1200,7 @@ fn charts(
         runs,
         seed,
         samples: usize::MAX,
+        final_target_g: None,
     };
     let snrs = [30.0, 40.0, 50.0, 60.0, 70.0, 80.0];
     eprintln!("charts (a)–(c): {runs} runs at each of {} SNRs", snrs.len());
@@ -1219,6 +1222,7 @@ fn charts(
         runs,
         seed,
         samples: readout_samples,
+        final_target_g: None,
     };
     eprintln!("chart (d): {runs} runs, orders 1–12, D = 1 and 12, SNR 30–60 dB");
     let by_snr = montecarlo::run_studies(&order_study, &[30.0, 40.0, 50.0, 60.0])?;

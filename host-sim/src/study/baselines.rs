@@ -176,6 +176,7 @@ pub fn search(
                 runs,
                 seed,
                 samples: usize::MAX,
+                final_target_g: None,
             };
             let result = montecarlo::run_studies(&study, &[])?;
             let result = result.first().context("no result")?;
