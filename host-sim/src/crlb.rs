@@ -95,6 +95,123 @@ pub fn coloured_known_tare(unit_step: &[f64], gain: f64, autocovariance: &[f64])
     bounds
 }
 
+/// The output (g) of the sensor `chain` carrying `load_g` released from each unit initial
+/// state (1 in one state, 0 in the others, no input), `samples` long: the columns an
+/// unknown initial state adds to the step's regression (see [`coloured_unknown_state`]).
+pub fn free_responses(
+    chain: &SensorChain,
+    load_g: f64,
+    samples: usize,
+) -> [Vec<f64>; crate::sensor::STATES] {
+    // The same discretisation as `unit_step_response`: one output per sample.
+    let model = chain.discretise_over(load_g, 1.0 / chain.sample_rate_hz);
+    core::array::from_fn(|state| {
+        let mut x = [0.0; crate::sensor::STATES];
+        x[state] = 1.0;
+        (0..samples)
+            .map(|_| model.step(&mut x, [0.0; crate::sensor::INPUTS]))
+            .collect()
+    })
+}
+
+/// Known model, onset and tare, the sensor's initial state unknown (what a model-based
+/// estimator that fits `[x₀; u]` does not assume): the bound on `u` with the columns of
+/// `nuisance` (the free responses, [`free_responses`]) profiled out, for stationary noise
+/// with autocovariance `autocovariance[lag]` (raw units²; `[σ², 0, …]` for white noise).
+/// Each column is whitened by the same Levinson–Durbin innovations as in
+/// [`coloured_known_tare`]; the information matrix of `[u; x₀]` is accumulated and its
+/// inverse's first element taken per prefix. Never below the known-state bound.
+pub fn coloured_unknown_state(
+    unit_step: &[f64],
+    nuisance: &[Vec<f64>],
+    gain: f64,
+    autocovariance: &[f64],
+) -> Vec<f64> {
+    let columns: Vec<&[f64]> = std::iter::once(unit_step)
+        .chain(nuisance.iter().map(Vec::as_slice))
+        .collect();
+    let p = columns.len();
+    let n = columns
+        .iter()
+        .map(|c| c.len())
+        .min()
+        .unwrap_or(0)
+        .min(autocovariance.len());
+    let mut bounds = Vec::with_capacity(n);
+    let mut predictor: Vec<f64> = Vec::with_capacity(n);
+    let mut error = autocovariance.first().copied().unwrap_or(0.0);
+    let mut information = vec![vec![0.0; p]; p];
+    let mut innovation = vec![0.0; p];
+    for k in 0..n {
+        if k > 0 {
+            let mut acc = autocovariance[k];
+            for (i, a) in predictor.iter().enumerate() {
+                acc -= a * autocovariance[k - 1 - i];
+            }
+            let reflection = acc / error;
+            let previous = predictor.clone();
+            for i in 0..previous.len() {
+                predictor[i] = previous[i] - reflection * previous[previous.len() - 1 - i];
+            }
+            predictor.push(reflection);
+            error *= 1.0 - reflection * reflection;
+        }
+        for (w, column) in innovation.iter_mut().zip(&columns) {
+            *w = column[k];
+            for (i, a) in predictor.iter().enumerate() {
+                *w -= a * column[k - 1 - i];
+            }
+        }
+        for (row, &wr) in information.iter_mut().zip(&innovation) {
+            for (cell, &wc) in row.iter_mut().zip(&innovation) {
+                *cell += gain * gain * wr * wc / error;
+            }
+        }
+        bounds.push(first_of_inverse(&information));
+    }
+    bounds
+}
+
+/// `(J⁻¹)₀₀` of a symmetric information matrix, by Gaussian elimination on its
+/// unit-diagonal scaling (infinite when `J` is singular to 1e-12 relative: the prefix does
+/// not identify every parameter, or the columns are not yet independent).
+fn first_of_inverse(information: &[Vec<f64>]) -> f64 {
+    let p = information.len();
+    let scale: Vec<f64> = (0..p).map(|i| information[i][i].sqrt()).collect();
+    if scale.iter().any(|s| !(*s > 0.0)) {
+        return f64::INFINITY;
+    }
+    // Solve (D⁻¹ J D⁻¹) x = e₀; then (J⁻¹)₀₀ = x₀ / J₀₀.
+    let mut m: Vec<Vec<f64>> = (0..p)
+        .map(|i| {
+            let mut row: Vec<f64> = (0..p)
+                .map(|j| information[i][j] / (scale[i] * scale[j]))
+                .collect();
+            row.push(if i == 0 { 1.0 } else { 0.0 });
+            row
+        })
+        .collect();
+    for col in 0..p {
+        let pivot = (col..p)
+            .max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))
+            .unwrap_or(col);
+        if !(m[pivot][col].abs() > 1e-12) {
+            return f64::INFINITY;
+        }
+        m.swap(col, pivot);
+        for row in 0..p {
+            if row != col {
+                let factor = m[row][col] / m[col][col];
+                for j in col..=p {
+                    m[row][j] -= factor * m[col][j];
+                }
+            }
+        }
+    }
+    let x0 = m[0][p] / m[0][0];
+    x0 / (scale[0] * scale[0])
+}
+
 /// The autocovariance (g², lags `0..lags`) at the filter output of the INA114's input noise,
 /// white over one conversion period with the variance of
 /// [`SensorChain::amplifier_noise_g`], coloured by the anti-alias filter:
@@ -168,6 +285,60 @@ mod tests {
             (got - expected).abs() <= 1e-10 * expected,
             "{got} {expected}"
         );
+    }
+
+    #[test]
+    fn an_unknown_state_is_profiled_out_exactly_and_never_lowers_the_bound() {
+        // Without nuisance columns the unknown-state bound is the known one.
+        let s: Vec<f64> = (0..60).map(|k| 1.0 - (-(k as f64) / 9.0).exp()).collect();
+        let mut r = vec![0.0; 60];
+        r[0] = 1.7;
+        let known = coloured_known_tare(&s, 2.0, &r);
+        let alone = coloured_unknown_state(&s, &[], 2.0, &r);
+        for (a, b) in known.iter().zip(&alone) {
+            assert!(a == b || (a - b).abs() <= 1e-12 * a, "{a} {b}");
+        }
+        // One nuisance column, white noise: the closed form of the 2 × 2 Schur complement,
+        // σ² / (G² (Σs² − (Σsf)²/Σf²)), and never below the known bound.
+        let f: Vec<f64> = (0..60).map(|k| (-(k as f64) / 5.0).exp()).collect();
+        let with = coloured_unknown_state(&s, std::slice::from_ref(&f), 2.0, &r);
+        let (mut ss, mut sf, mut ff) = (0.0, 0.0, 0.0);
+        for k in 0..60 {
+            ss += s[k] * s[k];
+            sf += s[k] * f[k];
+            ff += f[k] * f[k];
+            let expected = 1.7 / (4.0 * (ss - sf * sf / ff));
+            if k >= 2 {
+                assert!(
+                    (with[k] - expected).abs() <= 1e-9 * expected,
+                    "{k}: {} {expected}",
+                    with[k]
+                );
+                assert!(with[k] >= known[k]);
+            }
+        }
+        // A nuisance column equal to the step's leaves u unidentified.
+        let same = coloured_unknown_state(&s, std::slice::from_ref(&s), 2.0, &r);
+        assert!(same.iter().all(|b| b.is_infinite()));
+    }
+
+    #[test]
+    fn the_free_responses_and_the_step_response_span_every_start_of_the_sensor() {
+        // Superposition: the reference chain started in an arbitrary state and stepped by
+        // 138.32 g outputs exactly u·s(k) + Σ x₀ⱼ·fⱼ(k), so profiling the fⱼ out is the
+        // bound of an estimator that fits the state with the step.
+        let chain = crate::scene::Scene::load("reference-step").unwrap().chain;
+        let (load, samples) = (138.32, 400);
+        let s = unit_step_response(&chain, load, samples);
+        let free = free_responses(&chain, load, samples);
+        let start = [3.0, -0.7, 12.5, -4.0, 0.9];
+        let model = chain.discretise_over(load, 1.0 / chain.sample_rate_hz);
+        let mut x = start;
+        for k in 0..samples {
+            let y = model.step(&mut x, [load, 0.0, 0.0]);
+            let sum = load * s[k] + (0..start.len()).map(|j| start[j] * free[j][k]).sum::<f64>();
+            assert!((y - sum).abs() <= 1e-9 * load, "{k}: {y} {sum}");
+        }
     }
 
     #[test]

@@ -636,6 +636,16 @@ pub(crate) fn centred_record<const E: usize>(
 /// oversampled ones) and, when the scene has it and does not oversample, the amplifier's
 /// noise coloured by the filter (the coloured bound).
 pub fn crlb_g2(scene: &Scene, truth_g: f64, samples: usize) -> Vec<f64> {
+    crlb_with_state(scene, truth_g, samples, false)
+}
+
+/// As [`crlb_g2`] with the sensor's initial state unknown (profiled out): the bound of an
+/// estimator that fits the state with the step, as the model bank does (g², per prefix).
+pub fn crlb_unknown_state_g2(scene: &Scene, truth_g: f64, samples: usize) -> Vec<f64> {
+    crlb_with_state(scene, truth_g, samples, true)
+}
+
+fn crlb_with_state(scene: &Scene, truth_g: f64, samples: usize, unknown_state: bool) -> Vec<f64> {
     let chain = scene.chain;
     let gain = chain.counts_per_gram();
     let oversampling = f64::from(chain.adc.oversampling.max(1));
@@ -651,7 +661,19 @@ pub fn crlb_g2(scene: &Scene, truth_g: f64, samples: usize) -> Vec<f64> {
             .map(|r| r * gain * gain)
             .collect();
         autocovariance[0] += noise_variance;
-        crlb::coloured_known_tare(&unit_step, gain, &autocovariance)
+        if unknown_state {
+            let nuisance = crlb::free_responses(&chain, truth_g, samples);
+            crlb::coloured_unknown_state(&unit_step, &nuisance, gain, &autocovariance)
+        } else {
+            crlb::coloured_known_tare(&unit_step, gain, &autocovariance)
+        }
+    } else if unknown_state {
+        let nuisance = crlb::free_responses(&chain, truth_g, samples);
+        let mut white = vec![0.0; samples];
+        if let Some(first) = white.first_mut() {
+            *first = noise_variance;
+        }
+        crlb::coloured_unknown_state(&unit_step, &nuisance, gain, &white)
     } else {
         crlb::white_known_tare(&unit_step, gain, noise_variance)
     }
