@@ -66,33 +66,64 @@ pub fn white_unknown_tare(unit_step: &[f64], gain: f64, noise_variance: f64) -> 
 pub fn coloured_known_tare(unit_step: &[f64], gain: f64, autocovariance: &[f64]) -> Vec<f64> {
     let n = unit_step.len().min(autocovariance.len());
     let mut bounds = Vec::with_capacity(n);
-    // predictor[i] predicts y(k) from y(k−1−i); the innovation variance is `error`.
-    let mut predictor: Vec<f64> = Vec::with_capacity(n);
-    let mut error = autocovariance.first().copied().unwrap_or(0.0);
+    let mut whitener = Innovations::new(autocovariance, n);
     let mut information = 0.0;
     for k in 0..n {
-        if k > 0 {
-            // Levinson–Durbin step from order k−1 to k.
-            let mut acc = autocovariance[k];
-            for (i, a) in predictor.iter().enumerate() {
-                acc -= a * autocovariance[k - 1 - i];
-            }
-            let reflection = acc / error;
-            let previous = predictor.clone();
-            for i in 0..previous.len() {
-                predictor[i] = previous[i] - reflection * previous[previous.len() - 1 - i];
-            }
-            predictor.push(reflection);
-            error *= 1.0 - reflection * reflection;
-        }
-        let mut innovation = unit_step[k];
-        for (i, a) in predictor.iter().enumerate() {
-            innovation -= a * unit_step[k - 1 - i];
-        }
-        information += innovation * innovation / error;
+        whitener.advance(k);
+        let innovation = whitener.innovation(unit_step, k);
+        information += innovation * innovation / whitener.error;
         bounds.push(bound(1.0, gain * gain * information));
     }
     bounds
+}
+
+/// The innovations form of stationary noise's inverse covariance, one sample at a time:
+/// the Levinson–Durbin predictor of order `k` and its prediction-error variance.
+struct Innovations<'a> {
+    autocovariance: &'a [f64],
+    /// `predictor[i]` predicts y(k) from y(k−1−i).
+    predictor: Vec<f64>,
+    /// The innovation variance at the current order.
+    error: f64,
+}
+
+impl<'a> Innovations<'a> {
+    fn new(autocovariance: &'a [f64], capacity: usize) -> Self {
+        Self {
+            autocovariance,
+            predictor: Vec::with_capacity(capacity),
+            error: autocovariance.first().copied().unwrap_or(0.0),
+        }
+    }
+
+    /// Raise the predictor to order `k` (a Levinson–Durbin step from order k−1; nothing at
+    /// k = 0).
+    fn advance(&mut self, k: usize) {
+        if k == 0 {
+            return;
+        }
+        let r = self.autocovariance;
+        let mut acc = r[k];
+        for (i, a) in self.predictor.iter().enumerate() {
+            acc -= a * r[k - 1 - i];
+        }
+        let reflection = acc / self.error;
+        let previous = self.predictor.clone();
+        for i in 0..previous.len() {
+            self.predictor[i] = previous[i] - reflection * previous[previous.len() - 1 - i];
+        }
+        self.predictor.push(reflection);
+        self.error *= 1.0 - reflection * reflection;
+    }
+
+    /// The whitened value of `column` at sample `k` (its innovation).
+    fn innovation(&self, column: &[f64], k: usize) -> f64 {
+        let mut innovation = column[k];
+        for (i, a) in self.predictor.iter().enumerate() {
+            innovation -= a * column[k - 1 - i];
+        }
+        innovation
+    }
 }
 
 /// The output (g) of the sensor `chain` carrying `load_g` released from each unit initial
@@ -119,7 +150,7 @@ pub fn free_responses(
 /// `nuisance` (the free responses, [`free_responses`]) profiled out, for stationary noise
 /// with autocovariance `autocovariance[lag]` (raw units²; `[σ², 0, …]` for white noise).
 /// Each column is whitened by the same Levinson–Durbin innovations as in
-/// [`coloured_known_tare`]; the information matrix of `[u; x₀]` is accumulated and its
+/// [`coloured_known_tare`] ([`Innovations`]); the information matrix of `[u; x₀]` is accumulated and its
 /// inverse's first element taken per prefix. Never below the known-state bound.
 pub fn coloured_unknown_state(
     unit_step: &[f64],
@@ -138,33 +169,17 @@ pub fn coloured_unknown_state(
         .unwrap_or(0)
         .min(autocovariance.len());
     let mut bounds = Vec::with_capacity(n);
-    let mut predictor: Vec<f64> = Vec::with_capacity(n);
-    let mut error = autocovariance.first().copied().unwrap_or(0.0);
+    let mut whitener = Innovations::new(autocovariance, n);
     let mut information = vec![vec![0.0; p]; p];
     let mut innovation = vec![0.0; p];
     for k in 0..n {
-        if k > 0 {
-            let mut acc = autocovariance[k];
-            for (i, a) in predictor.iter().enumerate() {
-                acc -= a * autocovariance[k - 1 - i];
-            }
-            let reflection = acc / error;
-            let previous = predictor.clone();
-            for i in 0..previous.len() {
-                predictor[i] = previous[i] - reflection * previous[previous.len() - 1 - i];
-            }
-            predictor.push(reflection);
-            error *= 1.0 - reflection * reflection;
-        }
+        whitener.advance(k);
         for (w, column) in innovation.iter_mut().zip(&columns) {
-            *w = column[k];
-            for (i, a) in predictor.iter().enumerate() {
-                *w -= a * column[k - 1 - i];
-            }
+            *w = whitener.innovation(column, k);
         }
         for (row, &wr) in information.iter_mut().zip(&innovation) {
             for (cell, &wc) in row.iter_mut().zip(&innovation) {
-                *cell += gain * gain * wr * wc / error;
+                *cell += gain * gain * wr * wc / whitener.error;
             }
         }
         bounds.push(first_of_inverse(&information));
