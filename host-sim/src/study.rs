@@ -5,8 +5,8 @@
 //! at 50, 100 and 200 ms and its ratio to the Cramér–Rao bound at that time (also with the
 //! sensor's initial state unknown), and the time to a final reading. The baselines
 //! join at the tuning [`baselines`] searches first, on runs of its own. It writes a CSV and a
-//! markdown table, the search's report, draws the two charts and prints the firmware
-//! default's goals.
+//! markdown table, the search's report, draws the charts (e), (f) and (k) and prints the firmware
+//! default's goals and issue 14's.
 //!
 //! What it must never do: pick a method's figures from a different run or seed than its
 //! rivals' (one Monte Carlo holds them all), or report an RMS over a subset of runs as if it
