@@ -14,6 +14,13 @@
 //! The amplifier's noise is coloured by the anti-alias filter:
 //! [`amplifier_autocovariance_g2`] gives its autocovariance for the coloured form.
 //!
+//! With the sensor's initial state unknown (an estimator that fits `[x₀; u]`, as the model
+//! bank does, or one that assumes nothing of the state, as the data-driven `ℓ` does) the
+//! free responses of the chain's states are profiled out ([`coloured_unknown_state`]). An
+//! unknown onset then adds nothing for a window that starts after it: moving the onset
+//! moves the output along the impulse response, itself a free response (a test builds
+//! the onset's column independently and finds 1e-11 of it outside their span).
+//!
 //! Every function returns the bound for each prefix length `k + 1`, in the unit of `u`
 //! squared (`f64::INFINITY` where the prefix does not identify `u`).
 //!
@@ -354,6 +361,88 @@ mod tests {
             let sum = load * s[k] + (0..start.len()).map(|j| start[j] * free[j][k]).sum::<f64>();
             assert!((y - sum).abs() <= 1e-9 * load, "{k}: {y} {sum}");
         }
+    }
+
+    /// The part of `column` no combination of `basis` explains, relative to its norm
+    /// (modified Gram–Schmidt in f64).
+    fn unexplained(column: &[f64], basis: &[Vec<f64>]) -> f64 {
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        let mut orthonormal: Vec<Vec<f64>> = Vec::new();
+        for vector in basis {
+            let mut v = vector.clone();
+            for q in &orthonormal {
+                let c = dot(&v, q);
+                v.iter_mut().zip(q).for_each(|(x, y)| *x -= c * y);
+            }
+            let norm = dot(&v, &v).sqrt();
+            if norm > 0.0 {
+                orthonormal.push(v.iter().map(|x| x / norm).collect());
+            }
+        }
+        let mut r = column.to_vec();
+        for q in &orthonormal {
+            let c = dot(&r, q);
+            r.iter_mut().zip(q).for_each(|(x, y)| *x -= c * y);
+        }
+        (dot(&r, &r) / dot(column, column)).sqrt()
+    }
+
+    /// With the initial state unknown, an unknown onset (within the first sample period)
+    /// adds nothing: shifting the onset moves the output along the chain's impulse
+    /// response, which is a free response of the state the load's input sets. So the bound
+    /// with the initial state unknown is also the bound with the onset and the initial
+    /// state unknown, for a window that starts after the landing. The onset's column here
+    /// is the central difference of step responses whose onset is moved by ±δ inside the
+    /// first sample period, built from the chain's exact discretisation over fractions of
+    /// a period, not from the free responses; the step itself is not in their span.
+    #[test]
+    fn an_unknown_onset_adds_nothing_once_the_initial_state_is_unknown() {
+        let chain = crate::scene::Scene::load("reference-step").unwrap().chain;
+        let (load, samples) = (138.32, 400);
+        let period = 1.0 / chain.sample_rate_hz;
+        let delta = 1e-3 * period;
+        let model = chain.discretise_over(load, period);
+        // A step at +δ after sample 0: the first period holds the load for T − δ only.
+        let late = {
+            let part = chain.discretise_over(load, period - delta);
+            let mut x = [0.0; crate::sensor::STATES];
+            let mut out = vec![0.0];
+            for (row, value) in x.iter_mut().enumerate() {
+                *value = part.input[row][0] * load;
+            }
+            for _ in 1..samples {
+                out.push(model.step(&mut x, [load, 0.0, 0.0]));
+            }
+            out
+        };
+        // A step at −δ: the state at sample 0 already holds δ of it.
+        let early = {
+            let part = chain.discretise_over(load, delta);
+            let mut x = [0.0; crate::sensor::STATES];
+            for (row, value) in x.iter_mut().enumerate() {
+                *value = part.input[row][0] * load;
+            }
+            (0..samples)
+                .map(|_| model.step(&mut x, [load, 0.0, 0.0]))
+                .collect::<Vec<f64>>()
+        };
+        let onset: Vec<f64> = late
+            .iter()
+            .zip(&early)
+            .map(|(a, b)| (a - b) / (2.0 * delta))
+            .collect();
+        let free = free_responses(&chain, load, samples);
+        let onset_left = unexplained(&onset, &free);
+        assert!(
+            onset_left < 1e-5,
+            "the onset's column: {onset_left:e} unexplained"
+        );
+        let step = unit_step_response(&chain, load, samples);
+        let step_left = unexplained(&step, &free);
+        assert!(
+            step_left > 0.1,
+            "the step's column: {step_left:e} unexplained"
+        );
     }
 
     #[test]
