@@ -262,6 +262,57 @@ mod tests {
     use crate::estimators::step::StepEstimator;
     use crate::reading::{ConfigError, Estimator};
 
+    /// Where the scale's `u` stops holding: a floor vibrating under the pan, a narrow band
+    /// of noise (2 Hz wide) at 10–25 Hz on the reading, 60 g dropped after 3 s of empty
+    /// pan with 0.1 g of white noise, 20 seeds each, 1.5 s after the drop. Prints, of the
+    /// readings shown stable or final, the share beyond 2u and 4u of the load and how
+    /// many lie beyond the permissible error. A fresh fit of a few tenths of a second
+    /// takes such a vibration for the cell's own dynamics: its `u` does not see it (the
+    /// torture's "fresh fits on vibrating floors"). `cargo test --release -p
+    /// estimator-core --lib settled_readings_on_a_vibrating_floor -- --ignored --nocapture`
+    #[test]
+    #[ignore = "a study: prints a table"]
+    fn settled_readings_on_a_vibrating_floor() {
+        extern crate std;
+        std::println!("| floor vibration | shown settled | beyond 2u | beyond 4u | beyond the permissible error |");
+        std::println!("|---|---:|---:|---:|---:|");
+        for (rms, hz) in [
+            (0.0, 0.0),
+            (0.2, 16.4),
+            (0.45, 10.0),
+            (0.45, 16.4),
+            (0.45, 25.0),
+        ] {
+            let (mut shown, mut two, mut four, mut wrong) = (0u32, 0u32, 0u32, 0u32);
+            for seed in 0..20u64 {
+                let (mut scale, _) = scene(0.1);
+                let mut cell = Cell::seeded(0.1, seed);
+                cell.vibration = (rms, hz, 2.0);
+                run(&mut scale, &mut cell, 12_000 + 37 * seed as usize);
+                cell.load_g = 60.0;
+                let permissible = scale.config().permissible_error_g(60.0);
+                for reading in run(&mut scale, &mut cell, 6000) {
+                    let settled = reading.state == ScaleState::Stable || reading.is_final;
+                    if let (true, Some(mass), Some(u)) =
+                        (settled, reading.mass_g, reading.uncertainty_g)
+                    {
+                        let error = (mass - 60.0).abs();
+                        shown += 1;
+                        two += u32::from(error > 2.0 * u);
+                        four += u32::from(error > 4.0 * u);
+                        wrong += u32::from(error > permissible);
+                    }
+                }
+            }
+            let share = |n: u32| 100.0 * f64::from(n) / f64::from(shown.max(1));
+            std::println!(
+                "| {rms} g RMS at {hz} Hz | {shown} | {:.1} % | {:.1} % | {wrong} |",
+                share(two),
+                share(four)
+            );
+        }
+    }
+
     #[test]
     fn empty_pan_reads_empty_near_zero() {
         let (mut scale, mut cell) = scene(0.4);

@@ -44,6 +44,11 @@ pub(crate) struct Cell {
     /// Its mode: natural frequency (Hz) and damping ratio.
     ring_hz: f64,
     damping: f64,
+    /// A floor vibrating under the pan: RMS (g), centre frequency and bandwidth (Hz) of a
+    /// narrow band of noise on the reading (a resonant second-order filter driven by the
+    /// cell's own noise stream), and that filter's last two outputs.
+    pub(crate) vibration: (f64, f64, f64),
+    vibration_state: (f64, f64),
 }
 
 impl Cell {
@@ -58,6 +63,8 @@ impl Cell {
             gain_factor: 1.0,
             ring_hz: 25.0,
             damping: 0.03,
+            vibration: (0.0, 0.0, 0.0),
+            vibration_state: (0.0, 0.0),
         }
     }
 
@@ -93,6 +100,27 @@ impl Cell {
         unit_noise(&mut self.noise_state)
     }
 
+    /// The floor's vibration now (0 without one): `x(k) = 2r·cos θ·x(k−1) − r²·x(k−2) +
+    /// e(k)`, its poles at radius `r = exp(−π·bandwidth/fs)` and angle `θ = 2π·f/fs`, `e`
+    /// scaled so that `x` has the configured RMS (the filter's stationary variance).
+    fn vibrate(&mut self) -> f64 {
+        let (rms, hz, bandwidth) = self.vibration;
+        if rms == 0.0 {
+            return 0.0;
+        }
+        let fs = FS as f64;
+        let r = (-std::f64::consts::PI * bandwidth / fs).exp();
+        let c = (2.0 * std::f64::consts::PI * hz / fs).cos();
+        let (a1, a2) = (2.0 * r * c, -r * r);
+        // Var x / Var e for the AR(2) x(k) = a1 x(k-1) + a2 x(k-2) + e(k).
+        let gain = (1.0 - a2) / ((1.0 + a2) * ((1.0 - a2) * (1.0 - a2) - a1 * a1));
+        let e = rms / gain.sqrt() * self.noise();
+        let (x1, x2) = self.vibration_state;
+        let x = a1 * x1 + a2 * x2 + e;
+        self.vibration_state = (x, x1);
+        x
+    }
+
     pub(crate) fn sample(&mut self) -> RawSample {
         let omega = 2.0 * std::f64::consts::PI * self.ring_hz;
         let dt = 1.0 / FS as f64;
@@ -103,7 +131,8 @@ impl Cell {
             self.velocity += accel * dt / 4.0;
             self.position_g += self.velocity * dt / 4.0;
         }
-        let grams = self.position_g + self.noise_g * self.noise();
+        let floor_g = self.vibrate();
+        let grams = self.position_g + self.noise_g * self.noise() + floor_g;
         let counts = self.offset_counts + grams * self.gain_factor * CPG as f64;
         RawSample::Counts(counts.round() as i32)
     }
