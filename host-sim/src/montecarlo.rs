@@ -253,36 +253,53 @@ impl SetupStats {
     /// The `quantile` (0..1) of the time to the first final reading over all runs, s
     /// (infinite when fewer runs than that became final; NaN without a target).
     pub fn final_quantile(&self, quantile: f64) -> f64 {
-        let mut times: Vec<f64> = self.finals.iter().map(|(t, _)| *t).collect();
-        times.sort_by(f64::total_cmp);
-        if times.is_empty() {
-            return f64::NAN;
-        }
-        let index = ((times.len() as f64 * quantile).ceil() as usize).clamp(1, times.len()) - 1;
-        times[index]
+        finals_quantile(&self.finals, quantile)
     }
 
     /// The share of runs whose first final reading came by `time_s` and lay within
     /// `tolerance_g` of the truth (NaN without a target).
     pub fn final_within_by(&self, time_s: f64, tolerance_g: f64) -> f64 {
-        let hits = self
-            .finals
-            .iter()
-            .filter(|(t, e)| *t <= time_s && e.abs() <= tolerance_g)
-            .count();
-        hits as f64 / self.finals.len() as f64
+        finals_within_by(&self.finals, time_s, tolerance_g)
     }
 
     /// The share of runs whose first final reading lay further than `tolerance_g` from the
     /// truth (NaN without a target).
     pub fn finals_beyond(&self, tolerance_g: f64) -> f64 {
-        let beyond = self
-            .finals
-            .iter()
-            .filter(|(t, e)| t.is_finite() && !(e.abs() <= tolerance_g))
-            .count();
-        beyond as f64 / self.finals.len() as f64
+        finals_beyond(&self.finals, tolerance_g)
     }
+}
+
+/// Of runs' first final readings `(time s, error g)`, one per run (`(∞, NaN)`: never
+/// final): the `quantile` of the time (NaN without runs; infinite when fewer runs than
+/// that were final).
+pub fn finals_quantile(finals: &[(f64, f64)], quantile: f64) -> f64 {
+    let mut times: Vec<f64> = finals.iter().map(|(t, _)| *t).collect();
+    times.sort_by(f64::total_cmp);
+    if times.is_empty() {
+        return f64::NAN;
+    }
+    let index = ((times.len() as f64 * quantile).ceil() as usize).clamp(1, times.len()) - 1;
+    times[index]
+}
+
+/// The share of runs final by `time_s` with their first final reading within
+/// `tolerance_g` of the truth (NaN without runs).
+pub fn finals_within_by(finals: &[(f64, f64)], time_s: f64, tolerance_g: f64) -> f64 {
+    let hits = finals
+        .iter()
+        .filter(|(t, e)| *t <= time_s && e.abs() <= tolerance_g)
+        .count();
+    hits as f64 / finals.len() as f64
+}
+
+/// The share of runs whose first final reading lay further than `tolerance_g` from the
+/// truth (NaN without runs).
+pub fn finals_beyond(finals: &[(f64, f64)], tolerance_g: f64) -> f64 {
+    let beyond = finals
+        .iter()
+        .filter(|(t, e)| t.is_finite() && !(e.abs() <= tolerance_g))
+        .count();
+    beyond as f64 / finals.len() as f64
 }
 
 /// A finished study at one SNR.

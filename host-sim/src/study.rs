@@ -24,6 +24,7 @@ use crate::calibrate;
 use crate::chart;
 
 pub mod baselines;
+pub mod scale_final;
 use crate::method::{IdentifiedModel, Method, ModelSpec};
 use crate::montecarlo::{self, Precision, SetupStats, Study, StudyResult};
 use crate::scene::Scene;
@@ -694,6 +695,32 @@ pub fn markdown_by_snr(rows: &[Row], out: &mut impl Write) -> Result<()> {
     Ok(())
 }
 
+/// The firmware's scale's time to final, a row per SNR (`scale_final`), markdown.
+pub fn markdown_scale_finals(
+    truth_g: f64,
+    rows: &[scale_final::ScaleFinals],
+    out: &mut impl Write,
+) -> Result<()> {
+    let tolerance_g = montecarlo::TOLERANCES[TOLERANCE_INDEX] * truth_g;
+    writeln!(out, "| SNR | final by 1.5 s | time to final: median / 95th pct | final and within 0.1% by 50 / 100 ms | first finals beyond 0.1% |")?;
+    writeln!(out, "|---|---:|---:|---:|---:|")?;
+    for row in rows {
+        writeln!(
+            out,
+            "| {} dB | {:.1}% | {} / {} | {:.1}% / {:.1}% | {:.1}% |",
+            row.snr_db,
+            100.0 * row.finals.iter().filter(|f| f.0.is_finite()).count() as f64
+                / row.runs.max(1) as f64,
+            time_text(row.quantile_s(0.5)),
+            time_text(row.quantile_s(0.95)),
+            100.0 * row.within_by(0.05, tolerance_g),
+            100.0 * row.within_by(GOAL_READOUT_S, tolerance_g),
+            100.0 * row.beyond(tolerance_g),
+        )?;
+    }
+    Ok(())
+}
+
 /// The whole markdown report.
 pub fn write_markdown(study: &SpeedStudy, command: &str, out: &mut impl Write) -> Result<()> {
     let rows = study.rows();
@@ -806,6 +833,7 @@ pub fn speed_command(
     let start = Instant::now();
     let (_, config) = firmware_default()?;
     let study = run(entries, runs, seed, snrs_db, config.final_target_g)?;
+    let (truth_g, scale_finals) = scale_final::study(runs, seed, snrs_db)?;
     let elapsed = start.elapsed().as_secs_f64();
     let rows = study.rows();
     let mut csv = create(&out.join("speed-study.csv"))?;
@@ -813,6 +841,12 @@ pub fn speed_command(
     csv.flush()?;
     let mut markdown = create(&out.join("speed-study.md"))?;
     write_markdown(&study, &command, &mut markdown)?;
+    writeln!(
+        markdown,
+        "\n### The firmware's scale: time from landing to the final line\n\nThe scale `firmware/weighing.toml` builds (`Scale::configured`, as both boards: onset detection, tare, the 50 ms hold, four `u` within the permissible error) on the `{}` scene (0.3 s of empty pan, then {truth_g} g lands), the same runs and seeds per SNR; the first reading marked final, the time from the landing, as the board prints its `final` line:\n",
+        scale_final::SCENE
+    )?;
+    markdown_scale_finals(truth_g, &scale_finals, &mut markdown)?;
     markdown.flush()?;
     let names: Vec<String> = study.entries.iter().map(|e| e.name.clone()).collect();
     if let Some(at_goal) = study.results.iter().find(|r| r.snr_db == GOAL_SNR_DB) {
@@ -826,6 +860,11 @@ pub fn speed_command(
     if snrs_db.contains(&GOAL_SNR_DB) {
         markdown_at(&rows, GOAL_SNR_DB, &mut stdout)?;
     }
+    println!(
+        "the firmware's scale on `{}`, time from landing to the final line:",
+        scale_final::SCENE
+    );
+    markdown_scale_finals(truth_g, &scale_finals, &mut stdout)?;
     println!(
         "firmware default `{}` (firmware/weighing.toml) at {GOAL_SNR_DB} dB ({runs} runs; an RMS over {runs} runs is known to about {:.1}%, 1/sqrt(2N)):",
         study.entries[0].method,
