@@ -194,44 +194,26 @@ pub fn coloured_unknown_state(
     bounds
 }
 
-/// `(J⁻¹)₀₀` of a symmetric information matrix, by Gaussian elimination on its
-/// unit-diagonal scaling (infinite when `J` is singular to 1e-12 relative: the prefix does
-/// not identify every parameter, or the columns are not yet independent).
+/// `(J⁻¹)₀₀` of a symmetric information matrix, by nalgebra's Cholesky factor of its
+/// unit-diagonal scaling (infinite when `J` is not positive definite to 1e-12 relative:
+/// the prefix does not identify every parameter, or the columns are not yet independent).
 fn first_of_inverse(information: &[Vec<f64>]) -> f64 {
     let p = information.len();
     let scale: Vec<f64> = (0..p).map(|i| information[i][i].sqrt()).collect();
     if scale.iter().any(|s| !(*s > 0.0)) {
         return f64::INFINITY;
     }
-    // Solve (D⁻¹ J D⁻¹) x = e₀; then (J⁻¹)₀₀ = x₀ / J₀₀.
-    let mut m: Vec<Vec<f64>> = (0..p)
-        .map(|i| {
-            let mut row: Vec<f64> = (0..p)
-                .map(|j| information[i][j] / (scale[i] * scale[j]))
-                .collect();
-            row.push(if i == 0 { 1.0 } else { 0.0 });
-            row
-        })
-        .collect();
-    for col in 0..p {
-        let pivot = (col..p)
-            .max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))
-            .unwrap_or(col);
-        if !(m[pivot][col].abs() > 1e-12) {
-            return f64::INFINITY;
-        }
-        m.swap(col, pivot);
-        for row in 0..p {
-            if row != col {
-                let factor = m[row][col] / m[col][col];
-                for j in col..=p {
-                    m[row][j] -= factor * m[col][j];
-                }
-            }
-        }
+    // (D⁻¹ J D⁻¹)⁻¹₀₀ / J₀₀ = (J⁻¹)₀₀.
+    let scaled = nalgebra::DMatrix::from_fn(p, p, |i, j| information[i][j] / (scale[i] * scale[j]));
+    let Some(factor) = scaled.cholesky() else {
+        return f64::INFINITY;
+    };
+    if factor.l_dirty().diagonal().iter().any(|d| !(d * d > 1e-12)) {
+        return f64::INFINITY;
     }
-    let x0 = m[0][p] / m[0][0];
-    x0 / (scale[0] * scale[0])
+    let mut unit = nalgebra::DVector::zeros(p);
+    unit[0] = 1.0;
+    factor.solve(&unit)[0] / (scale[0] * scale[0])
 }
 
 /// The autocovariance (g², lags `0..lags`) at the filter output of the INA114's input noise,

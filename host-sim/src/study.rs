@@ -6,7 +6,7 @@
 //! sensor's initial state unknown), and the time to a final reading. The baselines
 //! join at the tuning [`baselines`] searches first, on runs of its own. It writes a CSV and a
 //! markdown table, the search's report, draws the charts (e), (f) and (k) and prints the firmware
-//! default's goals and issue 14's.
+//! default's goals and those of the time to final and the bound.
 //!
 //! What it must never do: pick a method's figures from a different run or seed than its
 //! rivals' (one Monte Carlo holds them all), or report an RMS over a subset of runs as if it
@@ -406,7 +406,7 @@ impl SpeedStudy {
             },
             Goal {
                 what: format!(
-                    "model-free RMS at 100 ms <= 1.25x CRLB (issue 14): {ratio:.2}x; against the CRLB with the initial state unknown, {}",
+                    "model-free RMS at 100 ms <= 1.25x CRLB: {ratio:.2}x; against the CRLB with the initial state unknown, {}",
                     default_at
                         .state_ratio()
                         .map_or("not valid in all runs".to_string(), |r| format!("{r:.2}x"))

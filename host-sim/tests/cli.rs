@@ -502,9 +502,8 @@ fn speed_study_is_reproducible_across_thread_counts() {
                 .args(["--snr-db", "50", "--out"])
                 .arg(&dir),
         );
-        // Three goals of the firmware default; issue 14's final reading by 50 ms, its
-        // model-free 1.25x and its model bank within 5 % of the bound with the initial
-        // state unknown.
+        // Three goals of the firmware default; the final reading by 50 ms, the model-free
+        // 1.25x and the model bank within 5 % of the bound with the initial state unknown.
         assert_eq!(
             stdout.matches("PASS: ").count() + stdout.matches("GAP: ").count(),
             6,

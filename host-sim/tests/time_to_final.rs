@@ -1,4 +1,4 @@
-//! `host-sim study speed`'s time to a final reading (issue 14): the speed study records each
+//! `host-sim study speed`'s time to a final reading: the speed study records each
 //! run's first final reading in its own Monte Carlo, and it must agree with the coverage
 //! study's independent loop over the same records (`coverage::final_time`), and no method
 //! whose `u` is honest may be final sooner than the Cramér–Rao bound allows, beyond the 5 %
