@@ -2,8 +2,8 @@
 //! state machine (estimator-core, unchanged) read it, and every readout line is judged.
 
 use estimator_core::weighing::{
-    Calibration, CalibrationLimits, Command, CommandConfig, Commands, CountsScale, FrontEnd,
-    RawSample, ScaleReading, ScaleState, WeighingConfig,
+    Calibration, CalibrationLimits, Command, CommandConfig, CommandOutcome, Commands, CountsScale,
+    FrontEnd, RawSample, ScaleReading, ScaleState, WeighingConfig,
 };
 
 use super::judge::{Limits, Line, Tallies, Truth};
@@ -145,9 +145,12 @@ pub fn run_plan(
             match outcome {
                 Ok(_) => {
                     pending = None;
-                    match command {
-                        Command::Tare => tare_truth_g = adc.load_g(),
-                        Command::ClearTare => tare_truth_g = 0.0,
+                    match (command, outcome) {
+                        (Command::Tare, Ok(CommandOutcome::Tared { tare_g })) => {
+                            tare_truth_g = tare_truth(f64::from(tare_g), low, high);
+                        }
+                        (Command::Tare, _) => tare_truth_g = adc.load_g(),
+                        (Command::ClearTare, _) => tare_truth_g = 0.0,
                         _ => {}
                     }
                 }
@@ -160,6 +163,24 @@ pub fn run_plan(
     }
     tallies.runs += 1;
     Ok(())
+}
+
+/// The load a tare accepted at a readout line stands for: of the loads the pan held since
+/// the line before (`low_g..high_g`, the truth that line is judged against), the one
+/// nearest the gross mass the scale took as tare (`tare_g`). A tare is taken from the
+/// reading shown, and that reading is judged right when it lies within the permissible
+/// error of any load of its period; so is the tare. Taken instead as the load at the very
+/// sample it was accepted, a tare accepted as an item began to move, from a reading of the
+/// load before (right by the judge), charged every later net reading with the item's first
+/// few milliseconds of motion: 0.5 g on every line for the rest of the run, 96 silent wrong
+/// readings in one run of `host-sim torture --runs 10000 --seed 1` with a variant of the
+/// scale that showed fewer lines stable.
+pub(crate) fn tare_truth(tare_g: f64, low_g: f64, high_g: f64) -> f64 {
+    if low_g <= high_g {
+        tare_g.clamp(low_g, high_g)
+    } else {
+        tare_g
+    }
 }
 
 /// The readout line as judged: the reading the sample gave (what the firmware prints), the
@@ -199,5 +220,24 @@ pub fn instrument(limits: &Limits) -> Instrument {
         capacity_g: limits.capacity_g,
         scale_interval_g: limits.scale_interval_g,
         calibration_mass_g: CALIBRATION_MASS_G,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::tare_truth;
+
+    #[test]
+    fn a_tare_stands_for_the_load_of_its_line_nearest_the_value_taken() {
+        // A still pan: the load itself, whatever the scale's own error.
+        assert_eq!(tare_truth(100.03, 100.0, 100.0), 100.0);
+        // Accepted as a removal began (the pan held 15.77-16.39 g since the line before):
+        // the load the reading was of, not the one at the accepting sample.
+        assert_eq!(tare_truth(16.396, 15.766, 16.391), 16.391);
+        assert_eq!(tare_truth(0.0, 0.0, 0.494), 0.0);
+        // A tare off every load of its period is charged: the nearest one stands for it,
+        // and the net lines after it carry the difference.
+        assert_eq!(tare_truth(20.0, 15.766, 16.391), 16.391);
+        assert_eq!(tare_truth(-1.0, 0.0, 0.494), 0.0);
     }
 }
