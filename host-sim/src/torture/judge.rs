@@ -136,6 +136,11 @@ pub struct Tallies {
     /// 3–5, 5 and more, no `u` stated. Below 3 the stated `u` covered the error and the
     /// stability rule let it through; far above, `u` did not describe the data.
     pub silent_by_z: [u64; 5],
+    /// Silent wrong readings by how long the load had stayed within the permissible error
+    /// of where it was (`Line::steady_s`): below 0.1 s, 0.1–0.5 s, 0.5–2 s, 2 s and more.
+    /// Below 0.1 s the load moved within the last two readout lines: a change the data
+    /// had barely begun to show; from 2 s on it had been at rest while the fit was wrong.
+    pub silent_by_steady: [u64; 4],
     /// Runs tallied.
     pub runs: u64,
 }
@@ -180,6 +185,7 @@ impl Tallies {
         if is_wrong {
             tally.silent_wrong += 1;
             self.silent_by_z[z_bucket(error, line.u_g)] += 1;
+            self.silent_by_steady[steady_bucket(line.steady_s)] += 1;
             let (run, time_s, state) = at;
             self.worst.push(Wrong {
                 run,
@@ -202,6 +208,9 @@ impl Tallies {
         }
         self.worst.extend(other.worst);
         for (mine, theirs) in self.silent_by_z.iter_mut().zip(other.silent_by_z) {
+            *mine += theirs;
+        }
+        for (mine, theirs) in self.silent_by_steady.iter_mut().zip(other.silent_by_steady) {
             *mine += theirs;
         }
         self.keep_worst();
@@ -250,6 +259,19 @@ fn z_bucket(error_g: f64, u_g: Option<f64>) -> usize {
     }
 }
 
+/// The bucket of [`Tallies::silent_by_steady`] for a load steady for `steady_s`.
+fn steady_bucket(steady_s: f64) -> usize {
+    if steady_s < 0.1 {
+        0
+    } else if steady_s < 0.5 {
+        1
+    } else if steady_s < 2.0 {
+        2
+    } else {
+        3
+    }
+}
+
 /// One readout line as judged.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Line {
@@ -261,6 +283,41 @@ pub struct Line {
     pub u_g: Option<f64>,
     /// What was on the pan.
     pub truth: Truth,
+    /// How long the load had stayed within the permissible error of where it was, s (see
+    /// [`Steadiness`]).
+    pub steady_s: f64,
+}
+
+/// How long the load on the pan has stayed put: it is anchored where it was, and re-anchored
+/// (the clock started over) whenever it moves beyond the permissible error of the anchor.
+/// A step re-anchors at once, a trickle each time it has added one permissible error.
+#[derive(Clone, Copy, Debug)]
+pub struct Steadiness {
+    anchor_g: f64,
+    since_sample: u64,
+}
+
+impl Steadiness {
+    /// At rest at `load_g` from the first sample.
+    pub fn new(load_g: f64) -> Self {
+        Self {
+            anchor_g: load_g,
+            since_sample: 0,
+        }
+    }
+
+    /// The gross load at `sample`.
+    pub fn push(&mut self, sample: u64, load_g: f64, limits: &Limits) {
+        if (load_g - self.anchor_g).abs() > limits.permissible_g(load_g) {
+            self.anchor_g = load_g;
+            self.since_sample = sample;
+        }
+    }
+
+    /// Seconds the load has stayed put as of `sample`, at `rate_hz`.
+    pub fn steady_s(&self, sample: u64, rate_hz: f64) -> f64 {
+        sample.saturating_sub(self.since_sample) as f64 / rate_hz
+    }
 }
 
 #[cfg(test)]
@@ -301,11 +358,13 @@ mod tests {
                 high_g: 660.0,
                 gross_low_g: 660.0,
             },
+            steady_s: 10.0,
         };
         let at = (0, 0.0, "stable");
         tallies.judge(ActKind::Overload, line, &limits(), at);
         assert_eq!(tallies.worst[0].error_g, f64::INFINITY);
         assert_eq!(tallies.total().silent_wrong, 1);
+        assert_eq!(tallies.silent_by_steady, [0, 0, 0, 1]);
         // The same line flagged (estimating) is a flagged wrong reading, not a silent one.
         let mut tallies = Tallies::default();
         tallies.judge(
@@ -319,6 +378,34 @@ mod tests {
         );
         assert_eq!(tallies.total().silent_wrong, 0);
         assert_eq!(tallies.total().flagged_wrong, 1);
+    }
+
+    #[test]
+    fn the_load_is_steady_from_its_last_move_beyond_the_permissible_error() {
+        let limits = limits();
+        let rate_hz = 4000.0;
+        let mut steady = Steadiness::new(0.0);
+        // At rest on 100 g from sample 400, wobbling by less than the permissible error.
+        for sample in 0..4400_u64 {
+            let load = if sample < 400 {
+                0.0
+            } else {
+                100.0 + 0.04 * (sample % 2) as f64
+            };
+            steady.push(sample, load, &limits);
+        }
+        assert!((steady.steady_s(4400, rate_hz) - 1.0).abs() < 1e-9);
+        // A trickle of 0.5 g/s: re-anchored each time it has added one permissible error
+        // (0.069 g at 100 g, the target's), so once it has, never steady for more than
+        // 0.14 s.
+        let mut load = 100.0;
+        for sample in 4400..12_400_u64 {
+            load += 0.5 / rate_hz;
+            steady.push(sample, load, &limits);
+            if sample >= 4400 + 560 {
+                assert!(steady.steady_s(sample + 1, rate_hz) <= 0.14, "{sample}");
+            }
+        }
     }
 
     #[test]

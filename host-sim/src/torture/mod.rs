@@ -150,6 +150,12 @@ pub fn report(settings: &TortureSettings, tallies: &Tallies) -> String {
             "silent wrong readings by error / u shown: below 2: {}, 2-3: {}, 3-5: {}, 5 and above: {}, no u: {}",
             z[0], z[1], z[2], z[3], z[4]
         );
+        let steady = &tallies.silent_by_steady;
+        let _ = writeln!(
+            out,
+            "silent wrong readings by how long the load had stayed within the permissible error: below 0.1 s: {}, 0.1-0.5 s: {}, 0.5-2 s: {}, 2 s and more: {}",
+            steady[0], steady[1], steady[2], steady[3]
+        );
     }
     if !tallies.worst.is_empty() {
         let _ = writeln!(out);

@@ -6,7 +6,7 @@ use estimator_core::weighing::{
     FrontEnd, RawSample, ScaleReading, ScaleState, WeighingConfig,
 };
 
-use super::judge::{Limits, Line, Tallies, Truth};
+use super::judge::{Limits, Line, Steadiness, Tallies, Truth};
 use super::plan::PLAN_EVENTS;
 use super::plan::{ActKind, Instrument, Plan, PlannedCommand};
 use super::TortureSettings;
@@ -79,6 +79,7 @@ pub fn run_plan(
     let mut tare_truth_g = 0.0;
     let mut low = f64::INFINITY;
     let mut high = f64::NEG_INFINITY;
+    let mut steadiness = Steadiness::new(0.0);
     for sample in 0..plan.samples {
         while next_act < plan.acts.len() && plan.acts[next_act].0 <= sample {
             act = plan.acts[next_act].1;
@@ -96,13 +97,15 @@ pub fn run_plan(
         };
         let reading = scale.push(raw);
         let gross = adc.load_g();
+        steadiness.push(sample, gross, limits);
         low = low.min(gross);
         high = high.max(gross);
         if (sample + 1) % READOUT_SAMPLES != 0 {
             continue;
         }
         let now = (sample + 1) as u32;
-        let line = line_of(&reading, low, high, tare_truth_g);
+        let mut line = line_of(&reading, low, high, tare_truth_g);
+        line.steady_s = steadiness.steady_s(sample + 1, rate_hz);
         let time_s = (sample + 1) as f64 / rate_hz;
         tallies.judge(act, line, limits, (run, time_s, state_name(&reading.state)));
         if let Some(out) = trace.as_mut() {
@@ -197,6 +200,7 @@ fn line_of(reading: &ScaleReading, low_g: f64, high_g: f64, tare_g: f64) -> Line
             high_g: high_g - tare_g,
             gross_low_g: low_g,
         },
+        steady_s: f64::INFINITY,
     }
 }
 
