@@ -94,6 +94,8 @@ pub struct Wrong {
     pub permissible_g: f64,
     /// The state shown.
     pub state: &'static str,
+    /// How long the load had stayed within the permissible error of where it was, s.
+    pub steady_s: f64,
 }
 
 /// Counts for one act.
@@ -196,6 +198,7 @@ impl Tallies {
                 error_g: if over_capacity { f64::INFINITY } else { error },
                 permissible_g: permissible,
                 state,
+                steady_s: line.steady_s,
             });
             self.keep_worst();
         }

@@ -172,7 +172,7 @@ pub fn report(settings: &TortureSettings, tallies: &Tallies) -> String {
             };
             let _ = writeln!(
                 out,
-                "  run {} at {:.2} s ({}): shown {:.3} g {}, truth {:.3}..{:.3} g, {error}, permissible ±{:.3} g",
+                "  run {} at {:.2} s ({}): shown {:.3} g {}, truth {:.3}..{:.3} g, {error}, permissible ±{:.3} g, load steady {:.2} s",
                 w.run,
                 w.time_s,
                 w.act.name(),
@@ -180,7 +180,8 @@ pub fn report(settings: &TortureSettings, tallies: &Tallies) -> String {
                 w.state,
                 w.truth_g.0,
                 w.truth_g.1,
-                w.permissible_g
+                w.permissible_g,
+                w.steady_s
             );
         }
     }
