@@ -24,7 +24,13 @@ impl<E: ScaleEstimator> Scale<E> {
             Err(fault) => return self.set_fault(fault),
         };
         self.start_sample();
-        self.white.push(counts, self.config.block_samples);
+        if self.white.push(counts, self.config.block_samples) {
+            // The meter's first value: the run that began before it (the power-up run) gets
+            // the floor now rather than at its next restart (see `Scale::restart`).
+            let _ = self
+                .estimator
+                .set_white_noise_variance(self.white.variance());
+        }
         self.push_trend(counts);
         // The zero is removed in integer arithmetic, so the conversion is exact (|counts| is
         // far below 2^24 for any converter this runs).
