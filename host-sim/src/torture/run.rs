@@ -104,8 +104,8 @@ pub fn run_plan(
             continue;
         }
         let now = (sample + 1) as u32;
-        let mut line = line_of(&reading, low, high, tare_truth_g);
-        line.steady_s = steadiness.steady_s(sample + 1, rate_hz);
+        let steady_s = steadiness.steady_s(sample + 1, rate_hz);
+        let line = line_of(&reading, low, high, tare_truth_g, steady_s);
         let time_s = (sample + 1) as f64 / rate_hz;
         tallies.judge(act, line, limits, (run, time_s, state_name(&reading.state)));
         if let Some(out) = trace.as_mut() {
@@ -146,11 +146,11 @@ pub fn run_plan(
                 let _ = writeln!(out, ",,,,,,,,,\"{command:?} -> {outcome:?}\"");
             }
             match outcome {
-                Ok(_) => {
+                Ok(done) => {
                     pending = None;
-                    match (command, outcome) {
-                        (Command::Tare, Ok(CommandOutcome::Tared { tare_g })) => {
-                            tare_truth_g = tare_truth(f64::from(tare_g), low, high);
+                    match (command, done) {
+                        (Command::Tare, CommandOutcome::Tared { tare_g }) => {
+                            tare_truth_g = tare_truth(f64::from(tare_g), low, high, adc.load_g());
                         }
                         (Command::Tare, _) => tare_truth_g = adc.load_g(),
                         (Command::ClearTare, _) => tare_truth_g = 0.0,
@@ -177,18 +177,20 @@ pub fn run_plan(
 /// load before (right by the judge), charged every later net reading with the item's first
 /// few milliseconds of motion: 0.5 g on every line for the rest of the run, 96 silent wrong
 /// readings in one run of `host-sim torture --runs 10000 --seed 1` with a variant of the
-/// scale that showed fewer lines stable.
-pub(crate) fn tare_truth(tare_g: f64, low_g: f64, high_g: f64) -> f64 {
-    if low_g <= high_g {
+/// scale that showed fewer lines stable. A tare that is not a number stands for the load
+/// at the accepting sample (`now_g`): its net lines are judged against a number, and any
+/// wrong one counts.
+pub(crate) fn tare_truth(tare_g: f64, low_g: f64, high_g: f64, now_g: f64) -> f64 {
+    if tare_g.is_finite() && low_g <= high_g {
         tare_g.clamp(low_g, high_g)
     } else {
-        tare_g
+        now_g
     }
 }
 
 /// The readout line as judged: the reading the sample gave (what the firmware prints), the
-/// truth of the period since the last line.
-fn line_of(reading: &ScaleReading, low_g: f64, high_g: f64, tare_g: f64) -> Line {
+/// truth of the period since the last line, and how long the load has been steady.
+fn line_of(reading: &ScaleReading, low_g: f64, high_g: f64, tare_g: f64, steady_s: f64) -> Line {
     let settled =
         matches!(reading.state, ScaleState::Stable | ScaleState::Empty) || reading.is_final;
     Line {
@@ -200,7 +202,7 @@ fn line_of(reading: &ScaleReading, low_g: f64, high_g: f64, tare_g: f64) -> Line
             high_g: high_g - tare_g,
             gross_low_g: low_g,
         },
-        steady_s: f64::INFINITY,
+        steady_s,
     }
 }
 
@@ -234,14 +236,17 @@ mod tests {
     #[test]
     fn a_tare_stands_for_the_load_of_its_line_nearest_the_value_taken() {
         // A still pan: the load itself, whatever the scale's own error.
-        assert_eq!(tare_truth(100.03, 100.0, 100.0), 100.0);
+        assert_eq!(tare_truth(100.03, 100.0, 100.0, 100.0), 100.0);
         // Accepted as a removal began (the pan held 15.77-16.39 g since the line before):
         // the load the reading was of, not the one at the accepting sample.
-        assert_eq!(tare_truth(16.396, 15.766, 16.391), 16.391);
-        assert_eq!(tare_truth(0.0, 0.0, 0.494), 0.0);
+        assert_eq!(tare_truth(16.396, 15.766, 16.391, 15.766), 16.391);
+        assert_eq!(tare_truth(0.0, 0.0, 0.494, 0.494), 0.0);
         // A tare off every load of its period is charged: the nearest one stands for it,
         // and the net lines after it carry the difference.
-        assert_eq!(tare_truth(20.0, 15.766, 16.391), 16.391);
-        assert_eq!(tare_truth(-1.0, 0.0, 0.494), 0.0);
+        assert_eq!(tare_truth(20.0, 15.766, 16.391, 15.766), 16.391);
+        assert_eq!(tare_truth(-1.0, 0.0, 0.494, 0.494), 0.0);
+        // A tare that is not a number: the load at the accepting sample, so the lines
+        // after it are still judged (a NaN truth would pass every one).
+        assert_eq!(tare_truth(f64::NAN, 15.766, 16.391, 15.766), 15.766);
     }
 }

@@ -18,9 +18,10 @@
 //! with them: the minimum is from a quiet block). The run in progress when the meter's
 //! first block ends (the power-up run, which began before there was any) gets it then:
 //! handed only at restarts, that run's `u` went without a floor for as long as it lasted
-//! (test `the_power_up_run_rests_its_u_on_the_white_noise_once_metered`). A floor a little low is harmless (the
-//! residuals' own level is stated where it is higher); one too high would only widen `u`,
-//! and the minimum keeps it low: the white noise of the front end is all it can see.
+//! (test `the_power_up_run_rests_its_u_on_the_white_noise_once_metered`). A floor a
+//! little low is harmless (the residuals' own level is stated where it is higher); one
+//! too high would only widen `u`, and the minimum keeps it low: the white noise of the
+//! front end is all it can see.
 //!
 //! Cost per sample: one subtraction, a multiply-add and a count, in the sample's integer
 //! counts (no gain, no zero: a recalibration leaves it as it is).
