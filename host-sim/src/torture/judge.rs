@@ -138,8 +138,8 @@ pub struct Tallies {
     /// 3–5, 5 and more, no `u` stated. Below 3 the stated `u` covered the error and the
     /// stability rule let it through; far above, `u` did not describe the data.
     pub silent_by_z: [u64; 5],
-    /// Silent wrong readings by how long the load had stayed within the permissible error
-    /// of where it was (`Line::steady_s`): below 0.1 s, 0.1–0.5 s, 0.5–2 s, 2 s and more.
+    /// Silent wrong readings by how long the loads on the pan had spanned no more than the
+    /// permissible error (`Line::steady_s`): below 0.1 s, 0.1–0.5 s, 0.5–2 s, 2 s and more.
     /// Below 0.1 s the load moved within the last two readout lines: a change the data
     /// had barely begun to show; from 2 s on it had been at rest while the fit was wrong.
     pub silent_by_steady: [u64; 4],
@@ -286,7 +286,7 @@ pub struct Line {
     pub u_g: Option<f64>,
     /// What was on the pan.
     pub truth: Truth,
-    /// How long the loads on the pan had spanned no more than the permissible error, s.(see
+    /// How long the loads on the pan had spanned no more than the permissible error, s (see
     /// [`Steadiness`]).
     pub steady_s: f64,
 }
@@ -419,7 +419,7 @@ mod tests {
         assert!((placed.steady_s(1200, rate_hz) - 0.2).abs() < 1e-9);
         placed.push(1200, 100.12, &limits);
         assert_eq!(placed.steady_s(1200, rate_hz), 0.0);
-        // A trickle of 0.5 g/s: re-anchored each time it has added one permissible error
+        // A trickle of 0.5 g/s: started over each time it has added one permissible error
         // (0.069 g at 100 g, the target's), so once it has, never steady for more than
         // 0.14 s.
         let mut load = 100.0;
