@@ -63,15 +63,15 @@ impl<E: ScaleEstimator> Scale<E> {
         // The tracked zero may have moved since the run started.
         let zero_shift_g = (self.zero_counts - self.run_zero_counts as f32) * self.grams_per_count;
         let estimate_g = estimate_counts * self.grams_per_count - zero_shift_g;
-        let gross_u_g = reading.uncertainty.map(|u| u * self.grams_per_count.abs());
-        // The bound (a square root and two divisions) and the net `u` (the tare's and the
-        // zero's drift with it) only when `u` changed: it changes once per block of the
-        // estimator, not on every sample, and the drift moves far slower.
-        if gross_u_g != self.gross_u_g {
-            self.gross_u_bound_g = reading
-                .uncertainty_bound()
-                .map(|u| u * self.grams_per_count.abs());
-            self.gross_u_g = gross_u_g;
+        // `u` in grams, its bound (a square root and two divisions) and the net `u` (the
+        // tare's and the zero's drift with it) only when the fit's `u` changed: it changes
+        // once per block of the estimator, not on every sample, and the drift moves far
+        // slower. (A `u` that is not a number is never equal to the last: taken each time.)
+        if reading.uncertainty != self.fit_u_counts {
+            self.fit_u_counts = reading.uncertainty;
+            let grams = |u: f32| u * self.grams_per_count.abs();
+            self.gross_u_g = reading.uncertainty.map(grams);
+            self.gross_u_bound_g = reading.uncertainty_bound().map(grams);
             self.refresh_net_u();
         }
         if estimate_g > self.overload_limit_g() {

@@ -219,6 +219,9 @@ pub struct Scale<E> {
     /// Its upper 95 % confidence bound (the noise level's own uncertainty), what the
     /// decisions on `u` take.
     gross_u_bound_g: Option<f32>,
+    /// The estimator's `u` (counts) when `gross_u_g` was last worked out from it; not a
+    /// number after a new calibration, so that the next reading's is taken whatever it is.
+    fit_u_counts: Option<f32>,
     state: ScaleState,
     /// The empty pan's noise, for the consistency check.
     noise: NoiseMetering,
@@ -340,6 +343,7 @@ impl<E: ScaleEstimator> Scale<E> {
             gross_g: None,
             gross_u_g: None,
             gross_u_bound_g: None,
+            fit_u_counts: Some(f32::NAN),
             state: ScaleState::Estimating,
             noise: NoiseMetering::new(samples_per_update, config.noise_window_samples),
             noise_metered: false,
@@ -372,6 +376,8 @@ impl<E: ScaleEstimator> Scale<E> {
             1.0
         };
         self.grams_per_count = 1.0 / self.counts_per_gram;
+        // `u` in grams is worked out again at the next reading (`Scale::push`).
+        self.fit_u_counts = Some(f32::NAN);
         self.zero_counts = if calibration.zero_counts.is_finite() {
             calibration.zero_counts
         } else {
