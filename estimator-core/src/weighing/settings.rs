@@ -8,9 +8,9 @@
 //! [`ScaleConfig::FIELDS`] value as an `f32` in that order, the console's rate (u16) and
 //! unit (u8), one zero byte, the method (family u8: 0 step, 1 bias-compensated, 2
 //! instrumental variables, 3 model bank; order u8; D u16; λ f64; candidates u16; two zero
-//! bytes; lowest and highest ratio f64: exact, as typed), and a CRC-32 of everything before it. A record of an
-//! earlier version (1: no method; 2: no `ringing_min_hz`) is refused as an unsupported
-//! version. A record that fails any
+//! bytes; lowest and highest ratio f64: exact, as typed), and a CRC-32 of everything before
+//! it. A record of an earlier version (1: no method; 2: no `ringing_min_hz`; 3: no
+//! `restless_fit_samples`) is refused as an unsupported version. A record that fails any
 //! check is refused with its reason and nothing of it is used: the board then runs on the
 //! compiled-in configuration and says so.
 
@@ -22,7 +22,7 @@ use super::scale::ScaleConfig;
 /// Bytes of a settings record.
 pub const SETTINGS_LEN: usize = 8 + 4 * ScaleConfig::FIELDS.len() + 4 + METHOD_LEN + 4;
 /// The layout this firmware writes and reads.
-pub const SETTINGS_VERSION: u16 = 3;
+pub const SETTINGS_VERSION: u16 = 4;
 /// Bytes of the method in a settings record.
 const METHOD_LEN: usize = 32;
 const MAGIC: [u8; 4] = *b"WSET";

@@ -95,7 +95,7 @@ macro_rules! samples {
 impl ScaleConfig {
     /// Every field by name, in the order `config show` lists them: the instrument (Max, e,
     /// targets), stability and the empty pan, zero tracking, then the change tests.
-    pub const FIELDS: [ConfigField; 28] = [
+    pub const FIELDS: [ConfigField; 29] = [
         real!(capacity_g),
         real!(scale_interval_g),
         real!(final_target_g),
@@ -124,6 +124,7 @@ impl ScaleConfig {
         real!(raw_drift_g),
         real!(raw_threshold_g),
         samples!(raw_arm_samples),
+        samples!(restless_fit_samples),
         samples!(block_samples),
         real!(block_drift_g),
         real!(block_threshold_g),

@@ -130,7 +130,7 @@ proptest! {
             prop_oneof![any::<f32>(), -10.0f32..1000.0, Just(f32::NAN), Just(0.0)],
             20,
         ),
-        counts in proptest::collection::vec(any::<u32>(), 7),
+        counts in proptest::collection::vec(any::<u32>(), 8),
         codes in proptest::collection::vec(any::<i32>(), 0..500),
     ) {
         let config = ScaleConfig {
@@ -158,6 +158,7 @@ proptest! {
             stable_hold_samples: counts[0],
             residual_arm_samples: counts[1],
             raw_arm_samples: counts[2] % 100_000,
+            restless_fit_samples: counts[7] % 100_000,
             flag_restart_samples: counts[3],
             noise_window_samples: counts[4],
             noise_guard_samples: counts[5],

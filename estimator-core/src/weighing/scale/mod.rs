@@ -40,6 +40,12 @@
 //! blocks, within the permissible error of the reading (`trend`; a trickle begun soon
 //! after a change is not seen by any test before it matters, on a noisy pan).
 //!
+//! A pan that keeps alarming — [`RESTLESS_SHORT_RUNS`] runs in a row cut short by a load
+//! change, as on a vibrating floor or with items put on in quick succession — is
+//! restless: there a fit vouches for nothing (stable, empty, final) before it is
+//! `restless_fit_samples` old. A fit of a few tenths of a second takes a floor's vibration
+//! for the cell's own transient, and its `u` does not see it.
+//!
 //! Neither CUSUM test runs on a flagged reading (a flagged fit has no residual to trust, and no
 //! mass to compare with). So a flag that persists after the run showed a valid reading —
 //! the fit of one load broke down, typically because a new load arrived before the
@@ -204,6 +210,10 @@ pub struct Scale<E> {
     uncertain_samples: u32,
     /// This load's run was restarted for that once already (cleared by a load change).
     restarted_uncertain: bool,
+    /// Consecutive runs a load change ended before the cell could have settled
+    /// (`raw_arm_samples`): [`RESTLESS_SHORT_RUNS`] of them make a restless pan
+    /// (`decide::show`).
+    short_runs: u8,
     /// e⁻⁵ over `raw_arm_samples`, per sample (1 − 5/`raw_arm_samples`, at least 0).
     ringing_decay: f32,
     /// The current run has shown a valid reading.
@@ -335,6 +345,7 @@ impl<E: ScaleEstimator> Scale<E> {
             after_slow_change: false,
             uncertain_samples: 0,
             restarted_uncertain: false,
+            short_runs: 0,
             ringing_decay: ringing_decay(config.raw_arm_samples),
             valid_in_run: false,
             flagged_samples: 0,
@@ -561,6 +572,12 @@ impl<E: ScaleEstimator> Scale<E> {
     /// goes on across the restarts it causes, and a step in the window is cut out of it
     /// when the trend test or the block test sees it (`trend`).
     fn restart_as_load_change(&mut self) {
+        let short = self.samples_since_change < u64::from(self.config.raw_arm_samples);
+        self.short_runs = if short {
+            self.short_runs.saturating_add(1)
+        } else {
+            0
+        };
         self.restart();
         self.restarted_uncertain = false;
         self.load_changes = self.load_changes.saturating_add(1);
@@ -604,6 +621,12 @@ pub const ZERO_SETTING_RANGE_OF_MAX: f32 = 0.02;
 /// within 2–3 u of the truth, 675 in all; 263 with four and nothing else changed, none
 /// within 3 u).
 pub const VOUCHING_COVERAGE_FACTOR: f32 = 4.0;
+
+/// Runs in a row ended by a load change before the cell could have settled
+/// (`ScaleConfig::raw_arm_samples`) that make a pan restless: from then on a fit vouches for
+/// its reading only once `ScaleConfig::restless_fit_samples` old. One is any drop whose
+/// ringing trips a second alarm; two is a pan that keeps alarming.
+pub const RESTLESS_SHORT_RUNS: u8 = 2;
 
 impl<E: ScaleEstimator> Scale<E> {
     /// `VOUCHING_COVERAGE_FACTOR` upper confidence bounds of the net reading's `u`
