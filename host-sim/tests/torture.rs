@@ -94,7 +94,7 @@ fn one_run_alone_gives_its_share_and_a_trace_of_truth_and_readings() {
     assert_eq!(shown_settled, shown);
 }
 
-/// The CI-sized torture (issue 12): 1,000 runs of seed 1, every act and noise kind the
+/// The CI-sized torture: 1,000 runs of seed 1, every act and noise kind the
 /// torture has, show no reading settled beyond the permissible error (1 of 263,581 at
 /// stop 38, run 357 below; about a minute on two cores). The 10,000-run figure is the
 /// README's, too long for CI.

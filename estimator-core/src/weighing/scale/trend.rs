@@ -54,8 +54,9 @@
 //! or final only while the load, by the lines through the window's last 100, 32 and
 //! 16 blocks (their values at the end of the next block: the newest block's mean is the
 //! load half a block before it ended, and the bound vouches until the next block ends),
-//! lies within the permissible error of it, each line's value's standard error included [`PROOF_T`] times (Student's t for the
-//! line's own degrees of freedom at z = 2.5): its absence of motion shown, not merely not
+//! lies within the permissible error of it, each line's value's standard error included
+//! [`PROOF_T`] times (Student's t for the line's own degrees of freedom at z = 2.5): its
+//! absence of motion shown, not merely not
 //! refuted. The short lines see a ramp begun in a long flat window, which
 //! the window's own line barely follows. With fewer than [`TREND_PROOF_MIN_BLOCKS`]
 //! blocks, or while a step is judged (the first 1.8 s after a fast change), the window
