@@ -35,7 +35,7 @@ pub use crate::weighing_file::{
 };
 
 /// The bank size calibration offers (the core's bank is a const generic):
-/// [`tuning::BankCandidate::REFERENCE`].
+/// [`estimator_core::weighing::BankCandidate::REFERENCE`].
 pub const BANK_CANDIDATES: usize = 33;
 
 /// What `host-sim calibrate` is asked to do.

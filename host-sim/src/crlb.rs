@@ -157,7 +157,7 @@ pub fn free_responses(
 /// `nuisance` (the free responses, [`free_responses`]) profiled out, for stationary noise
 /// with autocovariance `autocovariance[lag]` (raw units²; `[σ², 0, …]` for white noise).
 /// Each column is whitened by the same Levinson–Durbin innovations as in
-/// [`coloured_known_tare`] ([`Innovations`]); the information matrix of `[u; x₀]` is accumulated and its
+/// [`coloured_known_tare`] (`Innovations`); the information matrix of `[u; x₀]` is accumulated and its
 /// inverse's first element taken per prefix. Never below the known-state bound.
 pub fn coloured_unknown_state(
     unit_step: &[f64],

@@ -642,7 +642,7 @@ estimator_via_intake!(ModelEstimator<T, const S>);
 ///
 /// ## What a sample costs
 /// The candidates share the decimation `D` and the valid range, so the bank checks each
-/// sample and sums the block once ([`Intake`]); the candidates' regressions and their
+/// sample and sums the block once (`Intake`); the candidates' regressions and their
 /// combination run once per block. And the bank stops fitting candidates the data have
 /// ruled out: once the best candidate has 16 residuals, a candidate on either end of those
 /// still fitted whose residual sum exceeds the best's by more than 100 residual variances

@@ -2,7 +2,7 @@
 //! before=B rate_hz=R`, then `D <index> <code>…` lines (`L` a lost sample, `S` a saturated
 //! one), then `RECORD end samples=N lost=… saturated=…`, with reading and answer lines
 //! anywhere between them. [`unpack`] turns a transcript into recordings and
-//! [`Recording::to_csv`] into the CSV every host command reads (`t,y`, an empty `y` for a
+//! [`ConsoleRecording::to_csv`] into the CSV every host command reads (`t,y`, an empty `y` for a
 //! sample the board did not have), so `host-sim records` hands `calibrate` and `replay`
 //! exactly what the board saw.
 //!

@@ -143,6 +143,8 @@ pub struct Tallies {
     /// Below 0.1 s the load moved within the last two readout lines: a change the data
     /// had barely begun to show; from 2 s on it had been at rest while the fit was wrong.
     pub silent_by_steady: [u64; 4],
+    /// Lines with no mass by why ([`NoMass`], in its order).
+    pub no_mass_by_why: [u64; 4],
     /// Runs tallied.
     pub runs: u64,
 }
@@ -162,9 +164,13 @@ impl Tallies {
     ) {
         let tally = self.by_act.entry(act).or_default();
         tally.readings += 1;
-        let Some(shown_g) = line.mass_g else {
-            tally.no_mass += 1;
-            return;
+        let shown_g = match line.mass_g {
+            Ok(shown_g) => shown_g,
+            Err(why) => {
+                tally.no_mass += 1;
+                self.no_mass_by_why[why as usize] += 1;
+                return;
+            }
         };
         let mid = 0.5 * (line.truth.low_g + line.truth.high_g);
         let permissible = limits.permissible_g(mid);
@@ -214,6 +220,9 @@ impl Tallies {
             *mine += theirs;
         }
         for (mine, theirs) in self.silent_by_steady.iter_mut().zip(other.silent_by_steady) {
+            *mine += theirs;
+        }
+        for (mine, theirs) in self.no_mass_by_why.iter_mut().zip(other.no_mass_by_why) {
             *mine += theirs;
         }
         self.keep_worst();
@@ -275,11 +284,25 @@ fn steady_bucket(steady_s: f64) -> usize {
     }
 }
 
+/// Why a line shows no mass: the columns of [`Tallies::no_mass_by_why`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NoMass {
+    /// No estimate yet (a fresh run).
+    NotYet = 0,
+    /// The consistency check flagged the run's fit (`InvalidReason::ModelMismatch`).
+    ModelMismatch = 1,
+    /// The estimator flagged its reading for another reason (ill-conditioned, a bank's fit
+    /// on its edge, a latched fault).
+    EstimatorFlag = 2,
+    /// The scale's own fault: overload, a saturated or lost sample.
+    Fault = 3,
+}
+
 /// One readout line as judged.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Line {
-    /// The mass shown, g (`None`: no mass).
-    pub mass_g: Option<f64>,
+    /// The mass shown, g, or why none is.
+    pub mass_g: Result<f64, NoMass>,
     /// Shown as settled (stable, empty or final).
     pub settled: bool,
     /// The standard uncertainty shown with the mass, g (`None`: none stated).
@@ -364,7 +387,7 @@ mod tests {
     fn a_stable_mass_above_max_plus_9e_is_wrong_even_when_accurate() {
         let mut tallies = Tallies::default();
         let line = Line {
-            mass_g: Some(660.0),
+            mass_g: Ok(660.0),
             settled: true,
             u_g: None,
             truth: Truth {
@@ -392,6 +415,44 @@ mod tests {
         );
         assert_eq!(tallies.total().silent_wrong, 0);
         assert_eq!(tallies.total().flagged_wrong, 1);
+    }
+
+    #[test]
+    fn lines_without_a_mass_are_counted_by_why() {
+        let line = |why| Line {
+            mass_g: Err(why),
+            settled: false,
+            u_g: None,
+            truth: Truth {
+                low_g: 100.0,
+                high_g: 100.0,
+                gross_low_g: 100.0,
+            },
+            steady_s: 1.0,
+        };
+        let mut tallies = Tallies::default();
+        tallies.judge(
+            ActKind::Trickle,
+            line(NoMass::ModelMismatch),
+            &limits(),
+            (0, 0.0, "invalid"),
+        );
+        let mut other = Tallies::default();
+        other.judge(
+            ActKind::Overload,
+            line(NoMass::Fault),
+            &limits(),
+            (1, 0.0, "invalid"),
+        );
+        other.judge(
+            ActKind::Overload,
+            line(NoMass::ModelMismatch),
+            &limits(),
+            (1, 0.1, "invalid"),
+        );
+        tallies.merge(other);
+        assert_eq!(tallies.no_mass_by_why, [0, 2, 0, 1]);
+        assert_eq!(tallies.total().no_mass, 3);
     }
 
     #[test]

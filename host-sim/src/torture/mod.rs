@@ -142,6 +142,13 @@ pub fn report(settings: &TortureSettings, tallies: &Tallies) -> String {
         total.no_mass,
         total.worst_ratio
     );
+    let why = &tallies.no_mass_by_why;
+    let _ = writeln!(out);
+    let _ = writeln!(
+        out,
+        "lines with no mass by why: no estimate yet: {}, model mismatch (the consistency check): {}, other estimator flags: {}, faults (overload, saturated or lost samples): {}",
+        why[0], why[1], why[2], why[3]
+    );
     if total.silent_wrong > 0 {
         let z = &tallies.silent_by_z;
         let _ = writeln!(out);

@@ -3,10 +3,11 @@
 
 use estimator_core::weighing::{
     Calibration, CalibrationLimits, Command, CommandConfig, CommandOutcome, Commands, CountsScale,
-    FrontEnd, RawSample, ScaleReading, ScaleState, WeighingConfig,
+    FrontEnd, RawSample, ScaleFault, ScaleReading, ScaleState, WeighingConfig,
 };
+use estimator_core::InvalidReason;
 
-use super::judge::{Limits, Line, Steadiness, Tallies, Truth};
+use super::judge::{Limits, Line, NoMass, Steadiness, Tallies, Truth};
 use super::plan::PLAN_EVENTS;
 use super::plan::{ActKind, Instrument, Plan, PlannedCommand};
 use super::TortureSettings;
@@ -194,7 +195,14 @@ fn line_of(reading: &ScaleReading, low_g: f64, high_g: f64, tare_g: f64, steady_
     let settled =
         matches!(reading.state, ScaleState::Stable | ScaleState::Empty) || reading.is_final;
     Line {
-        mass_g: reading.mass_g.map(f64::from),
+        mass_g: reading.mass_g.map(f64::from).ok_or(match reading.state {
+            ScaleState::Invalid(ScaleFault::Estimator(InvalidReason::ModelMismatch)) => {
+                NoMass::ModelMismatch
+            }
+            ScaleState::Invalid(ScaleFault::Estimator(_)) => NoMass::EstimatorFlag,
+            ScaleState::Invalid(_) => NoMass::Fault,
+            _ => NoMass::NotYet,
+        }),
         settled,
         u_g: reading.uncertainty_g.map(f64::from),
         truth: Truth {
