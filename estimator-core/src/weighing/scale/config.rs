@@ -51,7 +51,7 @@ pub struct ScaleConfig {
     /// Samples the reading must be stable or empty before the raw test is armed (the
     /// cell's settling time: the raw signal rings until then).
     pub raw_arm_samples: u32,
-    /// On a restless pan — [`super::RESTLESS_SHORT_RUNS`] runs in a row ended by a load
+    /// On a restless pan — `RESTLESS_SHORT_RUNS` runs in a row ended by a load
     /// change before `raw_arm_samples` — a run's fit vouches for its reading (stable,
     /// empty, final) only once it is this many samples old.
     pub restless_fit_samples: u32,
@@ -97,10 +97,10 @@ pub struct ScaleConfig {
     /// Check every run after the first metered empty period against the noise metered on
     /// the empty pan (`crate::estimators::consistency`; see the `Scale` module docs, "The consistency check").
     pub consistency_check: bool,
-    /// Raw samples of one noise metering: the empty, stable pan's noise is metered over
+    /// Raw samples of one noise metering: the empty pan's noise, at rest, is metered over
     /// this many samples at a time (block means of the estimator's `D`).
     pub noise_window_samples: u32,
-    /// Raw samples the pan must stay empty and stable after a metering before it is taken
+    /// Raw samples the pan must stay empty and at rest after a metering before it is taken
     /// as the reference: a load arriving in its last samples is detected by then.
     pub noise_guard_samples: u32,
 }

@@ -7,6 +7,29 @@
 use super::{RawSample, Scale, ScaleEstimator, ScaleFault, ScaleReading, ScaleState};
 use crate::reading::{InvalidReason, State};
 
+/// What [`Scale::show`] found an empty pan to be (both false for a pan not empty).
+struct EmptyPan {
+    /// Shown empty: zero tracking may pull the zero.
+    stable: bool,
+    /// Empty, vouched for and held in its band, the estimator's residuals showing no
+    /// motion: its noise may be metered. Not asked to be stable: the block test's motion
+    /// level and the trend window's proof of 0.5 e (`Scale::in_motion`) are within this
+    /// chain's block noise, and on a pan at rest they doubted much of the time once the
+    /// run was 2.5 s old, so a pan whose fit vouched only from 1 s on (a restless one) was
+    /// not metered in 3 s (`a_once_restless_pan_at_rest_is_metered`). A load arriving
+    /// during a window restarts the run and drops it; a slow trickle barely moves the
+    /// differences of block means the meter squares.
+    at_rest: bool,
+}
+
+impl EmptyPan {
+    /// Not an empty pan.
+    const NOT: Self = Self {
+        stable: false,
+        at_rest: false,
+    };
+}
+
 impl<E: ScaleEstimator> Scale<E> {
     /// Feed one raw sample and get the reading after it.
     pub fn push(&mut self, sample: RawSample) -> ScaleReading {
@@ -77,8 +100,11 @@ impl<E: ScaleEstimator> Scale<E> {
         if estimate_g > self.overload_limit_g() {
             return self.overloaded();
         }
-        if self.show(estimate_g) {
+        let pan = self.show(estimate_g);
+        if pan.at_rest {
             self.meter_empty_pan(centred_counts);
+        }
+        if pan.stable {
             self.track_zero(estimate_g);
         }
         self.reading()
@@ -137,7 +163,7 @@ impl<E: ScaleEstimator> Scale<E> {
     }
 
     /// Show a valid gross estimate: the stability band, the state, the settling that arms
-    /// the raw test. True when the pan is empty and stable.
+    /// the raw test. What it found the pan to be, if empty ([`EmptyPan`]).
     ///
     /// Stable (and empty) are claims that the reading is right: they need the estimate to
     /// have held its band for `stable_hold_samples`, [`super::VOUCHING_COVERAGE_FACTOR`]
@@ -146,7 +172,7 @@ impl<E: ScaleEstimator> Scale<E> {
     /// variables with weak instruments, a barely resolved compensation), and no
     /// motion building up in the block test. A fresh fit near zero with a `u` of grams is
     /// not an empty pan, and a reading creeping with a trickle is not stable.
-    fn show(&mut self, estimate_g: f32) -> bool {
+    fn show(&mut self, estimate_g: f32) -> EmptyPan {
         self.gross_g = Some(estimate_g);
         self.last_shown_gross_g = estimate_g;
         self.valid_in_run = true;
@@ -196,7 +222,7 @@ impl<E: ScaleEstimator> Scale<E> {
                     self.restart();
                     self.restarted_uncertain = true;
                     self.state = ScaleState::Estimating;
-                    return false;
+                    return EmptyPan::NOT;
                 }
             }
         } else {
@@ -219,7 +245,11 @@ impl<E: ScaleEstimator> Scale<E> {
         // Decided once per sample and kept for `reading` (which asks again for `final`);
         // asked only where it decides something: a reading that could be stable or final.
         self.moving = (held || self.final_bound_met) && self.in_motion();
-        let stable = held && !self.moving && (self.raw_armed || !self.after_slow_change);
+        // At rest for the noise metering: the block and trend tests' doubts aside, which
+        // a pan at rest on this chain raised much of the time from 2.5 s on (`EmptyPan`).
+        let at_rest =
+            held && !self.residual_motion.moving && (self.raw_armed || !self.after_slow_change);
+        let stable = at_rest && !self.moving;
         let empty = estimate_g.abs() <= self.config.empty_band_g;
         self.state = if empty && stable {
             ScaleState::Empty
@@ -237,7 +267,10 @@ impl<E: ScaleEstimator> Scale<E> {
         } else {
             self.settled_samples = 0;
         }
-        empty && stable
+        EmptyPan {
+            stable: empty && stable,
+            at_rest: empty && at_rest,
+        }
     }
 
     /// The largest gross mass the scale shows: Max + 9 e (OIML R 76 4.4.3).

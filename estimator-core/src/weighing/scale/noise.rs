@@ -5,14 +5,15 @@
 //! [`ScaleConfig::consistency_check`](super::ScaleConfig::consistency_check).
 //!
 //! - **Metering.** A [`crate::NoiseMeter`] at the estimator's `D` is fed the centred raw
-//!   counts of every sample on which the reading is empty and stable *and* the run has been
-//!   settled for `raw_arm_samples` (the raw test's arming: the pan still rings before, and a
+//!   counts of every sample on which the pan is empty and at rest (`decide::EmptyPan`:
+//!   vouched for and held in its band, the residuals showing no motion; not asked to be
+//!   shown stable) *and* the run has been settled for `raw_arm_samples` (the raw test's arming: the pan still rings before, and a
 //!   window metered on a ringing empty pan reads far above the noise). It meters windows of
 //!   `noise_window_samples` (the window on which the check's allowance was measured,
 //!   `crate::estimators::consistency`). A complete window becomes the reference once the
-//!   pan stayed empty and stable for `noise_guard_samples` more (a load landing in the
-//!   window's last samples is detected by then; one landing earlier already ends
-//!   stability, and so the window); anything else (a load change, a flag, a sample lost,
+//!   pan stayed empty and at rest for `noise_guard_samples` more (a load landing in the
+//!   window's last samples is detected by then; one landing earlier already moves the
+//!   reading out of its band or alarms, and so ends the window); anything else (a load change, a flag, a sample lost,
 //!   leaving the empty band) drops the window in progress and one waiting out its guard.
 //! - **When it is live.** The estimator takes the latest accepted metering at each restart
 //!   (a load change, the run after a fault, a recalibration: the reference is in counts,
@@ -70,7 +71,7 @@ impl NoiseMetering {
         }
     }
 
-    /// The pan was not empty and stable on this sample (or the run restarted): the window
+    /// The pan was not empty and at rest on this sample (or the run restarted): the window
     /// in progress and one waiting out the guard are dropped; the reference is kept.
     pub(super) fn interrupt(&mut self) {
         if !self.active {
@@ -84,7 +85,7 @@ impl NoiseMetering {
         self.pending_samples = 0;
     }
 
-    /// One centred sample of the empty, stable pan.
+    /// One centred sample of the empty pan at rest.
     pub(super) fn push(&mut self, centred_counts: f32, guard_samples: u32) {
         let Some(meter) = self.meter.as_mut() else {
             return;
@@ -138,8 +139,9 @@ impl<E: ScaleEstimator> Scale<E> {
         self.noise.reference = None;
     }
 
-    /// Meter the empty, stable pan's centred sample once it has settled, in a run of its
-    /// own: a load change restarts the run and drops the window in progress (`restart`).
+    /// Meter the empty pan's centred sample, at rest (`decide::EmptyPan`) and settled, in a
+    /// run of its own: a load change restarts the run and drops the window in progress
+    /// (`restart`).
     pub(super) fn meter_empty_pan(&mut self, centred_counts: i32) {
         if self.settled_samples >= self.config.raw_arm_samples && self.config.consistency_check {
             self.noise
