@@ -195,14 +195,10 @@ fn line_of(reading: &ScaleReading, low_g: f64, high_g: f64, tare_g: f64, steady_
     let settled =
         matches!(reading.state, ScaleState::Stable | ScaleState::Empty) || reading.is_final;
     Line {
-        mass_g: reading.mass_g.map(f64::from).ok_or(match reading.state {
-            ScaleState::Invalid(ScaleFault::Estimator(InvalidReason::ModelMismatch)) => {
-                NoMass::ModelMismatch
-            }
-            ScaleState::Invalid(ScaleFault::Estimator(_)) => NoMass::EstimatorFlag,
-            ScaleState::Invalid(_) => NoMass::Fault,
-            _ => NoMass::NotYet,
-        }),
+        mass_g: reading
+            .mass_g
+            .map(f64::from)
+            .ok_or_else(|| no_mass_why(&reading.state)),
         settled,
         u_g: reading.uncertainty_g.map(f64::from),
         truth: Truth {
@@ -211,6 +207,18 @@ fn line_of(reading: &ScaleReading, low_g: f64, high_g: f64, tare_g: f64, steady_
             gross_low_g: low_g,
         },
         steady_s,
+    }
+}
+
+/// Why a line in `state` shows no mass.
+fn no_mass_why(state: &ScaleState) -> NoMass {
+    match state {
+        ScaleState::Invalid(ScaleFault::Estimator(InvalidReason::ModelMismatch)) => {
+            NoMass::ModelMismatch
+        }
+        ScaleState::Invalid(ScaleFault::Estimator(_)) => NoMass::EstimatorFlag,
+        ScaleState::Invalid(_) => NoMass::Fault,
+        _ => NoMass::NotYet,
     }
 }
 

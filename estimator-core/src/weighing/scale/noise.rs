@@ -7,14 +7,15 @@
 //! - **Metering.** A [`crate::NoiseMeter`] at the estimator's `D` is fed the centred raw
 //!   counts of every sample on which the pan is empty and at rest (`decide::EmptyPan`:
 //!   vouched for and held in its band, the residuals showing no motion; not asked to be
-//!   shown stable) *and* the run has been settled for `raw_arm_samples` (the raw test's arming: the pan still rings before, and a
-//!   window metered on a ringing empty pan reads far above the noise). It meters windows of
-//!   `noise_window_samples` (the window on which the check's allowance was measured,
-//!   `crate::estimators::consistency`). A complete window becomes the reference once the
-//!   pan stayed empty and at rest for `noise_guard_samples` more (a load landing in the
-//!   window's last samples is detected by then; one landing earlier already moves the
-//!   reading out of its band or alarms, and so ends the window); anything else (a load change, a flag, a sample lost,
-//!   leaving the empty band) drops the window in progress and one waiting out its guard.
+//!   shown stable) *and* the run has been settled for `raw_arm_samples` (the raw test's
+//!   arming: the pan still rings before, and a window metered on a ringing empty pan reads
+//!   far above the noise). It meters windows of `noise_window_samples` (the window on which
+//!   the check's allowance was measured, `crate::estimators::consistency`). A complete
+//!   window becomes the reference once the pan stayed empty and at rest for
+//!   `noise_guard_samples` more (a load landing in the window's last samples is detected by
+//!   then; one landing earlier already moves the reading out of its band or alarms, and so
+//!   ends the window); anything else (a load change, a flag, a sample lost, leaving the
+//!   empty band) drops the window in progress and one waiting out its guard.
 //! - **When it is live.** The estimator takes the latest accepted metering at each restart
 //!   (a load change, the run after a fault, a recalibration: the reference is in counts,
 //!   which a new gain does not change): every run that starts after the first settled empty

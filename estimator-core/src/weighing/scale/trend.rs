@@ -46,31 +46,29 @@
 //! (1.5 s; `Scale::reading`), as it is not stable: a fresh fit of a ramp's few hundred
 //! samples was final 0.09 g off with u = 0.004 g.
 //!
-//! The window also vouches for a settled reading (`distance_bound_g`, asked at each
-//! block by `Scale::push_trend`): the tests above alarm only once a slope is *seen*, and on
-//! a noisy pan a trickle begun within a few seconds of a change is not seen before the
+//! The window also vouches for a settled reading (`distance_bound_g`, asked at each block
+//! by `Scale::push_trend`): the tests above alarm only once a slope is *seen*, and on a
+//! noisy pan a trickle begun within a few seconds of a change is not seen before the
 //! reading lags it by the permissible error (`host-sim torture --runs 10000 --seed 1`: 91
-//! of 138 silent wrong readings were such trickles). So a reading is shown stable, empty
-//! or final only while the load, by the lines through the window's last 100, 32 and
-//! 16 blocks (their values at the end of the next block: the newest block's mean is the
-//! load half a block before it ended, and the bound vouches until the next block ends),
-//! lies within the permissible error of it, each line's value's standard error included
-//! [`PROOF_T`] times (Student's t for the line's own degrees of freedom at z = 2.5): its
-//! absence of motion shown, not merely not
-//! refuted. The short lines see a ramp begun in a long flat window, which
-//! the window's own line barely follows. With fewer than [`TREND_PROOF_MIN_BLOCKS`]
-//! blocks, or while a step is judged (the first 1.8 s after a fast change), the window
-//! says nothing and the other tests decide alone: a trickle can have built only a small
-//! lag in a run that young. The price is paid on noisy pans: where the 16 newest blocks'
-//! line is uncertain by about the permissible error (a block of 0.1 s scattering by
-//! 0.04 g against 0.05 g permissible), small loads are not shown stable at all. The
-//! 10,000-run torture went from 138 to 92 silent wrong readings (trickles 91 to 47) and
-//! showed 6.1 % fewer readout lines settled, with two standard errors; with the 8 newest
-//! blocks' line too, 79 and 10.7 % fewer. Two standard errors are a one-sided 3.3 % per
-//! look on the line of 16 blocks (14 degrees of freedom), and a trickle is looked at once
-//! a block: Student's t at z = 2.5, from 10 blocks, took it to 73 (trickles 29) and 4.0 %
-//! fewer lines settled again; from 5 blocks to 68 and 6.2 % fewer; a flat three to 65 and
-//! 6.6 % fewer.
+//! of 138 silent wrong readings were such trickles). So a reading is shown stable, empty or
+//! final only while the load, by the lines through the window's last 100, 32 and 16 blocks
+//! (their values at the end of the next block: the newest block's mean is the load half a
+//! block before it ended, and the bound vouches until the next block ends), lies within the
+//! permissible error of it, each line's value's standard error included [`PROOF_T`] times
+//! (Student's t for the line's own degrees of freedom at z = 2.5): its absence of motion
+//! shown, not merely not refuted. The short lines see a ramp begun in a long flat window,
+//! which the window's own line barely follows. With fewer than [`TREND_PROOF_MIN_BLOCKS`]
+//! blocks, or while a step is judged (the first 1.8 s after a fast change), the window says
+//! nothing and the other tests decide alone: a trickle can have built only a small lag in a
+//! run that young. The price is paid on noisy pans: where the 16 newest blocks' line is
+//! uncertain by about the permissible error (a block of 0.1 s scattering by 0.04 g against
+//! 0.05 g permissible), small loads are not shown stable at all. The 10,000-run torture
+//! went from 138 to 92 silent wrong readings (trickles 91 to 47) and showed 6.1 % fewer
+//! readout lines settled, with two standard errors; with the 8 newest blocks' line too, 79
+//! and 10.7 % fewer. Two standard errors are a one-sided 3.3 % per look on the line of 16
+//! blocks (14 degrees of freedom), and a trickle is looked at once a block: Student's t at
+//! z = 2.5, from 10 blocks, took it to 73 (trickles 29) and 4.0 % fewer lines settled
+//! again; from 5 blocks to 68 and 6.2 % fewer; a flat three to 65 and 6.6 % fewer.
 //!
 //! Cost: 100 means and their times (800 B); four passes over the window per 0.1 s block
 //! (the slope, and the three lines that vouch).
