@@ -96,6 +96,8 @@ pub struct Wrong {
     pub state: &'static str,
     /// How long the loads on the pan had spanned no more than the permissible error, s.
     pub steady_s: f64,
+    /// What the data held against the reading at its line ([`Evidence::z`]).
+    pub evidence_z: f64,
 }
 
 /// Counts for one act.
@@ -143,6 +145,10 @@ pub struct Tallies {
     /// Below 0.1 s the load moved within the last two readout lines: a change the data
     /// had barely begun to show; from 2 s on it had been at rest while the fit was wrong.
     pub silent_by_steady: [u64; 4],
+    /// Silent wrong readings by the evidence against them in the data at their line
+    /// ([`Evidence::z`]): below 2, 2–3, 3–5, 5 and more. Below 2 no test could have seen
+    /// the change in time, however good: it had not yet shown in the data above its noise.
+    pub silent_by_evidence: [u64; 4],
     /// Lines with no mass by why ([`NoMass`], in its order).
     pub no_mass_by_why: [u64; 4],
     /// Runs tallied.
@@ -154,13 +160,15 @@ impl Tallies {
     pub const KEEP: usize = 8;
 
     /// Count one judged readout line of `act`; `at` is (run, time in s, state shown), kept
-    /// with a silent wrong reading.
+    /// with a silent wrong reading, and `evidence` what the data held against the mass
+    /// shown (asked only of a silent wrong reading: see [`Evidence::z`]).
     pub fn judge(
         &mut self,
         act: ActKind,
         line: Line,
         limits: &Limits,
         at: (u64, f64, &'static str),
+        evidence: impl FnOnce(f64) -> f64,
     ) {
         let tally = self.by_act.entry(act).or_default();
         tally.readings += 1;
@@ -194,6 +202,8 @@ impl Tallies {
             tally.silent_wrong += 1;
             self.silent_by_z[z_bucket(error, line.u_g)] += 1;
             self.silent_by_steady[steady_bucket(line.steady_s)] += 1;
+            let evidence_z = evidence(shown_g);
+            self.silent_by_evidence[z_of(evidence_z)] += 1;
             let (run, time_s, state) = at;
             self.worst.push(Wrong {
                 run,
@@ -205,6 +215,7 @@ impl Tallies {
                 permissible_g: permissible,
                 state,
                 steady_s: line.steady_s,
+                evidence_z,
             });
             self.keep_worst();
         }
@@ -220,6 +231,13 @@ impl Tallies {
             *mine += theirs;
         }
         for (mine, theirs) in self.silent_by_steady.iter_mut().zip(other.silent_by_steady) {
+            *mine += theirs;
+        }
+        for (mine, theirs) in self
+            .silent_by_evidence
+            .iter_mut()
+            .zip(other.silent_by_evidence)
+        {
             *mine += theirs;
         }
         for (mine, theirs) in self.no_mass_by_why.iter_mut().zip(other.no_mass_by_why) {
@@ -255,19 +273,73 @@ impl Tallies {
 /// The bucket of [`Tallies::silent_by_z`] for an error of `error_g` shown with `u_g`.
 fn z_bucket(error_g: f64, u_g: Option<f64>) -> usize {
     match u_g {
-        Some(u) if u > 0.0 => {
-            let z = error_g / u;
-            if z < 2.0 {
-                0
-            } else if z < 3.0 {
-                1
-            } else if z < 5.0 {
-                2
-            } else {
-                3
-            }
-        }
+        Some(u) if u > 0.0 => z_of(error_g / u),
         _ => 4,
+    }
+}
+
+/// The bucket of a z: below 2, 2–3, 3–5, 5 and more (NaN: the last).
+fn z_of(z: f64) -> usize {
+    if z < 2.0 {
+        0
+    } else if z < 3.0 {
+        1
+    } else if z < 5.0 {
+        2
+    } else {
+        3
+    }
+}
+
+/// The true net loads of the last samples, for what a silent wrong reading's data held
+/// against it: whether the change it missed had shown in the samples at all by its line.
+#[derive(Clone, Debug)]
+pub struct Evidence {
+    loads_g: Vec<f64>,
+    next: usize,
+    filled: usize,
+    noise_g: f64,
+}
+
+impl Evidence {
+    /// The last `samples` true loads, against white noise of `noise_g` per sample.
+    pub fn new(samples: usize, noise_g: f64) -> Self {
+        Self {
+            loads_g: vec![0.0; samples.max(1)],
+            next: 0,
+            filled: 0,
+            noise_g,
+        }
+    }
+
+    /// The true net load of the next sample, g.
+    pub fn push(&mut self, load_g: f64) {
+        self.loads_g[self.next] = load_g;
+        self.next = (self.next + 1) % self.loads_g.len();
+        self.filled = (self.filled + 1).min(self.loads_g.len());
+    }
+
+    /// The largest z of the true loads' mean against `shown_g`, over every stretch of the
+    /// kept samples that ends now and lies wholly on the side of the reading the load is
+    /// on now: `|Σ (load − shown)| / (σ √n)` for the last n samples, σ the white noise
+    /// alone. What a test that knew the change's moment and had no other noise to allow
+    /// for (no vibration, no mains, no ringing, no lag of the sensor) would have held
+    /// against the reading: an upper bound on any real test's evidence. (Loads on the other
+    /// side, such as the load before a removal, say the pan held something else then, not
+    /// that the reading is wrong now.)
+    pub fn z(&self, shown_g: f64) -> f64 {
+        let len = self.loads_g.len();
+        let mut sum = 0.0;
+        let mut best: f64 = 0.0;
+        for back in 0..self.filled {
+            let deviation = self.loads_g[(self.next + len - 1 - back) % len] - shown_g;
+            if deviation * sum < 0.0 {
+                break;
+            }
+            sum += deviation;
+            best = best.max(sum.abs() / (self.noise_g * ((back + 1) as f64).sqrt()));
+        }
+        best
     }
 }
 
@@ -398,10 +470,11 @@ mod tests {
             steady_s: 10.0,
         };
         let at = (0, 0.0, "stable");
-        tallies.judge(ActKind::Overload, line, &limits(), at);
+        tallies.judge(ActKind::Overload, line, &limits(), at, |_| 9.0);
         assert_eq!(tallies.worst[0].error_g, f64::INFINITY);
         assert_eq!(tallies.total().silent_wrong, 1);
         assert_eq!(tallies.silent_by_steady, [0, 0, 0, 1]);
+        assert_eq!(tallies.silent_by_evidence, [0, 0, 0, 1]);
         // The same line flagged (estimating) is a flagged wrong reading, not a silent one.
         let mut tallies = Tallies::default();
         tallies.judge(
@@ -412,6 +485,7 @@ mod tests {
             },
             &limits(),
             at,
+            |_| unreachable!("asked only of a silent wrong reading"),
         );
         assert_eq!(tallies.total().silent_wrong, 0);
         assert_eq!(tallies.total().flagged_wrong, 1);
@@ -436,6 +510,7 @@ mod tests {
             line(NoMass::ModelMismatch),
             &limits(),
             (0, 0.0, "invalid"),
+            |_| unreachable!(),
         );
         let mut other = Tallies::default();
         other.judge(
@@ -443,12 +518,14 @@ mod tests {
             line(NoMass::Fault),
             &limits(),
             (1, 0.0, "invalid"),
+            |_| unreachable!(),
         );
         other.judge(
             ActKind::Overload,
             line(NoMass::ModelMismatch),
             &limits(),
             (1, 0.1, "invalid"),
+            |_| unreachable!(),
         );
         tallies.merge(other);
         assert_eq!(tallies.no_mass_by_why, [0, 2, 0, 1]);
@@ -491,6 +568,29 @@ mod tests {
                 assert!(steady.steady_s(sample + 1, rate_hz) <= 0.14, "{sample}");
             }
         }
+    }
+
+    #[test]
+    fn the_evidence_is_the_best_stretch_ending_now() {
+        // 1 g of white noise; 100 samples at 10 g, then 16 at 10.5 g: against 10 g shown,
+        // the last 16 samples give 0.5 × 16 / (1 × 4) = 2, and longer stretches less.
+        let mut evidence = Evidence::new(1000, 1.0);
+        for sample in 0..116 {
+            evidence.push(if sample < 100 { 10.0 } else { 10.5 });
+        }
+        assert!((evidence.z(10.0) - 2.0).abs() < 1e-12);
+        // Shown at 10.25 g, the load is above it now: the stretch stops where it was
+        // below, however much that held (0.25 × 16 / 4 = 1).
+        assert!((evidence.z(10.25) - 1.0).abs() < 1e-12);
+        // Shown at 10.5 g the newest samples are no evidence at all, and the stretch
+        // goes on over them into the 100 below it: 50 / √116.
+        assert!((evidence.z(10.5) - 50.0 / 116f64.sqrt()).abs() < 1e-12);
+        // Only the kept samples count: the last 16 of a ring of 16.
+        let mut short = Evidence::new(16, 1.0);
+        for sample in 0..116 {
+            short.push(if sample < 100 { 10.0 } else { 10.5 });
+        }
+        assert!((short.z(10.5) - 0.0).abs() < 1e-12);
     }
 
     #[test]

@@ -163,6 +163,12 @@ pub fn report(settings: &TortureSettings, tallies: &Tallies) -> String {
             "silent wrong readings by how long the load had stayed within the permissible error: below 0.1 s: {}, 0.1-0.5 s: {}, 0.5-2 s: {}, 2 s and more: {}",
             steady[0], steady[1], steady[2], steady[3]
         );
+        let evidence = &tallies.silent_by_evidence;
+        let _ = writeln!(
+            out,
+            "silent wrong readings by the evidence against them in the data by their line (z of the true load's mean over the best stretch ending there, white noise alone): below 2: {}, 2-3: {}, 3-5: {}, 5 and above: {}",
+            evidence[0], evidence[1], evidence[2], evidence[3]
+        );
     }
     if !tallies.worst.is_empty() {
         let _ = writeln!(out);
@@ -179,7 +185,7 @@ pub fn report(settings: &TortureSettings, tallies: &Tallies) -> String {
             };
             let _ = writeln!(
                 out,
-                "  run {} at {:.2} s ({}): shown {:.3} g {}, truth {:.3}..{:.3} g, {error}, permissible ±{:.3} g, load steady {:.2} s",
+                "  run {} at {:.2} s ({}): shown {:.3} g {}, truth {:.3}..{:.3} g, {error}, permissible ±{:.3} g, load steady {:.2} s, evidence z {:.1}",
                 w.run,
                 w.time_s,
                 w.act.name(),
@@ -188,7 +194,8 @@ pub fn report(settings: &TortureSettings, tallies: &Tallies) -> String {
                 w.truth_g.0,
                 w.truth_g.1,
                 w.permissible_g,
-                w.steady_s
+                w.steady_s,
+                w.evidence_z
             );
         }
     }

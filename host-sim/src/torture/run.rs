@@ -7,7 +7,7 @@ use estimator_core::weighing::{
 };
 use estimator_core::InvalidReason;
 
-use super::judge::{Limits, Line, NoMass, Steadiness, Tallies, Truth};
+use super::judge::{Evidence, Limits, Line, NoMass, Steadiness, Tallies, Truth};
 use super::plan::PLAN_EVENTS;
 use super::plan::{ActKind, Instrument, Plan, PlannedCommand};
 use super::TortureSettings;
@@ -19,6 +19,9 @@ use std::io::Write as _;
 
 /// Raw samples per readout line (the firmware's 20 Hz readout at 4 kHz).
 const READOUT_SAMPLES: u64 = crate::replay::READOUT_SAMPLES as u64;
+
+/// The samples a silent wrong reading's evidence is sought in (4 s; `Evidence`).
+const EVIDENCE_SAMPLES: usize = 16_000;
 
 /// A command refused is pressed again each readout for this many samples (2 s).
 const RETRY_SAMPLES: u64 = 8000;
@@ -81,6 +84,12 @@ pub fn run_plan(
     let mut low = f64::INFINITY;
     let mut high = f64::NEG_INFINITY;
     let mut steadiness = Steadiness::new(0.0);
+    // A sample is the mean of the converter's conversions, each with the white noise.
+    let oversampling = f64::from(chain.adc.oversampling.max(1));
+    let mut evidence = Evidence::new(
+        EVIDENCE_SAMPLES,
+        plan.disturbances.white_noise_g / oversampling.sqrt(),
+    );
     for sample in 0..plan.samples {
         while next_act < plan.acts.len() && plan.acts[next_act].0 <= sample {
             act = plan.acts[next_act].1;
@@ -99,6 +108,7 @@ pub fn run_plan(
         let reading = scale.push(raw);
         let gross = adc.load_g();
         steadiness.push(sample, gross, limits);
+        evidence.push(gross);
         low = low.min(gross);
         high = high.max(gross);
         if (sample + 1) % READOUT_SAMPLES != 0 {
@@ -108,7 +118,10 @@ pub fn run_plan(
         let steady_s = steadiness.steady_s(sample + 1, rate_hz);
         let line = line_of(&reading, low, high, tare_truth_g, steady_s);
         let time_s = (sample + 1) as f64 / rate_hz;
-        tallies.judge(act, line, limits, (run, time_s, state_name(&reading.state)));
+        let at = (run, time_s, state_name(&reading.state));
+        tallies.judge(act, line, limits, at, |shown_g| {
+            evidence.z(shown_g + tare_truth_g)
+        });
         if let Some(out) = trace.as_mut() {
             let _ = writeln!(
                 out,
