@@ -143,16 +143,32 @@ fn runs_that_showed_wrong_readings_settled_show_none() {
 /// stop 39: runs 8655 and 8359, trickles shown stable 0.05-0.06 g behind, and 2072 and
 /// 7177, a small addition and a removal by hand seen a line late (the trend window's lines
 /// were taken to the newest block's mean, half a block old, though they vouch until the
-/// next block ends; now to that end).
+/// next block ends; now to that end). At stop 41: runs 1490 and 1718, trickles begun
+/// within a second of a removal on floors vibrating by 0.2-0.3 g, shown empty or stable
+/// 0.05-0.06 g behind: the trend window skipped the 1.5 s after the removal whatever the
+/// ringing and said nothing meanwhile; it now takes blocks once a block rings no more
+/// than the pan did on settled runs. (Run 4912 of stop 31: below.)
 #[test]
 fn runs_of_ten_thousand_that_showed_wrong_readings_settled_show_none() {
     show_none_settled_wrong(
         "10000",
         &[
-            "4700", "5430", "9291", "2371", "4912", "9139", "8837", "5119", "2486", "2062", "9054",
-            "3581", "9324", "8655", "8359", "2072", "7177",
+            "4700", "5430", "9291", "2371", "9139", "8837", "5119", "2486", "2062", "9054", "3581",
+            "9324", "8655", "8359", "2072", "7177", "1490", "1718",
         ],
     );
+}
+
+/// Run 4912 of `host-sim torture --runs 10000 --seed 1` (above, stop 31: a trickle on a
+/// pan with 0.94 g of raw noise shown `Empty` behind it): since stop 41 it shows nothing
+/// settled at all, the trend window taking blocks soon after each change and its young
+/// lines unable to vouch for 0.05 g on that pan. Nothing wrong may be shown; that it
+/// shows nothing is the price, said here rather than hidden by leaving the run out.
+#[test]
+fn a_trickle_on_the_noisiest_pan_shows_nothing_wrong() {
+    let (report, ok) = torture(&["--runs", "10000", "--seed", "1", "--only-run", "4912"]);
+    let (wrong, _, runs) = last_line(&report);
+    assert!(ok && wrong == 0 && runs == 1, "{report}");
 }
 
 /// Run 7156 of `host-sim torture --runs 10000 --seed 1`: a load at rest on a floor

@@ -173,6 +173,12 @@ pub struct Scale<E> {
     /// The ringing measured in the last whole block of this run (`change::raw_alarm`), g:
     /// the tests allow the smaller of it and `ringing_g`; `+∞` until a block is measured.
     ringing_measured_g: f32,
+    /// The pan's own ringing: `ringing_measured_g` of the whole blocks of runs whose raw
+    /// tests are armed (settled for `raw_arm_samples`), averaged over about the last ten
+    /// and kept across runs, g (a vibrating floor's; `+∞` until measured). The trend
+    /// window's skip after a fast change ends once a block rings no more than this
+    /// (`change::ringing_over`).
+    pan_ringing_g: f32,
     /// The ringing the raw tests allowed for at the last sample they judged, g: the smaller
     /// of `ringing_g` and `ringing_measured_g`.
     ringing_allowed_g: f32,
@@ -330,6 +336,7 @@ impl<E: ScaleEstimator> Scale<E> {
             ringing_envelope: 1.0,
             ringing_g: 0.0,
             ringing_measured_g: f32::INFINITY,
+            pan_ringing_g: f32::INFINITY,
             ringing_allowed_g: 0.0,
             ringing_sum_samples: ringing_sum_samples(&config),
             block_alarmed: false,

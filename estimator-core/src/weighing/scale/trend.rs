@@ -24,8 +24,10 @@
 //! the false alarms a noisy pan gives the CUSUM tests), and the evidence for it should too.
 //! A change the CUSUM tests saw may be a real step, though, and a step in the window would
 //! look like a slope until it left. So at such an alarm the window marks the moment, skips
-//! the blocks while a fresh load may ring (`raw_arm_samples` after a fast change; none
-//! after a slow one), and once [`STEP_DECISION_BLOCKS`] blocks follow, asks whether they
+//! the blocks while a fresh load may ring (`raw_arm_samples` after a fast change, or
+//! until a whole block rings no more than the pan's own ringing on settled runs or moves
+//! a block mean by a tenth of the permissible error: `Scale::ringing_over`; none after a
+//! slow one), and once [`STEP_DECISION_BLOCKS`] blocks follow, asks whether they
 //! lie where the line through the blocks before predicts: if not (by four standard
 //! errors), it was a step, and the blocks before it are dropped. The trend test's own
 //! alarms are judged the same way (without skipping): a trickle that has stopped leaves
@@ -58,17 +60,18 @@
 //! (Student's t for the line's own degrees of freedom at z = 2.5): its absence of motion
 //! shown, not merely not refuted. The short lines see a ramp begun in a long flat window,
 //! which the window's own line barely follows. With fewer than [`TREND_PROOF_MIN_BLOCKS`]
-//! blocks, or while a step is judged (the first 1.8 s after a fast change), the window says
-//! nothing and the other tests decide alone: a trickle can have built only a small lag in a
-//! run that young. The price is paid on noisy pans: where the 16 newest blocks' line is
-//! uncertain by about the permissible error (a block of 0.1 s scattering by 0.04 g against
-//! 0.05 g permissible), small loads are not shown stable at all. The 10,000-run torture
-//! went from 138 to 92 silent wrong readings (trickles 91 to 47) and showed 6.1 % fewer
-//! readout lines settled, with two standard errors; with the 8 newest blocks' line too, 79
-//! and 10.7 % fewer. Two standard errors are a one-sided 3.3 % per look on the line of 16
-//! blocks (14 degrees of freedom), and a trickle is looked at once a block: Student's t at
-//! z = 2.5, from 10 blocks, took it to 73 (trickles 29) and 4.0 % fewer lines settled
-//! again; from 5 blocks to 68 and 6.2 % fewer; a flat three to 65 and 6.6 % fewer.
+//! blocks, or while a step is judged (up to the first 1.8 s after a fast change), the
+//! window says nothing and the other tests decide alone: a trickle can have built only a
+//! small lag in a run that young. The price is paid on noisy pans: where the 16 newest
+//! blocks' line is uncertain by about the permissible error (a block of 0.1 s scattering by
+//! 0.04 g against 0.05 g permissible), small loads are not shown stable at all. The
+//! 10,000-run torture went from 138 to 92 silent wrong readings (trickles 91 to 47) and
+//! showed 6.1 % fewer readout lines settled, with two standard errors; with the 8 newest
+//! blocks' line too, 79 and 10.7 % fewer. Two standard errors are a one-sided 3.3 % per
+//! look on the line of 16 blocks (14 degrees of freedom), and a trickle is looked at once a
+//! block: Student's t at z = 2.5, from 10 blocks, took it to 73 (trickles 29) and 4.0 %
+//! fewer lines settled again; from 5 blocks to 68 and 6.2 % fewer; a flat three to 65 and
+//! 6.6 % fewer.
 //!
 //! Cost: 100 means and their times (800 B); four passes over the window per 0.1 s block
 //! (the slope, and the three lines that vouch).
@@ -219,6 +222,16 @@ impl Trend {
     /// Start over (a fault, a new calibration): nothing before it counts.
     pub(super) fn clear(&mut self, skip_blocks: u32) {
         *self = Self::new(skip_blocks);
+    }
+
+    /// Blocks are being skipped while a fresh load may ring.
+    pub(super) fn skipping(&self) -> bool {
+        self.skip_blocks > 0
+    }
+
+    /// The ringing is measured to be over: take the blocks from the next on.
+    pub(super) fn end_skip(&mut self) {
+        self.skip_blocks = 0;
     }
 
     /// A CUSUM test alarmed: mark the moment, skip `skip_blocks` (a fresh load rings),
