@@ -227,22 +227,10 @@ impl Tallies {
             self.by_act.entry(*act).or_default().add(tally);
         }
         self.worst.extend(other.worst);
-        for (mine, theirs) in self.silent_by_z.iter_mut().zip(other.silent_by_z) {
-            *mine += theirs;
-        }
-        for (mine, theirs) in self.silent_by_steady.iter_mut().zip(other.silent_by_steady) {
-            *mine += theirs;
-        }
-        for (mine, theirs) in self
-            .silent_by_evidence
-            .iter_mut()
-            .zip(other.silent_by_evidence)
-        {
-            *mine += theirs;
-        }
-        for (mine, theirs) in self.no_mass_by_why.iter_mut().zip(other.no_mass_by_why) {
-            *mine += theirs;
-        }
+        add_counts(&mut self.silent_by_z, &other.silent_by_z);
+        add_counts(&mut self.silent_by_steady, &other.silent_by_steady);
+        add_counts(&mut self.silent_by_evidence, &other.silent_by_evidence);
+        add_counts(&mut self.no_mass_by_why, &other.no_mass_by_why);
         self.keep_worst();
         self.runs += other.runs;
     }
@@ -267,6 +255,13 @@ impl Tallies {
             total.add(tally);
         }
         total
+    }
+}
+
+/// Add the counts of `theirs` to `mine`, bucket by bucket.
+fn add_counts(mine: &mut [u64], theirs: &[u64]) {
+    for (mine, theirs) in mine.iter_mut().zip(theirs) {
+        *mine += theirs;
     }
 }
 

@@ -30,7 +30,8 @@ const RINGING_MEASURED_MARGIN: f32 = 1.5;
 
 /// The trend window stops skipping the blocks after a fast change once the ringing
 /// measured in a whole block moves a block mean by less than this part of the permissible
-/// error of the load shown, or is no more than the pan's own (`Scale::ringing_over`).
+/// error of the load shown, or is within [`PAN_RINGING_MARGIN`] of the pan's own
+/// (`Scale::ringing_over`).
 const RINGING_IN_TREND_OF_PERMISSIBLE: f32 = 0.1;
 
 /// How far above the pan's own ringing (its average) a block may ring and still be the
@@ -465,15 +466,15 @@ mod tests {
     }
 
     /// The trend window skips the blocks after a fast change while the fresh load may ring,
-    /// and, since it says nothing then, a trickle begun soon after (on a noisy or
-    /// vibrating pan) could be shown settled a permissible error behind it (`host-sim
-    /// torture --runs 10000 --seed 1`, runs 1490 and 1718: 3 of its 13 silent wrong
-    /// readings). The skip now ends once a whole block rings no more than the pan's own
-    /// vibration: before the whole 1.5 s after 20 g taken off this cell (25 Hz, ζ = 0.03;
-    /// about 1.3 s on a still floor, whose pan rings by a few hundredths of a gram in the
-    /// measure, 0.9-1 s on a floor vibrating by 0.2 g), yet not at once, while it rings. A
-    /// pan that never settled on its load (a floor vibrating by 0.4 g under this cell) has
-    /// no measure of its own ringing, and waits the whole 1.5 s as before.
+    /// and, since it says nothing then, a trickle begun soon after (on a noisy or vibrating
+    /// pan) could be shown settled a permissible error behind it (`host-sim torture --runs
+    /// 10000 --seed 1`, runs 1490 and 1718: 3 of its 13 silent wrong readings). The skip
+    /// now ends once a whole block rings no more than 1.5 times the pan's own vibration
+    /// (`PAN_RINGING_MARGIN`): before the whole 1.5 s after 20 g taken off this cell (25
+    /// Hz, ζ = 0.03; about 1.3 s on a still floor, whose pan rings by a few hundredths of a
+    /// gram in the measure, 0.9-1 s on a floor vibrating by 0.2 g), yet not at once, while
+    /// it rings. A pan that never settled on its load (a floor vibrating by 0.4 g under
+    /// this cell) has no measure of its own ringing, and waits the whole 1.5 s as before.
     #[test]
     fn the_trend_window_takes_blocks_once_the_ringing_is_over() {
         for (seed, rms_g) in [(1, 0.0), (2, 0.0), (3, 0.2), (4, 0.2)] {

@@ -25,9 +25,9 @@
 //! A change the CUSUM tests saw may be a real step, though, and a step in the window would
 //! look like a slope until it left. So at such an alarm the window marks the moment, skips
 //! the blocks while a fresh load may ring (`raw_arm_samples` after a fast change, or
-//! until a whole block rings no more than the pan's own ringing on settled runs or moves
-//! a block mean by a tenth of the permissible error: `Scale::ringing_over`; none after a
-//! slow one), and once [`STEP_DECISION_BLOCKS`] blocks follow, asks whether they
+//! until a whole block rings no more than 1.5 times the pan's own ringing on settled runs
+//! or moves a block mean by a tenth of the permissible error: `Scale::ringing_over`; none
+//! after a slow one), and once [`STEP_DECISION_BLOCKS`] blocks follow, asks whether they
 //! lie where the line through the blocks before predicts: if not (by four standard
 //! errors), it was a step, and the blocks before it are dropped. The trend test's own
 //! alarms are judged the same way (without skipping): a trickle that has stopped leaves
