@@ -147,14 +147,18 @@ fn runs_that_showed_wrong_readings_settled_show_none() {
 /// within a second of a removal on floors vibrating by 0.2-0.3 g, shown empty or stable
 /// 0.05-0.06 g behind: the trend window skipped the 1.5 s after the removal whatever the
 /// ringing and said nothing meanwhile; it now takes blocks once a block rings no more
-/// than the pan did on settled runs. (Run 4912 of stop 31: below.)
+/// than the pan did on settled runs. At stop 42: run 4278, a 0.43 g load lifted off by
+/// hand at 2 g/s on a pan with 0.17 g of raw noise, shown stable 0.06 g above the truth:
+/// the noise alone measured as a ringing of 0.1 g, which the block in progress's test
+/// allowed (it now takes the ringing net of the noise's own scatter). (Run 4912 of stop
+/// 31: below.)
 #[test]
 fn runs_of_ten_thousand_that_showed_wrong_readings_settled_show_none() {
     show_none_settled_wrong(
         "10000",
         &[
             "4700", "5430", "9291", "2371", "9139", "8837", "5119", "2486", "2062", "9054", "3581",
-            "9324", "8655", "8359", "2072", "7177", "1490", "1718",
+            "9324", "8655", "8359", "2072", "7177", "1490", "1718", "4278",
         ],
     );
 }

@@ -173,6 +173,10 @@ pub struct Scale<E> {
     /// The ringing measured in the last whole block of this run (`change::raw_alarm`), g:
     /// the tests allow the smaller of it and `ringing_g`; `+∞` until a block is measured.
     ringing_measured_g: f32,
+    /// `ringing_measured_g` less what the noise alone scatters into its measure
+    /// (`change::RINGING_NOISE_Z`), g: the block in progress's test allows the smaller of
+    /// it and `ringing_allowed_g`; `+∞` until a block is measured.
+    ringing_net_g: f32,
     /// The pan's own ringing: `ringing_measured_g` of the whole blocks of runs whose raw
     /// tests are armed (settled for `raw_arm_samples`), averaged over about the last ten
     /// and kept across runs, g (a vibrating floor's; `+∞` until measured). The trend
@@ -336,6 +340,7 @@ impl<E: ScaleEstimator> Scale<E> {
             ringing_envelope: 1.0,
             ringing_g: 0.0,
             ringing_measured_g: f32::INFINITY,
+            ringing_net_g: f32::INFINITY,
             pan_ringing_g: f32::INFINITY,
             ringing_allowed_g: 0.0,
             ringing_sum_samples: ringing_sum_samples(&config),
@@ -543,6 +548,7 @@ impl<E: ScaleEstimator> Scale<E> {
         self.previous_gross_g = self.last_shown_gross_g;
         self.ringing_envelope = 1.0;
         self.ringing_measured_g = f32::INFINITY;
+        self.ringing_net_g = f32::INFINITY;
         self.ringing_allowed_g = self.ringing_g;
         self.final_bound_met = false;
         self.uncertain_samples = 0;
