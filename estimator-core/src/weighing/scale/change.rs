@@ -530,6 +530,28 @@ mod tests {
         assert_eq!(after, most + 1);
     }
 
+    /// The pan's own ringing is measured in counts and kept in grams: a recalibration that
+    /// raises the counts per gram by 10 % leaves the same vibration 10 % fewer grams (it
+    /// used to keep the old gain's grams until the average had forgotten them).
+    #[test]
+    fn a_recalibration_rescales_the_pans_own_ringing() {
+        let (mut scale, _) = scene(0.14);
+        let mut cell = Cell::seeded(0.14, 3);
+        cell.vibration = (0.2, 20.0, 2.0);
+        cell.load_g = 100.0;
+        run(&mut scale, &mut cell, 24_000);
+        let before_g = scale.pan_ringing_g;
+        assert!(before_g > 0.05 && before_g < 1.0, "{before_g} g");
+        let mut calibration = super::super::test_scene::calibration();
+        calibration.counts_per_gram *= 1.1;
+        scale.recalibrate(calibration);
+        let after_g = scale.pan_ringing_g;
+        assert!(
+            (after_g * 1.1 / before_g - 1.0).abs() < 1e-5,
+            "{before_g} -> {after_g} g"
+        );
+    }
+
     /// Blocks of 400 samples with `noise_g` of white noise per sample and a ringing of
     /// `ringing_g` at 25 Hz: how many of `blocks` measure a ringing above `above_g`, and how
     /// many net of the noise (`block_ringing_g`).

@@ -179,9 +179,9 @@ pub struct Scale<E> {
     ringing_net_g: f32,
     /// The pan's own ringing: `ringing_measured_g` of the whole blocks of runs whose raw
     /// tests are armed (settled for `raw_arm_samples`), averaged over about the last ten
-    /// and kept across runs, g (a vibrating floor's; `+∞` until measured). The trend
-    /// window's skip after a fast change ends once a block rings no more than this
-    /// (`change::ringing_over`).
+    /// and kept across runs (rescaled to a new gain at a recalibration), g (a vibrating
+    /// floor's; `+∞` until measured). The trend window's skip after a fast change ends once
+    /// a block rings no more than this (`change::ringing_over`).
     pan_ringing_g: f32,
     /// The ringing the raw tests allowed for at the last sample they judged, g: the smaller
     /// of `ringing_g` and `ringing_measured_g`.
@@ -398,7 +398,14 @@ impl<E: ScaleEstimator> Scale<E> {
         } else {
             1.0
         };
-        self.grams_per_count = 1.0 / self.counts_per_gram;
+        let grams_per_count = 1.0 / self.counts_per_gram;
+        // The pan's own ringing was measured in counts and kept in grams of the old gain:
+        // the same ringing in grams of the new (by comparison: a NaN ratio leaves it be).
+        let ratio = grams_per_count / self.grams_per_count;
+        if ratio > 0.0 && ratio < f32::INFINITY {
+            self.pan_ringing_g *= ratio;
+        }
+        self.grams_per_count = grams_per_count;
         // `u` in grams is worked out again at the next reading (`Scale::push`).
         self.fit_u_counts = Some(f32::NAN);
         self.zero_counts = if calibration.zero_counts.is_finite() {
