@@ -98,6 +98,9 @@ pub struct Wrong {
     pub steady_s: f64,
     /// What the data held against the reading at its line ([`Evidence::z`]).
     pub evidence_z: f64,
+    /// How finely one readout line's data resolved the permissible error on that pan
+    /// ([`Line::resolution`]); `None` before the pan had shown its scatter.
+    pub resolution: Option<f64>,
 }
 
 /// Counts for one act.
@@ -149,6 +152,14 @@ pub struct Tallies {
     /// ([`Evidence::z`]): below 2, 2–3, 3–5, 5 and more. Below 2 no test could have seen
     /// the change in time, however good: it had not yet shown in the data above its noise.
     pub silent_by_evidence: [u64; 4],
+    /// Lines shown settled by how finely one readout line's data resolved their
+    /// permissible error ([`Line::resolution`]): below 2, 2–3, 3–5, 5 and more, not yet
+    /// known. Below 2 a change of the permissible error that began a whole line before
+    /// stood out of one line's mean by less than two of its standard errors: what a test
+    /// could see of it in time, at best, and what showing no such line would cost.
+    pub shown_by_resolution: [u64; 5],
+    /// Silent wrong readings in the same buckets.
+    pub silent_by_resolution: [u64; 5],
     /// Lines with no mass by why ([`NoMass`], in its order).
     pub no_mass_by_why: [u64; 4],
     /// Runs tallied.
@@ -192,6 +203,8 @@ impl Tallies {
             return;
         }
         tally.shown += 1;
+        let resolution = line.resolution(permissible);
+        self.shown_by_resolution[resolution_bucket(resolution)] += 1;
         let ratio = if over_capacity {
             f64::INFINITY
         } else {
@@ -204,6 +217,7 @@ impl Tallies {
             self.silent_by_steady[steady_bucket(line.steady_s)] += 1;
             let evidence_z = evidence(shown_g);
             self.silent_by_evidence[z_of(evidence_z)] += 1;
+            self.silent_by_resolution[resolution_bucket(resolution)] += 1;
             let (run, time_s, state) = at;
             self.worst.push(Wrong {
                 run,
@@ -216,6 +230,7 @@ impl Tallies {
                 state,
                 steady_s: line.steady_s,
                 evidence_z,
+                resolution,
             });
             self.keep_worst();
         }
@@ -230,6 +245,8 @@ impl Tallies {
         add_counts(&mut self.silent_by_z, &other.silent_by_z);
         add_counts(&mut self.silent_by_steady, &other.silent_by_steady);
         add_counts(&mut self.silent_by_evidence, &other.silent_by_evidence);
+        add_counts(&mut self.shown_by_resolution, &other.shown_by_resolution);
+        add_counts(&mut self.silent_by_resolution, &other.silent_by_resolution);
         add_counts(&mut self.no_mass_by_why, &other.no_mass_by_why);
         self.keep_worst();
         self.runs += other.runs;
@@ -283,6 +300,53 @@ fn z_of(z: f64) -> usize {
         2
     } else {
         3
+    }
+}
+
+/// The bucket of [`Tallies::shown_by_resolution`]: a z's ([`z_of`]), or the last when
+/// not yet known.
+fn resolution_bucket(resolution: Option<f64>) -> usize {
+    resolution.map_or(4, z_of)
+}
+
+/// How long the load must have stood still before a line counts towards the pan's
+/// [`LineScatter`], s: a heavy drop's ringing has died down by then (the reference cell's
+/// decays by e⁻⁷ in 1.5 s).
+pub const SCATTER_STILL_S: f64 = 1.5;
+
+/// Pairs of still lines before [`LineScatter::sigma_g`] answers: one second of them.
+const SCATTER_MIN_PAIRS: u64 = 20;
+
+/// The scatter of one readout line's mean on a pan: how finely the data of a single line
+/// resolve the load. From consecutive still lines (no change of the load in either, steady
+/// for [`SCATTER_STILL_S`], every sample good), half their differences' mean square is one
+/// line mean's variance, whatever the noise is made of (the converter's, the amplifier's
+/// through the filter, floor vibration, mains) as far as it reaches a line's mean.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct LineScatter {
+    previous_g: Option<f64>,
+    sum_g2: f64,
+    pairs: u64,
+}
+
+impl LineScatter {
+    /// One line's mean of the raw samples in grams, or `None` for a line that is not still
+    /// (it ends the pair it would have formed).
+    pub fn push(&mut self, mean_g: Option<f64>) {
+        if let (Some(now), Some(before)) = (mean_g, self.previous_g) {
+            let difference = now - before;
+            if difference.is_finite() {
+                self.sum_g2 += difference * difference;
+                self.pairs += 1;
+            }
+        }
+        self.previous_g = mean_g;
+    }
+
+    /// The standard deviation of one line's mean, g, once [`SCATTER_MIN_PAIRS`] pairs of
+    /// still lines have been seen.
+    pub fn sigma_g(&self) -> Option<f64> {
+        (self.pairs >= SCATTER_MIN_PAIRS).then(|| (0.5 * self.sum_g2 / self.pairs as f64).sqrt())
     }
 }
 
@@ -379,6 +443,19 @@ pub struct Line {
     /// How long the loads on the pan had spanned no more than the permissible error, s (see
     /// [`Steadiness`]).
     pub steady_s: f64,
+    /// The scatter of one line's mean on the pan so far ([`LineScatter::sigma_g`]), g.
+    pub line_sigma_g: Option<f64>,
+}
+
+impl Line {
+    /// How many standard errors of one line's mean the permissible error `permissible_g`
+    /// is on this pan: how far a change of that size, begun a whole line before, stood out
+    /// of the data of the line; `None` before the pan's scatter is known.
+    pub fn resolution(&self, permissible_g: f64) -> Option<f64> {
+        self.line_sigma_g
+            .filter(|&sigma| sigma > 0.0)
+            .map(|sigma| permissible_g / sigma)
+    }
 }
 
 /// How long the load on the pan has stayed put: the clock starts over whenever the loads
@@ -463,6 +540,7 @@ mod tests {
                 gross_low_g: 660.0,
             },
             steady_s: 10.0,
+            line_sigma_g: Some(0.1),
         };
         let at = (0, 0.0, "stable");
         tallies.judge(ActKind::Overload, line, &limits(), at, |_| 9.0);
@@ -470,6 +548,10 @@ mod tests {
         assert_eq!(tallies.total().silent_wrong, 1);
         assert_eq!(tallies.silent_by_steady, [0, 0, 0, 1]);
         assert_eq!(tallies.silent_by_evidence, [0, 0, 0, 1]);
+        // 1.5 e (0.15 g) over one line's scatter of 0.1 g.
+        assert_eq!(tallies.worst[0].resolution, Some(1.5000000000000002));
+        assert_eq!(tallies.silent_by_resolution, [1, 0, 0, 0, 0]);
+        assert_eq!(tallies.shown_by_resolution, [1, 0, 0, 0, 0]);
         // The same line flagged (estimating) is a flagged wrong reading, not a silent one.
         let mut tallies = Tallies::default();
         tallies.judge(
@@ -498,6 +580,7 @@ mod tests {
                 gross_low_g: 100.0,
             },
             steady_s: 1.0,
+            line_sigma_g: None,
         };
         let mut tallies = Tallies::default();
         tallies.judge(
@@ -525,6 +608,59 @@ mod tests {
         tallies.merge(other);
         assert_eq!(tallies.no_mass_by_why, [0, 2, 0, 1]);
         assert_eq!(tallies.total().no_mass, 3);
+    }
+
+    #[test]
+    fn settled_lines_are_counted_by_how_finely_one_line_resolves_their_error() {
+        let line = |sigma: Option<f64>| Line {
+            mass_g: Ok(10.0),
+            settled: true,
+            u_g: Some(0.01),
+            truth: Truth {
+                low_g: 10.0,
+                high_g: 10.0,
+                gross_low_g: 10.0,
+            },
+            steady_s: 5.0,
+            line_sigma_g: sigma,
+        };
+        let mut tallies = Tallies::default();
+        // 0.05 g permissible at 10 g: over 0.03, 0.02, 0.0125, 0.005 g and unknown.
+        for sigma in [Some(0.03), Some(0.02), Some(0.0125), Some(0.005), None] {
+            tallies.judge(
+                ActKind::Hand,
+                line(sigma),
+                &limits(),
+                (0, 0.0, "stable"),
+                |_| unreachable!("not wrong"),
+            );
+        }
+        assert_eq!(tallies.shown_by_resolution, [1, 1, 1, 1, 1]);
+        assert_eq!(tallies.silent_by_resolution, [0; 5]);
+        // A scatter of zero (a pan without noise) says nothing it could resolve.
+        assert_eq!(line(Some(0.0)).resolution(0.05), None);
+    }
+
+    #[test]
+    fn the_line_scatter_is_one_line_means_standard_deviation() {
+        let mut rng = crate::simulated::Gaussian::new(7);
+        let mut scatter = LineScatter::default();
+        // Still lines about 100 g with a scatter of 0.03 g, pairs broken now and then by
+        // a line that is not still (which must not pair across the break: a step of 5 g
+        // there would dominate the sum).
+        for line in 0..4000 {
+            if line % 50 == 0 {
+                scatter.push(None);
+                continue;
+            }
+            let level = if line < 2000 { 100.0 } else { 105.0 };
+            scatter.push(Some(level + 0.03 * rng.standard()));
+            if line == 15 {
+                assert_eq!(scatter.sigma_g(), None, "fewer than 20 pairs");
+            }
+        }
+        let sigma = scatter.sigma_g().unwrap();
+        assert!((sigma - 0.03).abs() < 0.0015, "{sigma}");
     }
 
     #[test]

@@ -149,6 +149,22 @@ pub fn report(settings: &TortureSettings, tallies: &Tallies) -> String {
         "lines with no mass by why: no estimate yet: {}, model mismatch (the consistency check): {}, other estimator flags: {}, faults (overload, saturated or lost samples): {}",
         why[0], why[1], why[2], why[3]
     );
+    let resolution = &tallies.shown_by_resolution;
+    let share = |count: u64| 100.0 * count as f64 / total.shown.max(1) as f64;
+    let _ = writeln!(
+        out,
+        "lines shown settled by how finely one readout line resolves their permissible error on that pan (the error over the scatter of one line's mean, from the pan's still lines so far; what a test could at best see of a change of that size a line after it began): below 2: {} ({:.1} %), 2-3: {} ({:.1} %), 3-5: {} ({:.1} %), 5 and above: {} ({:.1} %), not yet known: {} ({:.1} %)",
+        resolution[0],
+        share(resolution[0]),
+        resolution[1],
+        share(resolution[1]),
+        resolution[2],
+        share(resolution[2]),
+        resolution[3],
+        share(resolution[3]),
+        resolution[4],
+        share(resolution[4])
+    );
     if total.silent_wrong > 0 {
         let z = &tallies.silent_by_z;
         let _ = writeln!(out);
@@ -169,6 +185,12 @@ pub fn report(settings: &TortureSettings, tallies: &Tallies) -> String {
             "silent wrong readings by the evidence against them in the data by their line (z of the true load's mean over the best stretch ending there, white noise alone): below 2: {}, 2-3: {}, 3-5: {}, 5 and above: {}",
             evidence[0], evidence[1], evidence[2], evidence[3]
         );
+        let resolution = &tallies.silent_by_resolution;
+        let _ = writeln!(
+            out,
+            "silent wrong readings by how finely one readout line resolved their permissible error (as above): below 2: {}, 2-3: {}, 3-5: {}, 5 and above: {}, not yet known: {}",
+            resolution[0], resolution[1], resolution[2], resolution[3], resolution[4]
+        );
     }
     if !tallies.worst.is_empty() {
         let _ = writeln!(out);
@@ -185,7 +207,7 @@ pub fn report(settings: &TortureSettings, tallies: &Tallies) -> String {
             };
             let _ = writeln!(
                 out,
-                "  run {} at {:.2} s ({}): shown {:.3} g {}, truth {:.3}..{:.3} g, {error}, permissible ±{:.3} g, load steady {:.2} s, evidence z {:.1}",
+                "  run {} at {:.2} s ({}): shown {:.3} g {}, truth {:.3}..{:.3} g, {error}, permissible ±{:.3} g, load steady {:.2} s, evidence z {:.1}, one line resolves {}",
                 w.run,
                 w.time_s,
                 w.act.name(),
@@ -195,7 +217,9 @@ pub fn report(settings: &TortureSettings, tallies: &Tallies) -> String {
                 w.truth_g.1,
                 w.permissible_g,
                 w.steady_s,
-                w.evidence_z
+                w.evidence_z,
+                w.resolution
+                    .map_or("not yet known".to_string(), |r| format!("{r:.1}"))
             );
         }
     }

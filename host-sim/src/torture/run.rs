@@ -7,7 +7,9 @@ use estimator_core::weighing::{
 };
 use estimator_core::InvalidReason;
 
-use super::judge::{Evidence, Limits, Line, NoMass, Steadiness, Tallies, Truth};
+use super::judge::{
+    Evidence, Limits, Line, LineScatter, NoMass, Steadiness, Tallies, Truth, SCATTER_STILL_S,
+};
 use super::plan::PLAN_EVENTS;
 use super::plan::{ActKind, Instrument, Plan, PlannedCommand};
 use super::TortureSettings;
@@ -90,6 +92,12 @@ pub fn run_plan(
         EVIDENCE_SAMPLES,
         plan.disturbances.white_noise_g / oversampling.sqrt(),
     );
+    // The raw samples of the line in progress, for the pan's line scatter: their sum in
+    // counts, and whether every one was good.
+    let mut scatter = LineScatter::default();
+    let counts_per_gram = adc.counts_per_gram();
+    let mut line_counts = 0.0;
+    let mut line_good = true;
     for sample in 0..plan.samples {
         while next_act < plan.acts.len() && plan.acts[next_act].0 <= sample {
             act = plan.acts[next_act].1;
@@ -105,6 +113,10 @@ pub fn run_plan(
         } else {
             read
         };
+        match raw {
+            RawSample::Counts(counts) => line_counts += f64::from(counts),
+            RawSample::Saturated | RawSample::Lost => line_good = false,
+        }
         let reading = scale.push(raw);
         let gross = adc.load_g();
         steadiness.push(sample, gross, limits);
@@ -116,7 +128,13 @@ pub fn run_plan(
         }
         let now = (sample + 1) as u32;
         let steady_s = steadiness.steady_s(sample + 1, rate_hz);
-        let line = line_of(&reading, low, high, tare_truth_g, steady_s);
+        // A still line: the load the same throughout it, and long enough that a drop's
+        // ringing is over (the zero cancels in the differences).
+        let still = line_good && low == high && steady_s >= SCATTER_STILL_S;
+        scatter.push(still.then(|| line_counts / READOUT_SAMPLES as f64 / counts_per_gram));
+        (line_counts, line_good) = (0.0, true);
+        let mut line = line_of(&reading, low, high, tare_truth_g, steady_s);
+        line.line_sigma_g = scatter.sigma_g();
         let time_s = (sample + 1) as f64 / rate_hz;
         let at = (run, time_s, state_name(&reading.state));
         tallies.judge(act, line, limits, at, |shown_g| {
@@ -220,6 +238,7 @@ fn line_of(reading: &ScaleReading, low_g: f64, high_g: f64, tare_g: f64, steady_
             gross_low_g: low_g,
         },
         steady_s,
+        line_sigma_g: None,
     }
 }
 
