@@ -149,29 +149,17 @@ pub fn report(settings: &TortureSettings, tallies: &Tallies) -> String {
         "lines with no mass by why: no estimate yet: {}, model mismatch (the consistency check): {}, other estimator flags: {}, faults (overload, saturated or lost samples): {}",
         why[0], why[1], why[2], why[3]
     );
-    let resolution = &tallies.shown_by_resolution;
-    let share = |count: u64| 100.0 * count as f64 / total.shown.max(1) as f64;
     let _ = writeln!(
         out,
-        "lines shown settled by how finely one readout line resolves their permissible error on that pan (the error over the scatter of one line's mean, from the pan's still lines so far; what a test could at best see of a change of that size a line after it began): below 2: {} ({:.1} %), 2-3: {} ({:.1} %), 3-5: {} ({:.1} %), 5 and above: {} ({:.1} %), not yet known: {} ({:.1} %)",
-        resolution[0],
-        share(resolution[0]),
-        resolution[1],
-        share(resolution[1]),
-        resolution[2],
-        share(resolution[2]),
-        resolution[3],
-        share(resolution[3]),
-        resolution[4],
-        share(resolution[4])
+        "lines shown settled by how finely one readout line resolves their permissible error on that pan (the error over the scatter of one line's mean, from the pan's still lines so far; what a test could at best see of a change of that size a line after it began): {}",
+        z_buckets(&tallies.shown_by_resolution, &["not yet known"], Some(total.shown))
     );
     if total.silent_wrong > 0 {
-        let z = &tallies.silent_by_z;
         let _ = writeln!(out);
         let _ = writeln!(
             out,
-            "silent wrong readings by error / u shown: below 2: {}, 2-3: {}, 3-5: {}, 5 and above: {}, no u: {}",
-            z[0], z[1], z[2], z[3], z[4]
+            "silent wrong readings by error / u shown: {}",
+            z_buckets(&tallies.silent_by_z, &["no u"], None)
         );
         let steady = &tallies.silent_by_steady;
         let _ = writeln!(
@@ -179,17 +167,15 @@ pub fn report(settings: &TortureSettings, tallies: &Tallies) -> String {
             "silent wrong readings by how long the load had stayed within the permissible error: below 0.1 s: {}, 0.1-0.5 s: {}, 0.5-2 s: {}, 2 s and more: {}",
             steady[0], steady[1], steady[2], steady[3]
         );
-        let evidence = &tallies.silent_by_evidence;
         let _ = writeln!(
             out,
-            "silent wrong readings by the evidence against them in the data by their line (z of the true load's mean over the best stretch ending there, white noise alone): below 2: {}, 2-3: {}, 3-5: {}, 5 and above: {}",
-            evidence[0], evidence[1], evidence[2], evidence[3]
+            "silent wrong readings by the evidence against them in the data by their line (z of the true load's mean over the best stretch ending there, white noise alone): {}",
+            z_buckets(&tallies.silent_by_evidence, &[], None)
         );
-        let resolution = &tallies.silent_by_resolution;
         let _ = writeln!(
             out,
-            "silent wrong readings by how finely one readout line resolved their permissible error (as above): below 2: {}, 2-3: {}, 3-5: {}, 5 and above: {}, not yet known: {}",
-            resolution[0], resolution[1], resolution[2], resolution[3], resolution[4]
+            "silent wrong readings by how finely one readout line resolved their permissible error (as above): {}",
+            z_buckets(&tallies.silent_by_resolution, &["not yet known"], None)
         );
     }
     if !tallies.worst.is_empty() {
@@ -230,4 +216,23 @@ pub fn report(settings: &TortureSettings, tallies: &Tallies) -> String {
         total.silent_wrong, total.shown, tallies.runs
     );
     out
+}
+
+/// Counts in the buckets of a z (`judge`'s: below 2, 2-3, 3-5, 5 and above), then in those
+/// `extra` names, as `label: count` joined by commas; with `share_of`, each count's share
+/// of it as well.
+fn z_buckets(counts: &[u64], extra: &[&str], share_of: Option<u64>) -> String {
+    const Z: [&str; 4] = ["below 2", "2-3", "3-5", "5 and above"];
+    Z.iter()
+        .chain(extra)
+        .zip(counts)
+        .map(|(label, &count)| match share_of {
+            Some(total) => format!(
+                "{label}: {count} ({:.1} %)",
+                100.0 * count as f64 / total.max(1) as f64
+            ),
+            None => format!("{label}: {count}"),
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
 }

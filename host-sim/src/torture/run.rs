@@ -133,8 +133,14 @@ pub fn run_plan(
         let still = line_good && low == high && steady_s >= SCATTER_STILL_S;
         scatter.push(still.then(|| line_counts / READOUT_SAMPLES as f64 / counts_per_gram));
         (line_counts, line_good) = (0.0, true);
-        let mut line = line_of(&reading, low, high, tare_truth_g, steady_s);
-        line.line_sigma_g = scatter.sigma_g();
+        let line = line_of(
+            &reading,
+            low,
+            high,
+            tare_truth_g,
+            steady_s,
+            scatter.sigma_g(),
+        );
         let time_s = (sample + 1) as f64 / rate_hz;
         let at = (run, time_s, state_name(&reading.state));
         tallies.judge(act, line, limits, at, |shown_g| {
@@ -221,8 +227,16 @@ pub(crate) fn tare_truth(tare_g: f64, low_g: f64, high_g: f64, now_g: f64) -> f6
 }
 
 /// The readout line as judged: the reading the sample gave (what the firmware prints), the
-/// truth of the period since the last line, and how long the load has been steady.
-fn line_of(reading: &ScaleReading, low_g: f64, high_g: f64, tare_g: f64, steady_s: f64) -> Line {
+/// truth of the period since the last line, how long the load has been steady, and the
+/// pan's line scatter so far.
+fn line_of(
+    reading: &ScaleReading,
+    low_g: f64,
+    high_g: f64,
+    tare_g: f64,
+    steady_s: f64,
+    line_sigma_g: Option<f64>,
+) -> Line {
     let settled =
         matches!(reading.state, ScaleState::Stable | ScaleState::Empty) || reading.is_final;
     Line {
@@ -238,7 +252,7 @@ fn line_of(reading: &ScaleReading, low_g: f64, high_g: f64, tare_g: f64, steady_
             gross_low_g: low_g,
         },
         steady_s,
-        line_sigma_g: None,
+        line_sigma_g,
     }
 }
 
