@@ -47,8 +47,11 @@ pub use estimators::covariance::CovarianceStepEstimator;
 pub use estimators::iv::{
     max_instrument_delay, IvConfig, IvStepEstimator, DEFAULT_MIN_IDENTIFIABILITY,
 };
+pub use estimators::metered_noise::MIN_METERED_BLOCKS;
 pub use estimators::model::{InitialState, ModelBank, ModelConfig, ModelEstimator, SensorModel};
-pub use estimators::noise_meter::NoiseMeter;
+pub use estimators::noise_meter::{
+    Autocovariance, AutocovarianceMeter, AutocovarianceSums, NoiseMeter, AUTOCOVARIANCE_LAGS,
+};
 pub use estimators::ramp::{RampConfig, RampEstimator};
 pub use estimators::step::{StepConfig, StepEstimator, MAX_DECIMATION, MIN_IDENTIFIABILITY};
 pub use numerics::real::Real;

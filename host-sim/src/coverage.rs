@@ -7,14 +7,22 @@
 //! whatever the caller gives (by default the firmware's, in f32). A cell's Monte Carlo
 //! band: with `m` readings and a true coverage of 95 %, the observed fraction lies within
 //! `±1.96·sqrt(0.95·0.05/m)` of it 95 % of the time (±1.4 % at 1,000 runs).
+//!
+//! The noise runs before the landing ([`PRE_ROLL_S`] of empty pan): a scene's vibration
+//! started with the load made its first 100 ms unlike any real pan's (the shipped `u` then
+//! looked over-cautious where, with the vibration already running, it was over-confident).
+//! A step method's `u` rests on the empty pan's noise colour, metered over [`METERING_S`]
+//! of the same scene's empty pan (another seed), as the scale meters its pan whenever it
+//! is empty and at rest (`estimator_core::AutocovarianceMeter`).
 
 mod chart;
 pub mod final_time;
 
 use std::io::Write;
 
-use anyhow::Result;
+use anyhow::{anyhow, Result};
 use estimator_core::sensor::AdcSource;
+use estimator_core::{Autocovariance, AutocovarianceMeter};
 use rayon::prelude::*;
 
 use crate::method::{BuildContext, Method};
@@ -22,6 +30,11 @@ use crate::scene::Scene;
 use crate::simulated::run_seed;
 
 pub use chart::write as write_chart;
+
+/// Seconds of empty pan, its noise running, before the studied load lands.
+pub const PRE_ROLL_S: f64 = 2.0;
+/// Seconds of the empty pan a step method's noise colour is metered over.
+pub const METERING_S: f64 = 60.0;
 
 /// Readout times of the table, milliseconds after the onset.
 pub const TIMES_MS: [u32; 7] = [25, 50, 75, 100, 150, 200, 400];
@@ -90,13 +103,37 @@ pub fn study(
     seed: u64,
     snrs_db: &[f64],
 ) -> Result<Vec<SnrRow>> {
+    study_with(scene, method, runs, seed, snrs_db, Colour::Metered)
+}
+
+/// Whether a step method's `u` rests on the empty pan's metered noise colour.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Colour {
+    /// Metered over [`METERING_S`] of the scene's empty pan (what the scale does).
+    Metered,
+    /// Not metered: the `u` from the residuals alone (a scale before its first
+    /// [`estimator_core::MIN_METERED_BLOCKS`] block means of empty pan).
+    Unknown,
+}
+
+/// [`study`] with or without the metered noise colour.
+pub fn study_with(
+    scene: &str,
+    method: &Method,
+    runs: u64,
+    seed: u64,
+    snrs_db: &[f64],
+    colour: Colour,
+) -> Result<Vec<SnrRow>> {
     let base = Scene::load(scene)?;
     let (_, mass_g, _) = base.studied_step();
     snrs_db
         .iter()
         .map(|&snr_db| {
-            let scene = base.with_snr_db(snr_db);
-            let context = BuildContext::new(scene.chain, scene.chain.counts_per_gram());
+            let (scene, mut context) = prepared(&base, snr_db, method, seed)?;
+            if colour == Colour::Unknown {
+                context = context.with_noise_autocovariance(None);
+            }
             method.build(&context)?;
             let per_run: Vec<Result<Vec<Cell>>> = (0..runs)
                 .into_par_iter()
@@ -151,6 +188,52 @@ fn one_run(
         }
     }
     Ok(cells)
+}
+
+/// `base` at `snr_db`, delayed by [`PRE_ROLL_S`], and the build context of its runs: a
+/// step method's with the empty pan's colour ([`metered_autocovariance`]).
+pub fn prepared(
+    base: &Scene,
+    snr_db: f64,
+    method: &Method,
+    seed: u64,
+) -> Result<(Scene, BuildContext)> {
+    let scene = base
+        .with_snr_db(snr_db)
+        .delayed(PRE_ROLL_S)
+        .ok_or_else(|| anyhow!("the scene cannot be delayed by {PRE_ROLL_S} s"))?;
+    let metered = match method {
+        Method::Step(setup) => metered_autocovariance(&scene, setup.decimation, seed),
+        _ => None,
+    };
+    let context = BuildContext::new(scene.chain, scene.chain.counts_per_gram())
+        .with_noise_autocovariance(metered);
+    Ok((scene, context))
+}
+
+/// The block means' autocovariance of `scene`'s empty pan at block length `decimation`,
+/// metered over [`METERING_S`] after a second of settling (seed apart from the runs').
+pub fn metered_autocovariance(
+    scene: &Scene,
+    decimation: u16,
+    seed: u64,
+) -> Option<Autocovariance<f64>> {
+    let empty = scene.empty_pan(METERING_S + 1.0);
+    let mut adc = empty.adc(run_seed(seed, u64::MAX));
+    let mut meter = AutocovarianceMeter::<f64>::new(decimation).ok()?;
+    let zero = scene.chain.zero_code();
+    let rate_hz = 1.0 / scene.chain.conversion_period_s();
+    let settle = rate_hz.round() as usize;
+    for k in 0..empty.samples() {
+        match adc.read() {
+            Ok(code) if k >= settle => {
+                let _ = meter.push(f64::from(code) - zero);
+            }
+            Ok(_) => {}
+            Err(_) => meter.push_missing(),
+        }
+    }
+    meter.sums().autocovariance()
 }
 
 /// The sample index (1-based) of a readout `ms` after the onset.

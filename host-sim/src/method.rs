@@ -63,11 +63,11 @@ use anyhow::{anyhow, bail, Result};
 use estimator_core::sensor::LoadCellModel;
 use estimator_core::weighing::UNCERTAINTY_ORDERS;
 use estimator_core::{
-    max_instrument_delay, Baseline, BaselineConfig, BaselineMode, BiasCompensatedConfig,
-    BiasCompensatedStepEstimator, CovarianceStepEstimator, Estimator, InitialState, IvConfig,
-    IvStepEstimator, ModelBank, ModelConfig, NoiseMeter, NoiseReference, Prefilter, RampConfig,
-    RampEstimator, Reading, Real, SensorModel, ShaperKind, StepConfig, StepEstimator, Unfiltered,
-    MAX_DECIMATION,
+    max_instrument_delay, Autocovariance, Baseline, BaselineConfig, BaselineMode,
+    BiasCompensatedConfig, BiasCompensatedStepEstimator, CovarianceStepEstimator, Estimator,
+    InitialState, IvConfig, IvStepEstimator, ModelBank, ModelConfig, NoiseMeter, NoiseReference,
+    Prefilter, RampConfig, RampEstimator, Reading, Real, SensorModel, ShaperKind, StepConfig,
+    StepEstimator, Unfiltered, MAX_DECIMATION,
 };
 
 mod filtered;
@@ -244,6 +244,11 @@ pub enum Method {
     },
 }
 
+/// The lags over which a step method's `u` rests on the empty pan's metered noise colour
+/// (`estimator_core::StepEstimator`'s `C`): twice the lags it keeps, what the coverage study
+/// measured (16 at D = 24; 8 under-covered the rig's noise).
+pub const COLOUR_LAGS: usize = 2 * UNCERTAINTY_ORDERS;
+
 /// What building a method needs to know about the data.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BuildContext {
@@ -265,6 +270,10 @@ pub struct BuildContext {
     /// rails, where a drop's overshoot clips (`None`: no range, e.g. recorded data of
     /// unknown origin). The baselines take no range.
     pub valid_range: Option<(f64, f64)>,
+    /// The empty pan's block-mean autocovariance at the step method's `D` (raw units²,
+    /// [`estimator_core::AutocovarianceMeter`]): the step estimator's `u` rests on it
+    /// (`StepEstimator::set_noise_autocovariance`); `None`: not metered.
+    pub noise_autocovariance: Option<Autocovariance<f64>>,
 }
 
 impl BuildContext {
@@ -277,6 +286,15 @@ impl BuildContext {
             tare_differences: 0,
             noise_check: false,
             valid_range: None,
+            noise_autocovariance: None,
+        }
+    }
+
+    /// The same with the empty pan's block-mean autocovariance (see `noise_autocovariance`).
+    pub fn with_noise_autocovariance(self, autocovariance: Option<Autocovariance<f64>>) -> Self {
+        Self {
+            noise_autocovariance: autocovariance,
+            ..self
         }
     }
 
@@ -389,10 +407,21 @@ impl Method {
             |setup: &Setup, gain: T| referenced(ranged(step_config(setup, gain), context), context);
         let reference = context.noise_reference::<T>();
         Ok(match self {
-            Method::Step(setup) => Box::new(
-                StepEstimator::<T, CAPACITY, UNCERTAINTY_ORDERS>::new(step_config(setup, gain))
-                    .map_err(core)?,
-            ),
+            Method::Step(setup) => {
+                let mut estimator =
+                    StepEstimator::<T, CAPACITY, UNCERTAINTY_ORDERS, COLOUR_LAGS>::new(
+                        step_config(setup, gain),
+                    )
+                    .map_err(core)?;
+                let autocovariance = context.noise_autocovariance.map(|metered| Autocovariance {
+                    lags: metered.lags.map(T::from_f64),
+                    blocks: metered.blocks,
+                });
+                estimator
+                    .set_noise_autocovariance(autocovariance.as_ref())
+                    .map_err(core)?;
+                Box::new(estimator)
+            }
             Method::Covariance {
                 setup,
                 prior_information,

@@ -629,6 +629,33 @@ impl Scene {
         scene
     }
 
+    /// The same scene with `seconds` of empty pan before it (its noise running): a study
+    /// that starts at a load's landing then sees the noise as a pan that stood before it
+    /// does, not starting with the load. `None` if the script cannot be shifted.
+    pub fn delayed(&self, seconds: f64) -> Option<Self> {
+        let mut script = Script::new(self.script.end_s() + seconds);
+        for event in self.script.events() {
+            script
+                .push(LoadEvent {
+                    time_s: event.time_s + seconds,
+                    ..*event
+                })
+                .ok()?;
+        }
+        Some(Self {
+            script,
+            ..self.clone()
+        })
+    }
+
+    /// The empty pan with this scene's chain and noise, for `seconds`.
+    pub fn empty_pan(&self, seconds: f64) -> Self {
+        Self {
+            script: Script::new(seconds),
+            ..self.clone()
+        }
+    }
+
     /// A simulated ADC playing this scene.
     pub fn adc(&self, seed: u64) -> SimulatedAdc<MAX_EVENTS> {
         SimulatedAdc::new(self.chain, self.script, self.disturbances, seed)

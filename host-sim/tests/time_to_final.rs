@@ -51,6 +51,7 @@ fn the_speed_study_finds_the_final_readings_the_coverage_study_finds_and_none_be
         seed,
         &snrs,
         target_g,
+        host_sim::coverage::Colour::Unknown,
     )
     .unwrap();
     for (row, result) in rows.iter().zip(&speed.results) {

@@ -27,6 +27,7 @@ pub(crate) mod input;
 pub(crate) mod intake;
 pub(crate) mod iv;
 pub(crate) mod iv_uncertainty;
+pub(crate) mod metered_noise;
 pub(crate) mod model;
 pub(crate) mod noise_meter;
 pub(crate) mod ramp;

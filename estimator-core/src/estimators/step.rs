@@ -40,6 +40,8 @@
 use crate::estimators::consistency::{NoiseReference, ResidualCheck};
 use crate::estimators::input::{Decimator, DifferenceWindow};
 use crate::estimators::intake::{estimator_via_intake, intake_config_builders, Intake};
+use crate::estimators::metered_noise::MeteredNoise;
+use crate::estimators::noise_meter::Autocovariance;
 use crate::estimators::step_uncertainty::{Hankel, LagSums};
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
@@ -165,11 +167,13 @@ impl<T: Real> StepConfig<T> {
 /// The data-driven step-input estimator with capacity for orders up to `N`, stating the
 /// standard uncertainty of its level for orders up to `L` (the default 0 states none and
 /// keeps the bare estimator's size: the lag sums take `6L² + 3L` numbers, see
-/// `crate::estimators::step_uncertainty`).
+/// `crate::estimators::step_uncertainty`), and able to rest that `u` on the empty pan's
+/// metered noise colour over `C` lags (`2L` is what the coverage study measured; the
+/// default 0 keeps nothing and costs nothing: `crate::estimators::metered_noise`).
 ///
 /// Fixed size, no allocation, never panics on data. See the module docs for the method.
 #[derive(Clone, Debug)]
-pub struct StepEstimator<T: Real, const N: usize, const L: usize = 0> {
+pub struct StepEstimator<T: Real, const N: usize, const L: usize = 0, const C: usize = 0> {
     config: StepConfig<T>,
     intake: Intake<T>,
     differences: DifferenceWindow<T, N, 1>,
@@ -190,9 +194,12 @@ pub struct StepEstimator<T: Real, const N: usize, const L: usize = 0> {
     /// The rows' lagged cross-products and residual sum of squares, for the uncertainty
     /// (the residuals' autocovariance over every lag kept: `true`, see `step_uncertainty`).
     lags: LagSums<T, N, L, true, Hankel>,
+    /// The empty pan's metered noise colour and the rows' totals its `u` needs
+    /// (`crate::estimators::metered_noise`); kept over resets.
+    metered: MeteredNoise<T, L, C>,
 }
 
-impl<T: Real, const N: usize, const L: usize> StepEstimator<T, N, L> {
+impl<T: Real, const N: usize, const L: usize, const C: usize> StepEstimator<T, N, L, C> {
     /// A new estimator, or the reason the configuration is impossible.
     pub fn new(config: StepConfig<T>) -> Result<Self, ConfigError> {
         config.validate(N)?;
@@ -207,6 +214,7 @@ impl<T: Real, const N: usize, const L: usize> StepEstimator<T, N, L> {
             check: config.residual_check(),
             noise_gain: T::ONE,
             lags: LagSums::new(),
+            metered: MeteredNoise::new(),
         })
     }
 
@@ -243,6 +251,33 @@ impl<T: Real, const N: usize, const L: usize> StepEstimator<T, N, L> {
         self.lags
             .set_white_floor(variance / (config.gain * config.gain * block));
         Ok(())
+    }
+
+    /// Rest the level's `u` on the empty pan's metered noise colour: `autocovariance` of
+    /// block means of this estimator's `D` raw samples, raw units²
+    /// ([`crate::AutocovarianceMeter`]); `None` (the default) forgets it. From now on and
+    /// after every reset; see `crate::estimators::metered_noise` for what it changes. One
+    /// metered over fewer than [`crate::MIN_METERED_BLOCKS`] block means, or with `C = 0`,
+    /// is taken as none;
+    /// one that is no autocovariance ([`Autocovariance::validate`]) is refused and nothing
+    /// changes. Orders above `L`, and `L = 0`, state no `u` either way.
+    #[inline(never)]
+    pub fn set_noise_autocovariance(
+        &mut self,
+        autocovariance: Option<&Autocovariance<T>>,
+    ) -> Result<(), ConfigError> {
+        if let Some(autocovariance) = autocovariance {
+            autocovariance.validate()?;
+        }
+        let scale = T::ONE / self.config.gain;
+        self.metered.set(autocovariance, scale * scale);
+        Ok(())
+    }
+
+    /// Whether the level's `u` rests on a metered noise colour (one was set with enough block
+    /// means: [`Self::set_noise_autocovariance`]).
+    pub fn rests_on_metered_colour(&self) -> bool {
+        self.metered.is_known()
     }
 
     /// The raw samples' white noise the level's `u` rests on at least (raw units² per
@@ -287,6 +322,7 @@ impl<T: Real, const N: usize, const L: usize> StepEstimator<T, N, L> {
     fn fresh(&self) -> Result<Self, ConfigError> {
         let mut fresh = Self::new(self.config)?;
         fresh.lags.set_white_floor(self.lags.white_floor());
+        fresh.metered.keep_noise_of(&self.metered);
         Ok(fresh)
     }
 
@@ -304,6 +340,7 @@ impl<T: Real, const N: usize, const L: usize> StepEstimator<T, N, L> {
         let had_estimate = self.intake.estimate().is_some();
         let determined_before = self.rows as usize > n;
         let window = self.differences.window();
+        self.metered.push_row(&window, n, self.lags.rows());
         self.lags.push_row(&window, n);
         let folded = self.factor.fold(n, window, [T::ONE], x - self.offset);
         self.rows = self.rows.saturating_add(1);
@@ -363,6 +400,14 @@ impl<T: Real, const N: usize, const L: usize> StepEstimator<T, N, L> {
         }
         let (z, [z_level]) = self.factor.last_unknown_influence(n)?;
         let (lead, _) = self.factor.solution(n);
+        if self.metered.covers_run(self.lags.rows()) {
+            if let Some(stated) =
+                self.lags
+                    .metered_uncertainty(n, &z, z_level, &lead, &self.metered)
+            {
+                return Some(stated);
+            }
+        }
         // The larger of the empty pan's metered noise and the raw samples' white noise.
         let metered = self
             .check
@@ -395,4 +440,4 @@ pub(crate) fn recentre<T: Real, const N: usize, const E: usize>(
     origin
 }
 
-estimator_via_intake!(StepEstimator<T, const N, const L>);
+estimator_via_intake!(StepEstimator<T, const N, const L, const C>);

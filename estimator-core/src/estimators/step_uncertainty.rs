@@ -52,6 +52,8 @@
 //! Only the growing window (λ = 1): with forgetting the lag-0 term needs `ΦᵀW²Φ` as well,
 //! which is not kept, and the estimator states no `u`.
 
+use crate::estimators::metered_noise::{chi_square_mean_95, MeteredNoise, MIN_METERED_BLOCKS};
+use crate::estimators::noise_meter::AUTOCOVARIANCE_LAGS;
 use crate::numerics::real::Real;
 use crate::numerics::student::t_quantile;
 
@@ -418,6 +420,103 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
 impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: CrossForm<T, L>>
     LagSums<T, N, L, BEYOND_ORDER, F>
 {
+    /// The level's standard uncertainty from the empty pan's metered autocovariance
+    /// (`crate::estimators::metered_noise`) for `z`, `z_level` and `ℓ` (`lead[..n]`) as in
+    /// [`Self::uncertainty`]; `None` without a metering, below
+    /// [`MIN_DEGREES_OF_FREEDOM`], or for an equation error without power.
+    #[inline(never)]
+    pub(crate) fn metered_uncertainty<const C: usize>(
+        &self,
+        n: usize,
+        z: &[T; N],
+        z_level: T,
+        lead: &[T; N],
+        metered: &MeteredNoise<T, L, C>,
+    ) -> Option<(T, u32)> {
+        if !Self::covers(n) || L == 0 || !metered.covers_run(self.rows) {
+            return None;
+        }
+        let degrees = self.rows.checked_sub(n as u32 + 1)?;
+        if degrees < MIN_DEGREES_OF_FREEDOM {
+            return None;
+        }
+        let model = NoiseModel::<T, L>::first_differences(lead, n);
+        let h = |m: usize| model.at(n, m);
+        // ρ(m) = Σ_a h_a·h_{a+m}, m = 0..=n (ρ(n) = h_0·h_n apart).
+        let mut rho = [T::ZERO; L];
+        for (m, value) in rho[..n].iter_mut().enumerate() {
+            for a in 0..=n - m {
+                *value += h(a) * h(a + m);
+            }
+        }
+        let rho_n = h(0) * h(n);
+        let rho_at = |m: usize| if m < n { rho[m] } else { rho_n };
+        let gamma = metered.lags_array();
+        // γ_ε(l) = Σ_{m=−n..n} ρ(|m|)·γ(|l + m|) for the sandwich's lags (`l + n` is within
+        // the metered lags: `MeteredNoise::lags`).
+        let lags = metered.lags(n).min(self.rows.saturating_sub(1) as usize);
+        let mut equation_error = [T::ZERO; AUTOCOVARIANCE_LAGS + 1];
+        for (lag, value) in equation_error[..=lags].iter_mut().enumerate() {
+            let mut sum = rho_at(0) * gamma[lag];
+            for m in 1..=n {
+                sum += rho_at(m) * (gamma[lag + m] + gamma[lag.abs_diff(m)]);
+            }
+            *value = sum;
+        }
+        let power = equation_error[0];
+        if !(power > T::ZERO) {
+            return None;
+        }
+        let z_padded = pad::<T, N, L>(z, n);
+        let total = self.total_along(&z_padded);
+        let forms = F::forms(&self.cross, n, &z_padded);
+        let mut variance = power * z_level;
+        for (lag, &covariance) in equation_error[1..=lags.min(n)].iter().enumerate() {
+            let lag = lag + 1;
+            let quadratic = self.lag_quadratic(lag, n, &z_padded, z_level, total, &forms);
+            variance += T::from_f64(2.0) * covariance * quadratic;
+        }
+        if lags > n {
+            variance += T::from_f64(2.0)
+                * metered.constant_parts(
+                    &equation_error[..=lags],
+                    n + 1,
+                    &z_padded,
+                    z_level,
+                    self.rows,
+                );
+        }
+        // The errors-in-variables bias with the coloured noise (module docs of
+        // `metered_noise`): E[φ_k·ε_k] per row, entry i.
+        let mut bias = T::ZERO;
+        for (i, &zi) in z[..n].iter().enumerate() {
+            let (newer, older) = (n - 1 - i, n - i);
+            let mut correlation = T::ZERO;
+            for m in 0..=n {
+                correlation += h(m) * (gamma[m.abs_diff(newer)] - gamma[m.abs_diff(older)]);
+            }
+            bias += zi * correlation;
+        }
+        bias *= T::from_u32(self.rows);
+        // Residuals above what the metered noise explains: scaled up, with the t-factor.
+        let mean_square = self.residual_sum / T::from_u32(degrees);
+        let ratio = mean_square / power;
+        // Otherwise the noise level rests on the metering's block means, not on the
+        // residuals: at least MIN_METERED_BLOCKS degrees of freedom (what the final
+        // reading's bound on the noise level reads, `Reading::uncertainty_bound`).
+        let (variance, bias, factor, degrees) = if ratio > chi_square_mean_95::<T>(degrees) {
+            let factor = coverage_factor::<T>(degrees);
+            (variance * ratio, bias * ratio, factor, degrees)
+        } else {
+            (variance, bias, T::ONE, MIN_METERED_BLOCKS)
+        };
+        let total_variance = variance + bias * bias;
+        if !(total_variance > T::ZERO && total_variance.is_finite()) {
+            return None;
+        }
+        Some((total_variance.sqrt() * factor, degrees))
+    }
+
     /// `zᵀ·C(K)` for `z` padded to `L`: the newest rows' share of every lag's
     /// constant-column part (see `total`), the same for every lag.
     #[inline]
@@ -880,6 +979,126 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The metered sandwich's running totals (`MeteredNoise`, `2L` lags) give the constant
+    /// column's part of every lag beyond the order as the rows summed directly do, before
+    /// and after their ring of `2L` rows wraps, and the same as the lag sums' own for the
+    /// lags both keep.
+    #[test]
+    fn the_metered_totals_give_each_lags_constant_part_as_the_rows_do() {
+        use crate::weighing::test_scene::unit_noise;
+        const L: usize = 5;
+        const COUNT: usize = 30;
+        let mut state = 0x0DDB_1A5E_5BAD_5EEDu64;
+        let mut noise = move || unit_noise(&mut state);
+        for n in 1..=L {
+            let rows: [[f64; L]; COUNT] = core::array::from_fn(|_| {
+                core::array::from_fn(|i| if i < n { noise() } else { 0.0 })
+            });
+            let mut sums = LagSums::<f64, L, L, true, Hankel>::new();
+            let mut metered = MeteredNoise::<f64, L, { 2 * L }>::new();
+            // Rows are kept only while a colour is held (any will do here).
+            let mut lags = [0.0; crate::AUTOCOVARIANCE_LAGS + 1];
+            lags[0] = 1.0;
+            let colour = crate::Autocovariance {
+                lags,
+                blocks: crate::MIN_METERED_BLOCKS,
+            };
+            metered.set(Some(&colour), 1.0);
+            let z = pad::<f64, L, L>(&core::array::from_fn(|_| noise()), n);
+            let z_level = noise();
+            for count in 1..=COUNT {
+                metered.push_row(&rows[count - 1], n, sums.rows());
+                sums.push_row(&rows[count - 1], n);
+                let rows = &rows[..count];
+                let along = |row: &[f64; L]| (0..n).map(|i| row[i] * z[i]).sum::<f64>() + z_level;
+                for lag in n + 1..=2 * L {
+                    let direct: f64 = (lag..rows.len())
+                        .map(|k| (along(&rows[k]) + along(&rows[k - lag]) - z_level) * z_level)
+                        .sum();
+                    let kept = metered.constant_part(lag, &z, z_level, sums.rows());
+                    assert!(
+                        (kept - direct).abs() <= 1e-9 * (1.0 + direct.abs()),
+                        "n {n}, rows {count}, lag {lag}: kept {kept}, direct {direct}",
+                    );
+                    if lag <= L {
+                        let total = sums.total_along(&z);
+                        let forms = Hankel::forms(&sums.cross, n, &z);
+                        let own = sums.lag_quadratic(lag, n, &z, z_level, total, &forms);
+                        assert!((kept - own).abs() <= 1e-9 * (1.0 + own.abs()));
+                    }
+                }
+            }
+        }
+    }
+
+    /// With white block-mean noise metered (`γ = σ²·δ`), the metered sandwich is the model
+    /// sandwich with the noise level known: the same `u` as the residual-based one where the
+    /// residuals' level happens to equal σ², apart from the latter's t-factor.
+    #[test]
+    fn white_metered_noise_gives_the_model_sandwich() {
+        use crate::estimators::noise_meter::{Autocovariance, AUTOCOVARIANCE_LAGS};
+        use crate::weighing::test_scene::unit_noise;
+        const L: usize = 8;
+        let n = 3;
+        let mut state = 0x1234_5678_9ABC_DEF1u64;
+        let mut noise = move || unit_noise(&mut state);
+        let mut sums = LagSums::<f64, L, L, true, Hankel>::new();
+        let mut metered = MeteredNoise::<f64, L, { 2 * L }>::new();
+        let mut lags = [0.0; AUTOCOVARIANCE_LAGS + 1];
+        lags[0] = 2.0;
+        metered.set(
+            Some(&Autocovariance {
+                lags,
+                blocks: crate::MIN_METERED_BLOCKS,
+            }),
+            1.0,
+        );
+        assert!(metered.is_known());
+        let rows = 200;
+        // Rows of a decaying transient plus noise, residuals whose mean square is 2·Σh²
+        // for the ℓ below, so that both noise levels agree.
+        let lead: [f64; L] =
+            core::array::from_fn(|i| if i < n { 0.1 * (i as f64 + 1.0) } else { 0.0 });
+        let h: [f64; 4] = core::array::from_fn(|m| moving_average(&lead, n, m));
+        let power: f64 = h.iter().map(|h| h * h).sum();
+        for k in 0..rows {
+            let row: [f64; L] = core::array::from_fn(|i| {
+                if i < n {
+                    (-(k as f64 + i as f64) / 30.0).exp() + 0.1 * noise()
+                } else {
+                    0.0
+                }
+            });
+            metered.push_row(&row, n, sums.rows());
+            sums.push_row(&row, n);
+        }
+        sums.residual_sum = 2.0 * power * (rows - n - 1) as f64;
+        let z: [f64; L] =
+            core::array::from_fn(|i| if i < n { 0.01 * (i as f64 - 1.0) } else { 0.0 });
+        let z_level = 0.02;
+        let (from_metering, degrees) = sums
+            .metered_uncertainty(n, &z, z_level, &lead, &metered)
+            .unwrap();
+        assert_eq!(degrees, crate::MIN_METERED_BLOCKS);
+        let noise_model = NoiseModel::first_differences(&lead, n);
+        let quadratic = Quadratic {
+            z: &z,
+            z_level,
+            lag0: z_level,
+        };
+        // The model's lags only (no residual lags pushed), and its bias with σ² = 2.
+        let (variance, block_noise, _) = sums
+            .variance(n, &noise_model, quadratic, sums.residual_sum, None)
+            .unwrap();
+        assert!((block_noise - 2.0).abs() < 1e-12);
+        let bias = sums.errors_in_variables_bias(n, &z, &noise_model, block_noise);
+        let expected = (variance + bias * bias).sqrt();
+        assert!(
+            (from_metering / expected - 1.0).abs() < 1e-9,
+            "metered {from_metering}, model {expected}"
+        );
     }
 
     #[test]

@@ -890,8 +890,16 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
             let title = format!("{label} on {stem}, {runs} runs per SNR");
             host_sim::coverage::write_chart(&rows, &title, &args.out.join(&name))?;
             charts.push(name);
+            let colour = match method {
+                Method::Step(_) => format!(
+                    "; its `u` on the empty pan's noise colour, metered over {:.0} s",
+                    host_sim::coverage::METERING_S
+                ),
+                _ => String::new(),
+            };
             let header = format!(
-                "`{method}` on `{scene}` (onset and tare known), {runs} runs per SNR, seed {}:",
+                "`{method}` on `{scene}` (onset and tare known, the noise running {:.0} s before the landing{colour}), {runs} runs per SNR, seed {}:",
+                host_sim::coverage::PRE_ROLL_S,
                 args.seed
             );
             host_sim::coverage::write_markdown(&rows, &header, &mut stdout.lock())?;
@@ -913,8 +921,9 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
 }
 
 /// The time to a final reading on the reference drop, against the fixed 100 ms readout,
-/// of the firmware default and the identified-model bank: `time-to-final.md` (a table for
-/// each) and a chart for each (`time-to-final`, `time-to-final-bank`).
+/// of the firmware default (its `u` on the metered colour, and before it is metered) and
+/// the identified-model bank: `time-to-final.md` (a table for each) and a chart for each
+/// (`time-to-final`, `time-to-final-unmetered`, `time-to-final-bank`).
 fn time_to_final(
     methods: &[Method],
     runs: usize,
@@ -932,17 +941,57 @@ fn time_to_final(
     let path = out.join("time-to-final.md");
     let mut file = create(&path)?;
     let mut charts = Vec::new();
-    for (m, method) in methods.iter().enumerate() {
+    // The firmware default with its `u` on the metered colour and before it is metered
+    // (the scale's first 18 s of empty pan), then the bank.
+    use host_sim::coverage::Colour;
+    let mut runs_of = vec![
+        (
+            methods[0],
+            Colour::Metered,
+            "time-to-final",
+            "firmware default",
+        ),
+        (
+            methods[0],
+            Colour::Unknown,
+            "time-to-final-unmetered",
+            "firmware default, colour not yet metered",
+        ),
+    ];
+    if let Some(&bank) = methods.get(1) {
+        runs_of.push((
+            bank,
+            Colour::Metered,
+            "time-to-final-bank",
+            "identified-model bank",
+        ));
+    }
+    for (m, (method, colour, name, label)) in runs_of.into_iter().enumerate() {
         let rows = final_time::study(
             "reference-step",
-            method,
+            &method,
             runs as u64,
             seed,
             snr_db,
             target_g,
+            colour,
         )?;
+        let how = match (method, colour) {
+            (Method::Step(_), Colour::Metered) => format!(
+                " (the noise running {:.0} s before the landing, its `u` on the empty pan's noise colour metered over {:.0} s)",
+                host_sim::coverage::PRE_ROLL_S,
+                host_sim::coverage::METERING_S
+            ),
+            (Method::Step(_), Colour::Unknown) => {
+                " (its `u` from the residuals alone, the colour not yet metered; the runs of `host-sim study speed`)".to_string()
+            }
+            _ => format!(
+                " (the noise running {:.0} s before the landing)",
+                host_sim::coverage::PRE_ROLL_S
+            ),
+        };
         let header = format!(
-            "Time to a final reading (2u ≤ {target_g} g with the noise level at its upper 95 % bound), `{method}` on the reference drop, {runs} runs per SNR, seed {seed}; `host-sim study coverage --runs {runs} --seed {seed}`:"
+            "Time to a final reading (2u ≤ {target_g} g with the noise level at its upper 95 % bound), `{method}` on the reference drop{how}, {runs} runs per SNR, seed {seed}; `host-sim study coverage --runs {runs} --seed {seed}`:"
         );
         if m > 0 {
             println!();
@@ -950,11 +999,6 @@ fn time_to_final(
         }
         final_time::write_markdown(&rows, &header, limit_g, &mut std::io::stdout().lock())?;
         final_time::write_markdown(&rows, &header, limit_g, &mut file)?;
-        let (name, label) = if m == 0 {
-            ("time-to-final", "firmware default")
-        } else {
-            ("time-to-final-bank", "identified-model bank")
-        };
         let title = format!(
             "{label}: time to a final reading (2u ≤ {target_g} g, noise level at its 95 % bound), {runs} runs per SNR"
         );

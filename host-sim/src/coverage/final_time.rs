@@ -17,6 +17,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use rayon::prelude::*;
 
+use super::Colour;
 use crate::chart::{draw_legend, LegendLine, LEGEND_WIDTH, PALETTE};
 use crate::method::{BuildContext, Method};
 use crate::scene::Scene;
@@ -64,7 +65,10 @@ impl FinalRow {
 }
 
 /// Run `runs` drops of `scene` per SNR through `method`; a reading is final once
-/// `2u ≤ target_g`.
+/// `2u ≤ target_g`. With [`Colour::Metered`] as the coverage study runs them (the noise
+/// running before the landing, a step method's `u` on the empty pan's metered colour:
+/// [`super::prepared`]); with [`Colour::Unknown`] from the scene's first sample, the `u`
+/// from the residuals alone (as `host-sim study speed` runs them, on the same records).
 pub fn study(
     scene: &str,
     method: &Method,
@@ -72,14 +76,21 @@ pub fn study(
     seed: u64,
     snrs_db: &[f64],
     target_g: f64,
+    colour: Colour,
 ) -> Result<Vec<FinalRow>> {
     let base = Scene::load(scene)?;
     let (_, mass_g, _) = base.studied_step();
     snrs_db
         .iter()
         .map(|&snr_db| {
-            let scene = base.with_snr_db(snr_db);
-            let context = BuildContext::new(scene.chain, scene.chain.counts_per_gram());
+            let (scene, context) = match colour {
+                Colour::Metered => super::prepared(&base, snr_db, method, seed)?,
+                Colour::Unknown => {
+                    let scene = base.with_snr_db(snr_db);
+                    let context = BuildContext::new(scene.chain, scene.chain.counts_per_gram());
+                    (scene, context)
+                }
+            };
             method.build(&context)?;
             let per_run: Vec<Result<Option<(f64, f64)>>> = (0..runs)
                 .into_par_iter()
