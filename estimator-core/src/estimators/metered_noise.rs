@@ -8,7 +8,7 @@
 //! anti-alias filter. `host-sim study coverage --runs 1000 --seed 1` on the rig's noise and
 //! on floor vibration, with the noise already running when the load lands (as on a real
 //! pan), found the shipped `u` over-confident at 70–80 dB 100 ms after landing (±2u held
-//! 85–89 % of the errors) and over-cautious later (99 %). A first-order sandwich with the
+//! 85–89 % of the errors; 400 runs) and 91–99 % later. A first-order sandwich with the
 //! noise's true autocovariance held 92–98 % at every SNR and readout time there (a
 //! throwaway oracle; with the residuals' 8 lags it fell to 76 %, with 16 lags it held).
 //!
@@ -22,7 +22,7 @@
 //! ```
 //!
 //! and the level's variance is the sandwich `Σ_l γ_ε(l)·zᵀ(S_l + S_lᵀ)z` over the lags
-//! `0..=2L` (`L` the lags the estimator keeps; beyond the order `n` the rows'
+//! `0..=C` (the estimator's colour lags, `2L` in host-sim; beyond the order `n` the rows'
 //! cross-products keep their constant column's part, from the rows' running totals, as in
 //! `step_uncertainty`). The errors-in-variables bias is the same first-order term with the
 //! coloured noise: `N·Σ_i z_i·Σ_m h_m·(γ(|m − (n−1−i)|) − γ(|m − (n−i)|))`, added to the
@@ -32,8 +32,10 @@
 //! that adds noise of its own): then the variance and the bias are scaled by that ratio and
 //! the t-factor of the residuals' `ν` applies, as without a metering.
 //!
-//! Cost: the rows' totals for `2L` lags (`4L² + L` numbers, nothing for `L = 0`), one copy
-//! of a row's totals per block; per uncertainty `2L` lags of `2n + 1` products each.
+//! Cost: the rows' totals for `C` lags (`2CL + L` numbers and `2C` of `γ`; `C = 0`, the
+//! default and the firmware's, keeps `L` numbers and a count), one copy of a row's totals
+//! per block while a colour is held; per uncertainty `C` lags of `2n + 1` products each and
+//! one weighted sum of the totals.
 
 use crate::estimators::noise_meter::{Autocovariance, AUTOCOVARIANCE_LAGS};
 use crate::numerics::real::Real;

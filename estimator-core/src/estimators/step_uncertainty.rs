@@ -47,7 +47,10 @@
 //! `t_{0.975}(ν)/2` where that exceeds 1 (ν = rows − (n + 1)), so that ±2u is a 95 %
 //! interval (GUM G.3); below [`MIN_DEGREES_OF_FREEDOM`] there is no `u` at all. Where the
 //! empty pan's noise has been metered (the consistency check's reference), the residuals'
-//! noise level is not taken below it.
+//! noise level is not taken below it. Where the empty pan's noise *colour* has been metered
+//! (its block means' autocovariance, a step estimator with colour lags `C > 0`), none of
+//! this applies: the sandwich takes the equation error's autocovariance from the metering
+//! (`crate::estimators::metered_noise`, `LagSums::metered_uncertainty`).
 //!
 //! Only the growing window (λ = 1): with forgetting the lag-0 term needs `ΦᵀW²Φ` as well,
 //! which is not kept, and the estimator states no `u`.
@@ -422,8 +425,9 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
 {
     /// The level's standard uncertainty from the empty pan's metered autocovariance
     /// (`crate::estimators::metered_noise`) for `z`, `z_level` and `ℓ` (`lead[..n]`) as in
-    /// [`Self::uncertainty`]; `None` without a metering, below
-    /// [`MIN_DEGREES_OF_FREEDOM`], or for an equation error without power.
+    /// [`Self::uncertainty`]; `None` without a metering that saw every row of the run, below
+    /// [`MIN_DEGREES_OF_FREEDOM`], or for an equation error without power. The module docs
+    /// of `metered_noise` say what it computes.
     #[inline(never)]
     pub(crate) fn metered_uncertainty<const C: usize>(
         &self,
