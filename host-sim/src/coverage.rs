@@ -130,10 +130,7 @@ pub fn study_with(
     snrs_db
         .iter()
         .map(|&snr_db| {
-            let (scene, mut context) = prepared(&base, snr_db, method, seed)?;
-            if colour == Colour::Unknown {
-                context = context.with_noise_autocovariance(None);
-            }
+            let (scene, context) = prepared(&base, snr_db, method, seed, colour)?;
             method.build(&context)?;
             let per_run: Vec<Result<Vec<Cell>>> = (0..runs)
                 .into_par_iter()
@@ -190,20 +187,24 @@ fn one_run(
     Ok(cells)
 }
 
-/// `base` at `snr_db`, delayed by [`PRE_ROLL_S`], and the build context of its runs: a
-/// step method's with the empty pan's colour ([`metered_autocovariance`]).
+/// `base` at `snr_db`, delayed by [`PRE_ROLL_S`], and the build context of its runs: with
+/// [`Colour::Metered`] a step method's with the empty pan's colour
+/// ([`metered_autocovariance`]; not metered at all otherwise).
 pub fn prepared(
     base: &Scene,
     snr_db: f64,
     method: &Method,
     seed: u64,
+    colour: Colour,
 ) -> Result<(Scene, BuildContext)> {
     let scene = base
         .with_snr_db(snr_db)
         .delayed(PRE_ROLL_S)
         .ok_or_else(|| anyhow!("the scene cannot be delayed by {PRE_ROLL_S} s"))?;
-    let metered = match method {
-        Method::Step(setup) => metered_autocovariance(&scene, setup.decimation, seed),
+    let metered = match (method, colour) {
+        (Method::Step(setup), Colour::Metered) => {
+            metered_autocovariance(&scene, setup.decimation, seed)
+        }
         _ => None,
     };
     let context = BuildContext::new(scene.chain, scene.chain.counts_per_gram())

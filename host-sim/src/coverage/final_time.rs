@@ -84,7 +84,7 @@ pub fn study(
         .iter()
         .map(|&snr_db| {
             let (scene, context) = match colour {
-                Colour::Metered => super::prepared(&base, snr_db, method, seed)?,
+                Colour::Metered => super::prepared(&base, snr_db, method, seed, colour)?,
                 Colour::Unknown => {
                     let scene = base.with_snr_db(snr_db);
                     let context = BuildContext::new(scene.chain, scene.chain.counts_per_gram());
