@@ -445,25 +445,38 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
             return None;
         }
         let model = NoiseModel::<T, L>::first_differences(lead, n);
-        let h = |m: usize| model.at(n, m);
-        // ρ(m) = Σ_a h_a·h_{a+m}, m = 0..=n (ρ(n) = h_0·h_n apart).
-        let mut rho = [T::ZERO; L];
-        for (m, value) in rho[..n].iter_mut().enumerate() {
-            for a in 0..=n - m {
-                *value += h(a) * h(a + m);
+        // h_0..h_n in one array (n < the metered lags: `MeteredNoise::lags`), for loops
+        // over slices.
+        let mut h = [T::ZERO; AUTOCOVARIANCE_LAGS + 1];
+        h[..n].copy_from_slice(&model.h[..n]);
+        h[n] = model.h_last;
+        let h = &h[..=n];
+        // ρ(m) = Σ_a h_a·h_{a+m}, m = 0..=n.
+        let mut rho = [T::ZERO; AUTOCOVARIANCE_LAGS + 1];
+        for (m, value) in rho[..=n].iter_mut().enumerate() {
+            for (&early, &late) in h.iter().zip(&h[m..]) {
+                *value += early * late;
             }
         }
-        let rho_n = h(0) * h(n);
-        let rho_at = |m: usize| if m < n { rho[m] } else { rho_n };
+        let rho = &rho[..=n];
         let gamma = metered.lags_array();
         // γ_ε(l) = Σ_{m=−n..n} ρ(|m|)·γ(|l + m|) for the sandwich's lags (`l + n` is within
         // the metered lags: `MeteredNoise::lags`).
         let lags = metered.lags(n).min(self.rows.saturating_sub(1) as usize);
         let mut equation_error = [T::ZERO; AUTOCOVARIANCE_LAGS + 1];
         for (lag, value) in equation_error[..=lags].iter_mut().enumerate() {
-            let mut sum = rho_at(0) * gamma[lag];
-            for m in 1..=n {
-                sum += rho_at(m) * (gamma[lag + m] + gamma[lag.abs_diff(m)]);
+            let mut sum = rho[0] * gamma[lag];
+            for (&weight, &later) in rho[1..].iter().zip(&gamma[lag + 1..]) {
+                sum += weight * later;
+            }
+            if lag >= n {
+                for (&weight, &earlier) in rho[1..].iter().zip(gamma[lag - n..lag].iter().rev()) {
+                    sum += weight * earlier;
+                }
+            } else {
+                for (m, &weight) in rho.iter().enumerate().skip(1) {
+                    sum += weight * gamma[lag.abs_diff(m)];
+                }
             }
             *value = sum;
         }
@@ -491,15 +504,17 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
                 );
         }
         // The errors-in-variables bias with the coloured noise (module docs of
-        // `metered_noise`): E[φ_k·ε_k] per row, entry i.
-        let mut bias = T::ZERO;
-        for (i, &zi) in z[..n].iter().enumerate() {
-            let (newer, older) = (n - 1 - i, n - i);
-            let mut correlation = T::ZERO;
-            for m in 0..=n {
-                correlation += h(m) * (gamma[m.abs_diff(newer)] - gamma[m.abs_diff(older)]);
+        // `metered_noise`): E[φ_k·ε_k] per row, entry i, is d(n−1−i) − d(n−i) with
+        // d(k) = Σ_m h_m·γ(|m − k|).
+        let mut shifted = [T::ZERO; AUTOCOVARIANCE_LAGS + 1];
+        for (k, value) in shifted[..=n].iter_mut().enumerate() {
+            for (m, &hm) in h.iter().enumerate() {
+                *value += hm * gamma[m.abs_diff(k)];
             }
-            bias += zi * correlation;
+        }
+        let mut bias = T::ZERO;
+        for (&zi, pair) in z[..n].iter().rev().zip(shifted[..=n].windows(2)) {
+            bias += zi * (pair[0] - pair[1]);
         }
         bias *= T::from_u32(self.rows);
         // Residuals above what the metered noise explains: scaled up, with the t-factor.
