@@ -354,6 +354,14 @@ impl Pipeline {
         self.scale.noise_reference().is_some()
     }
 
+    /// Whether the scale hands its runs the empty pan's noise colour with enough block means
+    /// for the step method's `u` to rest on it (`estimator_core::MIN_METERED_BLOCKS`).
+    pub fn noise_coloured(&self) -> bool {
+        self.scale
+            .noise_autocovariance()
+            .is_some_and(|colour| colour.blocks >= estimator_core::MIN_METERED_BLOCKS)
+    }
+
     /// Samples lost since boot.
     pub fn dropped(&self) -> u32 {
         self.sequence.dropped()

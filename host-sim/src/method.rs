@@ -244,10 +244,9 @@ pub enum Method {
     },
 }
 
-/// The lags over which a step method's `u` rests on the empty pan's metered noise colour
-/// (`estimator_core::StepEstimator`'s `C`): twice the lags it keeps, what the coverage study
-/// measured (16 at D = 24; 8 under-covered the rig's noise).
-pub const COLOUR_LAGS: usize = 2 * UNCERTAINTY_ORDERS;
+/// The lags over which a step method's `u` rests on the empty pan's metered noise colour:
+/// the firmware's ([`estimator_core::weighing::COLOUR_LAGS`]).
+pub use estimator_core::weighing::COLOUR_LAGS;
 
 /// What building a method needs to know about the data.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -156,6 +156,12 @@ pub fn demo_scene() -> LoadCell {
 /// pan, whose fit vouches only from 1 s of age (`a_once_restless_pan_at_rest_is_metered`).
 pub const CHECKED_DEMO_EMPTY_S: f64 = 3.0;
 
+/// How much longer the coloured demo holds the empty pan, s: the scale rests the step
+/// method's `u` on the empty pan's noise colour once its metered windows hold
+/// `estimator_core::MIN_METERED_BLOCKS` block means (3,000 of 24 samples: 18 s of windows
+/// after 1.5 s of settling), so the bench can time the runs that do.
+pub const COLOURED_DEMO_EMPTY_S: f64 = 24.0;
+
 /// The checked demo: the demo after [`CHECKED_DEMO_EMPTY_S`] more of empty pan.
 pub fn checked_demo_scene() -> LoadCell {
     demo_scene_with_empty_start(CHECKED_DEMO_EMPTY_S)

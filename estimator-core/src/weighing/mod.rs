@@ -36,7 +36,7 @@ pub(crate) use method::cover_ratios;
 pub(crate) use method::readout_samples;
 pub use method::{
     BankCandidate, LoadCoverage, LoadScene, LoadScore, OnsetConfig, Prediction, RegionError, Spec,
-    SpecError, WeighingConfig, WeighingEstimator, WeighingMethod, MAX_LOADS,
+    SpecError, WeighingConfig, WeighingEstimator, WeighingMethod, COLOUR_LAGS, MAX_LOADS,
     MAX_NYQUIST_OVER_BANDWIDTH, MAX_SCENES, MIN_DATA_DRIVEN_ORDER, MIN_REFERENCE_SAMPLES,
     UNCERTAINTY_ORDERS, UPLOAD_ORDER_CAPACITY,
 };

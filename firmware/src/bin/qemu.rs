@@ -322,6 +322,8 @@ mod app {
         pipeline.restart();
         bench_checked_demo(pipeline, &mut chunk);
         pipeline.restart();
+        bench_coloured_demo(pipeline, &mut chunk);
+        pipeline.restart();
 
         // The deepest the stack went since `init` began: the factory calibration, building
         // the configured scale, the replay above. (Before the task stacks, which paint the
@@ -494,31 +496,66 @@ mod app {
     /// runs. The restarted pipeline counts sequence numbers from zero again.
     #[cfg(feature = "bench")]
     fn bench_checked_demo(pipeline: &mut Pipeline, chunk: &mut [SampleMessage]) {
-        let mut converter = SimulatedConverter::new(qemu_scenes::checked_demo_scene());
-        let first_drop_s = qemu_scenes::CHECKED_DEMO_EMPTY_S
-            + host_sim::simulated::REFERENCE_DEMO_EVENTS[0].time_s;
+        bench_demo_after_empty(
+            pipeline,
+            chunk,
+            qemu_scenes::CHECKED_DEMO_EMPTY_S,
+            "checked",
+            Pipeline::noise_checked,
+        );
+    }
+
+    /// The step method's `u` on the empty pan's noise colour: the demo after long enough
+    /// an empty pan for the colour to be metered, timed from the first drop on.
+    #[cfg(feature = "bench")]
+    fn bench_coloured_demo(pipeline: &mut Pipeline, chunk: &mut [SampleMessage]) {
+        bench_demo_after_empty(
+            pipeline,
+            chunk,
+            qemu_scenes::COLOURED_DEMO_EMPTY_S,
+            "coloured",
+            Pipeline::noise_coloured,
+        );
+    }
+
+    /// The demo after `empty_s` more of empty pan, timed from its first drop on for 3 s:
+    /// `bench <label> ticks= events= metered= dropped=`, `metered` whether `live` held at
+    /// the drop.
+    #[cfg(feature = "bench")]
+    fn bench_demo_after_empty(
+        pipeline: &mut Pipeline,
+        chunk: &mut [SampleMessage],
+        empty_s: f64,
+        label: &str,
+        live: fn(&Pipeline) -> bool,
+    ) {
+        let mut converter =
+            SimulatedConverter::new(qemu_scenes::demo_scene_with_empty_start(empty_s));
+        let first_drop_s = empty_s + host_sim::simulated::REFERENCE_DEMO_EVENTS[0].time_s;
         // Rounded to the nearest sample, as the script places the drop.
         let first_drop_chunk = (first_drop_s * SAMPLE_RATE_HZ as f64 + 0.5) as usize / chunk.len();
         let mut sequence = 0u32;
-        let mut checked_ticks = 0u64;
-        let mut checked_events = 0u32;
+        let mut timed_ticks = 0u64;
+        let mut timed_events = 0u32;
         let mut metered = false;
-        for index in 0..(6 * SAMPLE_RATE_HZ) as usize / chunk.len() {
+        let end_s = empty_s + 3.0;
+        for index in 0..(end_s * SAMPLE_RATE_HZ as f64) as usize / chunk.len() {
             converter.fill(chunk, &mut sequence);
             if index + 1 == first_drop_chunk {
-                metered = pipeline.noise_checked();
+                metered = live(pipeline);
             }
             let work = bench::measure_pipeline(pipeline, chunk);
             if index >= first_drop_chunk {
                 let overhead = bench::measure_loop_overhead(chunk);
-                checked_ticks += work.saturating_sub(overhead);
-                checked_events += chunk.len() as u32;
+                timed_ticks += work.saturating_sub(overhead);
+                timed_events += chunk.len() as u32;
             }
         }
         defmt::println!(
-            "bench checked ticks={=u64} events={=u32} metered={=u32} dropped={=u32}",
-            checked_ticks,
-            checked_events,
+            "bench {=str} ticks={=u64} events={=u32} metered={=u32} dropped={=u32}",
+            label,
+            timed_ticks,
+            timed_events,
             metered as u32,
             pipeline.dropped()
         );

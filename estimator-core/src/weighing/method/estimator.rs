@@ -4,6 +4,7 @@ use crate::estimators::bias_compensated::{BiasCompensatedConfig, BiasCompensated
 use crate::estimators::consistency::NoiseReference;
 use crate::estimators::iv::{IvConfig, IvStepEstimator};
 use crate::estimators::model::{InitialState, ModelBank};
+use crate::estimators::noise_meter::Autocovariance;
 use crate::estimators::step::{StepConfig, StepEstimator};
 use crate::numerics::real::Real;
 use crate::reading::{ConfigError, Estimator, Reading};
@@ -20,6 +21,12 @@ use super::{WeighingConfig, WeighingMethod};
 /// 3 KB, for readings the scale shows as estimating either way.
 pub const UNCERTAINTY_ORDERS: usize = 8;
 
+/// The lags over which the configured step method's `u` rests on the empty pan's metered
+/// noise colour ([`StepEstimator`]'s `C`, `crate::estimators::metered_noise`): twice the
+/// lags it keeps, what `host-sim study coverage` measured (16 at D = 24 held the rig's
+/// noise; 8 under-covered it).
+pub const COLOUR_LAGS: usize = 2 * UNCERTAINTY_ORDERS;
+
 /// The largest data-driven order a board's estimator is built to hold whatever its
 /// configured method: a method uploaded over the console up to this order runs without a
 /// rebuild, and states its `u` ([`UNCERTAINTY_ORDERS`]).
@@ -33,7 +40,7 @@ pub const UPLOAD_ORDER_CAPACITY: usize = UNCERTAINTY_ORDERS;
 #[allow(clippy::large_enum_variant)]
 pub enum WeighingEstimator<T: Real, const N: usize, const S: usize, const K: usize> {
     /// [`WeighingMethod::Step`].
-    Step(StepEstimator<T, N, UNCERTAINTY_ORDERS>),
+    Step(StepEstimator<T, N, UNCERTAINTY_ORDERS, COLOUR_LAGS>),
     /// [`WeighingMethod::BiasCompensated`].
     BiasCompensated(BiasCompensatedStepEstimator<T, N>),
     /// [`WeighingMethod::InstrumentalVariable`].
@@ -95,6 +102,20 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
     pub fn set_white_noise_variance(&mut self, variance: Option<T>) -> Result<(), ConfigError> {
         match self {
             Self::Step(e) => e.set_white_noise_variance(variance),
+            Self::BiasCompensated(_) | Self::InstrumentalVariable(_) | Self::ModelBank(_) => Ok(()),
+        }
+    }
+
+    /// Rest the `u` on the empty pan's metered noise colour from now on (see
+    /// [`crate::StepEstimator::set_noise_autocovariance`]): the step method takes it; the
+    /// others state no `u` from the same sandwich, or rest it on their model, and take
+    /// nothing.
+    pub fn set_noise_autocovariance(
+        &mut self,
+        autocovariance: Option<&Autocovariance<T>>,
+    ) -> Result<(), ConfigError> {
+        match self {
+            Self::Step(e) => e.set_noise_autocovariance(autocovariance),
             Self::BiasCompensated(_) | Self::InstrumentalVariable(_) | Self::ModelBank(_) => Ok(()),
         }
     }

@@ -38,7 +38,7 @@ mod onset;
 mod spec;
 
 pub use coverage::{LoadCoverage, LoadScene, LoadScore, MAX_LOADS, MAX_SCENES};
-pub use estimator::{WeighingEstimator, UNCERTAINTY_ORDERS, UPLOAD_ORDER_CAPACITY};
+pub use estimator::{WeighingEstimator, COLOUR_LAGS, UNCERTAINTY_ORDERS, UPLOAD_ORDER_CAPACITY};
 pub use kind::{BankCandidate, WeighingMethod};
 pub use onset::{OnsetConfig, MIN_REFERENCE_SAMPLES};
 pub use spec::{Spec, SpecError};

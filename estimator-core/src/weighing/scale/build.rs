@@ -10,14 +10,14 @@ use crate::estimators::step::{StepConfig, StepEstimator};
 use crate::reading::ConfigError;
 use crate::weighing::method::{RegionError, WeighingConfig, WeighingEstimator, WeighingMethod};
 
-impl<const N: usize> Scale<StepEstimator<f32, N, N>> {
+impl<const N: usize, const C: usize> Scale<StepEstimator<f32, N, N, C>> {
     /// The step estimator of `order`, `decimation` and `forgetting` in counts (gain 1, no
     /// range limit: the ADC's rails arrive as [`super::RawSample::Saturated`]).
     pub fn step_estimator(
         order: usize,
         decimation: u16,
         forgetting: f32,
-    ) -> Result<StepEstimator<f32, N, N>, ConfigError> {
+    ) -> Result<StepEstimator<f32, N, N, C>, ConfigError> {
         StepEstimator::new(
             StepConfig::new(order, 1.0)
                 .with_decimation(decimation)

@@ -306,6 +306,7 @@ mod tests {
     use crate::estimators::consistency::NoiseReference;
     use crate::estimators::step::StepEstimator;
     use crate::reading::{ConfigError, Estimator};
+    use crate::weighing::method::COLOUR_LAGS;
 
     /// Where the scale's `u` stops holding: a floor vibrating under the pan, a narrow band
     /// of noise (2 Hz wide) at 10–25 Hz on the reading, 60 g dropped after 3 s of empty
@@ -523,7 +524,7 @@ mod tests {
     /// `from`-th to before the `to`-th sample of each run, as IV can be on a fresh drop;
     /// with `unstated`, every reading without its `u`, as IV's with weak instruments.
     struct FlaggedWindow {
-        inner: StepEstimator<f32, 8, 8>,
+        inner: StepEstimator<f32, 8, 8, COLOUR_LAGS>,
         from: u32,
         to: u32,
         unstated: bool,

@@ -10,6 +10,7 @@ use crate::estimators::bias_compensated::BiasCompensatedStepEstimator;
 use crate::estimators::consistency::NoiseReference;
 use crate::estimators::iv::IvStepEstimator;
 use crate::estimators::model::ModelBank;
+use crate::estimators::noise_meter::Autocovariance;
 use crate::estimators::step::StepEstimator;
 use crate::reading::{ConfigError, Estimator};
 use crate::weighing::method::WeighingEstimator;
@@ -37,6 +38,19 @@ pub trait ScaleEstimator: Estimator<f32> {
         let _ = variance;
         Ok(())
     }
+
+    /// Rest the `u` on the empty pan's metered noise colour, `autocovariance` of block means
+    /// at this estimator's `D` in counts² (`None`: not known), from now on and after every
+    /// reset, for an estimator whose `u` can (see
+    /// [`crate::StepEstimator::set_noise_autocovariance`]); the default takes nothing. One
+    /// that is no autocovariance is refused and nothing changes.
+    fn set_noise_autocovariance(
+        &mut self,
+        autocovariance: Option<&Autocovariance<f32>>,
+    ) -> Result<(), ConfigError> {
+        let _ = autocovariance;
+        Ok(())
+    }
 }
 
 impl<E: ScaleEstimator + ?Sized> ScaleEstimator for &mut E {
@@ -54,6 +68,13 @@ impl<E: ScaleEstimator + ?Sized> ScaleEstimator for &mut E {
     fn set_white_noise_variance(&mut self, variance: Option<f32>) -> Result<(), ConfigError> {
         (**self).set_white_noise_variance(variance)
     }
+
+    fn set_noise_autocovariance(
+        &mut self,
+        autocovariance: Option<&Autocovariance<f32>>,
+    ) -> Result<(), ConfigError> {
+        (**self).set_noise_autocovariance(autocovariance)
+    }
 }
 
 /// `ScaleEstimator` for the estimators of this crate: `samples_per_update` is the
@@ -61,7 +82,7 @@ impl<E: ScaleEstimator + ?Sized> ScaleEstimator for &mut E {
 /// estimator's own `set_noise_reference`. (A macro, not a trait default: the decimation
 /// sits in each estimator's own configuration, which no shared trait exposes.)
 macro_rules! scale_estimator {
-    ($([$($generics:tt)*] $estimator:ty => |$e:ident| $decimation:expr $(, $white:ident)?;)*) => {$(
+    ($([$($generics:tt)*] $estimator:ty => |$e:ident| $decimation:expr $(, $white:ident, $colour:ident)?;)*) => {$(
         impl<$($generics)*> ScaleEstimator for $estimator {
             fn samples_per_update(&self) -> u32 {
                 let $e = self;
@@ -79,14 +100,21 @@ macro_rules! scale_estimator {
                 fn $white(&mut self, variance: Option<f32>) -> Result<(), ConfigError> {
                     Self::$white(self, variance)
                 }
+
+                fn $colour(
+                    &mut self,
+                    autocovariance: Option<&Autocovariance<f32>>,
+                ) -> Result<(), ConfigError> {
+                    Self::$colour(self, autocovariance)
+                }
             )?
         }
     )*};
 }
 
 scale_estimator! {
-    [const N: usize, const L: usize] StepEstimator<f32, N, L> => |e| e.config().decimation,
-        set_white_noise_variance;
+    [const N: usize, const L: usize, const C: usize] StepEstimator<f32, N, L, C> => |e| e.config().decimation,
+        set_white_noise_variance, set_noise_autocovariance;
     [const N: usize, const L: usize] BiasCompensatedStepEstimator<f32, N, L> => |e| e.config().step.decimation;
     [const N: usize, const L: usize] IvStepEstimator<f32, N, L> => |e| e.config().step.decimation;
     [const S: usize, const K: usize] ModelBank<f32, S, K> => |e| e.decimation();
@@ -113,5 +141,12 @@ impl<const N: usize, const S: usize, const K: usize> ScaleEstimator
 
     fn set_white_noise_variance(&mut self, variance: Option<f32>) -> Result<(), ConfigError> {
         WeighingEstimator::set_white_noise_variance(self, variance)
+    }
+
+    fn set_noise_autocovariance(
+        &mut self,
+        autocovariance: Option<&Autocovariance<f32>>,
+    ) -> Result<(), ConfigError> {
+        WeighingEstimator::set_noise_autocovariance(self, autocovariance)
     }
 }

@@ -95,6 +95,7 @@ pub use reading::{
 
 use crate::estimators::step::StepEstimator;
 use crate::reading::ConfigError;
+use crate::weighing::method::COLOUR_LAGS;
 use change::TwoSidedCusum;
 use noise::NoiseMetering;
 use residual_motion::ResidualMotion;
@@ -103,10 +104,16 @@ use white::WhiteNoise;
 use zero::round_to_i32;
 
 /// The weighing decisions around an estimator `E` (see [`ScaleEstimator`]).
+///
+/// Laid out as declared (`repr(C)`): the per-sample decisions' scalars first, the large
+/// parts (the estimator, the noise meterings, the trend window) last. Rust's own layout put
+/// the scalars after the large parts, beyond the ±1,020 B a Thumb-2 floating-point load
+/// reaches from the scale's address: the empty pan's colour metering (1.5 KB more) then
+/// cost the firmware 52 instructions per sample without running (`cargo xtask bench step`
+/// 1,029.8 against 978.0); laid out so, 973.3 with it.
 #[derive(Clone, Debug)]
+#[repr(C)]
 pub struct Scale<E> {
-    config: ScaleConfig,
-    estimator: E,
     /// Raw samples per regression update of `estimator` (when its residual is new).
     samples_per_update: u32,
     counts_per_gram: f32,
@@ -194,9 +201,6 @@ pub struct Scale<E> {
     block_alarmed: bool,
     /// The block test saw motion at the last shown reading (`change::in_motion`).
     moving: bool,
-    /// The residual motion test (`residual_motion`): the residuals' stretches against
-    /// their own scatter, which a ringing the model explains does not widen.
-    residual_motion: ResidualMotion,
     /// The last squared differences of consecutive block means of this run (g²), how many
     /// in the run, and the last block mean: the block means' scatter, for the block in
     /// progress (`change::judge_parts`).
@@ -243,20 +247,12 @@ pub struct Scale<E> {
     /// number after a new calibration, so that the next reading's is taken whatever it is.
     fit_u_counts: Option<f32>,
     state: ScaleState,
-    /// The empty pan's noise, for the consistency check.
-    noise: NoiseMetering,
     /// This sample went into the noise meter (else the window in progress is dropped).
     noise_metered: bool,
     /// The shown reading's `u` bound meets the final target and is vouched for
     /// (`decide::show`, once per sample; false after anything that changes the net reading
     /// until the next sample is shown).
     final_bound_met: bool,
-    /// The raw samples' white noise (`white`), handed to each new run as the floor of its
-    /// `u`.
-    white: WhiteNoise,
-    /// The trend test's window of block means (`trend`): kept over load changes, started
-    /// over after a fault or a new calibration or configuration.
-    trend: Trend,
     /// The trend test alarmed at its last block; taken as a slow change at the next
     /// valid reading.
     trend_alarmed: bool,
@@ -287,11 +283,25 @@ pub struct Scale<E> {
     /// n = 7, D = 16 past its 1,000 instructions per sample.
     reference_u2_g2: f32,
     reference_bound2_g2: f32,
+    config: ScaleConfig,
+    /// The residual motion test (`residual_motion`): the residuals' stretches against
+    /// their own scatter, which a ringing the model explains does not widen.
+    residual_motion: ResidualMotion,
+    /// The raw samples' white noise (`white`), handed to each new run as the floor of its
+    /// `u`.
+    white: WhiteNoise,
+    /// The empty pan's noise, for the consistency check.
+    noise: NoiseMetering,
+    /// The trend test's window of block means (`trend`): kept over load changes, started
+    /// over after a fault or a new calibration or configuration.
+    trend: Trend,
+    estimator: E,
 }
 
 /// The scale around the step estimator of capacity `N` (the firmware's method before the
-/// configuration was read at build time; the tests' reference).
-pub type StepScale<const N: usize> = Scale<StepEstimator<f32, N, N>>;
+/// configuration was read at build time; the tests' reference), its `u` resting on the empty
+/// pan's noise colour once metered, as the configured step method's does.
+pub type StepScale<const N: usize> = Scale<StepEstimator<f32, N, N, COLOUR_LAGS>>;
 
 impl<E: ScaleEstimator> Scale<E> {
     /// A scale running `estimator` (built in counts, see [`ScaleEstimator`]) with the
@@ -528,6 +538,10 @@ impl<E: ScaleEstimator> Scale<E> {
         let _ = self
             .estimator
             .set_white_noise_variance(self.white.variance());
+        // Refused only when it is no autocovariance, which the metering never hands over.
+        let _ = self
+            .estimator
+            .set_noise_autocovariance(self.noise_autocovariance().as_ref());
         self.estimator.reset();
         self.noise.interrupt();
         self.run_zero_counts = round_to_i32(self.zero_counts);

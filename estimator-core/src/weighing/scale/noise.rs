@@ -31,12 +31,28 @@
 //!   a new load before the residual test delays the change to its first flag plus that
 //!   hold (`tests::e2e` `consistency_study` measures how often, per method).
 //!
+//! - **The noise's colour.** The same windows meter the block means' autocovariance
+//!   ([`crate::AutocovarianceMeter`]); every window that passes the guard adds its sums to
+//!   those of the windows before (a narrow-band noise's lags need thousands of block
+//!   means: [`crate::MIN_METERED_BLOCKS`]), and past [`COLOUR_BLOCKS`] the older windows
+//!   are halved in weight, so the colour follows a pan whose vibration changes over
+//!   minutes. It is handed to the estimator at each restart like the reference
+//!   (`crate::estimators::metered_noise`: the step method's `u` rests on it once there are
+//!   enough block means). A recalibration keeps it (in counts); `forget_noise_reference`
+//!   and a new configuration drop it.
+//!
 //! What must never happen: a load in a metered window. It could only inflate the reference
 //! (fewer flags, never more); the settling and the guard keep it out.
 
 use super::{Scale, ScaleEstimator};
 use crate::estimators::consistency::NoiseReference;
-use crate::estimators::noise_meter::NoiseMeter;
+use crate::estimators::noise_meter::{
+    Autocovariance, AutocovarianceMeter, AutocovarianceSums, NoiseMeter,
+};
+
+/// Block means of the empty pan's colour beyond which the older windows are halved in
+/// weight (98 s of empty pan at D = 24).
+pub(super) const COLOUR_BLOCKS: u32 = 16_384;
 
 /// The noise of the empty, stable pan, metered window by window (see the module docs).
 #[derive(Clone, Debug)]
@@ -52,6 +68,12 @@ pub(super) struct NoiseMetering {
     pub(super) reference: Option<NoiseReference<f32>>,
     /// Samples went into the meter since the last interruption.
     pub(super) active: bool,
+    /// The window's block-mean autocovariance, beside `meter`.
+    colour: Option<AutocovarianceMeter<f32>>,
+    /// A complete window's, waiting out the guard with `pending`.
+    pending_colour: Option<AutocovarianceSums<f32>>,
+    /// Every accepted window's, added up (see the module docs).
+    colour_sums: AutocovarianceSums<f32>,
 }
 
 impl NoiseMetering {
@@ -59,8 +81,14 @@ impl NoiseMetering {
         let meter = u16::try_from(decimation)
             .ok()
             .and_then(|d| NoiseMeter::new(d).ok());
+        let colour = u16::try_from(decimation)
+            .ok()
+            .and_then(|d| AutocovarianceMeter::new(d).ok());
         Self {
             meter,
+            colour,
+            pending_colour: None,
+            colour_sums: AutocovarianceSums::new(),
             // `window/D` block means give one difference fewer; at least two for a variance.
             window_differences: (window_samples / decimation.max(1))
                 .saturating_sub(1)
@@ -75,32 +103,77 @@ impl NoiseMetering {
     /// The pan was not empty and at rest on this sample (or the run restarted): the window
     /// in progress and one waiting out the guard are dropped; the reference is kept.
     pub(super) fn interrupt(&mut self) {
-        if !self.active {
-            return;
+        if self.active {
+            self.drop_windows();
         }
+    }
+
+    /// Drop the window in progress and one waiting out its guard (`interrupt`).
+    #[inline(never)]
+    fn drop_windows(&mut self) {
         if let Some(meter) = self.meter.as_mut() {
             meter.reset();
         }
+        if let Some(colour) = self.colour.as_mut() {
+            colour.reset();
+        }
         self.active = false;
         self.pending = None;
+        self.pending_colour = None;
         self.pending_samples = 0;
     }
 
+    /// The empty pan's block-mean autocovariance over every accepted window, in counts²;
+    /// `None` before one.
+    #[inline(never)]
+    pub(super) fn autocovariance(&self) -> Option<Autocovariance<f32>> {
+        self.colour_sums.autocovariance()
+    }
+
+    /// Forget the colour metered so far.
+    pub(super) fn forget_colour(&mut self) {
+        self.colour_sums = AutocovarianceSums::new();
+    }
+
+    /// A window passed its guard: its reference and colour are the latest.
+    #[inline(never)]
+    fn accept(&mut self, reference: NoiseReference<f32>, colour: Option<AutocovarianceSums<f32>>) {
+        self.reference = Some(reference);
+        if let Some(colour) = colour {
+            self.colour_sums.merge(&colour);
+            if self.colour_sums.blocks() > COLOUR_BLOCKS {
+                self.colour_sums.halve();
+            }
+        }
+    }
+
     /// One centred sample of the empty pan at rest.
+    #[inline(never)]
     pub(super) fn push(&mut self, centred_counts: f32, guard_samples: u32) {
-        let Some(meter) = self.meter.as_mut() else {
+        if self.meter.is_none() {
             return;
-        };
+        }
         self.active = true;
         if let Some(pending) = self.pending {
             self.pending_samples = self.pending_samples.saturating_add(1);
             if self.pending_samples >= guard_samples {
-                self.reference = Some(pending);
                 self.pending = None;
+                let colour = self.pending_colour.take();
+                self.accept(pending, colour);
             }
         }
-        if meter.push(centred_counts).is_err() {
+        let Some(meter) = self.meter.as_mut() else {
+            return;
+        };
+        let colour_refused = self
+            .colour
+            .as_mut()
+            .is_some_and(|colour| colour.push(centred_counts).is_err());
+        if meter.push(centred_counts).is_err() || colour_refused {
             meter.reset();
+            if let Some(colour) = self.colour.as_mut() {
+                colour.reset();
+            }
             return;
         }
         if meter.differences() >= self.window_differences {
@@ -109,11 +182,17 @@ impl NoiseMetering {
                 .map(|variance| NoiseReference::new(variance, meter.differences()))
                 .filter(|reference| reference.validate().is_ok());
             meter.reset();
+            let colour = self.colour.as_mut().map(|colour| {
+                let sums = colour.sums().clone();
+                colour.reset();
+                sums
+            });
             if let Some(metered) = metered {
                 if guard_samples == 0 {
-                    self.reference = Some(metered);
+                    self.accept(metered, colour);
                 } else {
                     self.pending = Some(metered);
+                    self.pending_colour = colour;
                     self.pending_samples = 0;
                 }
             }
@@ -138,6 +217,18 @@ impl<E: ScaleEstimator> Scale<E> {
     pub fn forget_noise_reference(&mut self) {
         self.noise.interrupt();
         self.noise.reference = None;
+        self.noise.forget_colour();
+    }
+
+    /// The empty pan's metered block-mean autocovariance (counts², at the estimator's `D`)
+    /// the runs' `u` rests on from the next load change on (see the module docs); `None`
+    /// before a metering, or with the check off.
+    pub fn noise_autocovariance(&self) -> Option<Autocovariance<f32>> {
+        if self.config.consistency_check {
+            self.noise.autocovariance()
+        } else {
+            None
+        }
     }
 
     /// Meter the empty pan's centred sample, at rest (`decide::EmptyPan`) and settled, in a
@@ -223,6 +314,51 @@ mod tests {
         assert_eq!(scale.noise_reference(), Some(reference));
         scale.forget_noise_reference();
         assert_eq!(scale.noise_reference(), None);
+    }
+
+    /// The colour adds up over every window that passes its guard, reaches the estimator
+    /// at the next restart once it rests on enough block means, follows a recalibration
+    /// (it is in counts) and is forgotten with the reference.
+    #[test]
+    fn the_empty_pans_colour_adds_up_over_its_windows_and_reaches_the_estimator() {
+        use crate::MIN_METERED_BLOCKS;
+        let mut scale = new_scale();
+        let config = *scale.config();
+        let mut cell = Cell::new(0.4);
+        run(&mut scale, &mut cell, metered_after(&config));
+        let first = scale.noise_autocovariance().expect("one window");
+        let window_blocks = config.noise_window_samples / 16;
+        assert!(first.blocks >= window_blocks && first.blocks < MIN_METERED_BLOCKS);
+        // One window is not enough for the estimator: a load's run does not rest on it.
+        cell.load_g = 100.0;
+        run(&mut scale, &mut cell, 4000);
+        assert!(!scale.estimator().rests_on_metered_colour());
+        cell.load_g = 0.0;
+        // 3,000 block means of 16 samples are 12 s of metered empty pan (and its settling).
+        run(&mut scale, &mut cell, 64_000);
+        let colour = scale.noise_autocovariance().expect("metered");
+        assert!(colour.blocks >= MIN_METERED_BLOCKS, "{}", colour.blocks);
+        // The cell's white noise (0.4 g at 50 counts/g and the rounding) over 16 samples:
+        // lag 0 within 4 standard errors (√(2/M)), the lags after it near 0.
+        let truth = ((0.4f32 * CPG).powi(2) + 1.0 / 12.0) / 16.0;
+        let relative = 4.0 * (2.0 / colour.blocks as f32).sqrt();
+        assert!(
+            (colour.lags[0] / truth - 1.0).abs() < relative,
+            "{colour:?}"
+        );
+        assert!(colour.lags[1..]
+            .iter()
+            .all(|lag| lag.abs() < relative * truth));
+        cell.load_g = 100.0;
+        run(&mut scale, &mut cell, 4000);
+        assert!(scale.estimator().rests_on_metered_colour());
+        scale.recalibrate(CountsScale {
+            counts_per_gram: 2.0 * CPG,
+            zero_counts: ZERO,
+        });
+        assert_eq!(scale.noise_autocovariance(), Some(colour));
+        scale.forget_noise_reference();
+        assert_eq!(scale.noise_autocovariance(), None);
     }
 
     #[test]

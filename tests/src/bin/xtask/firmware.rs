@@ -814,6 +814,28 @@ fn bench_run(bench_elf: &Path, handoff: bool) -> Result<()> {
         };
         println!("  with the consistency check live{figure}");
     }
+    if let Ok(coloured) = find_fields(&run, "bench coloured") {
+        if field(&coloured, "dropped")? != 0 {
+            bail!("the coloured replay lost samples; its count would mean nothing");
+        }
+        let metered = field(&coloured, "metered")? != 0;
+        if !metered && handoff {
+            bail!(
+                "the coloured replay never metered the noise colour; its count would mean nothing"
+            );
+        }
+        let figure = if metered {
+            format!(
+                " (the demo after {:.0} s of empty pan, from its first drop on): {:>7.1} instructions per 4 kHz sample ({} samples)",
+                host_sim::qemu_scenes::COLOURED_DEMO_EMPTY_S,
+                per_event(&coloured)?,
+                field(&coloured, "events")?
+            )
+        } else {
+            ": never live (the scale never metered enough of the empty pan)".to_string()
+        };
+        println!("  with the u on the metered noise colour{figure}");
+    }
     if let Ok(restart) = find_fields(&run, "bench restart") {
         println!(
             "  one restart (a load change: the estimator's reset): {:.0} instructions",
