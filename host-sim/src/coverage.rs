@@ -17,6 +17,7 @@
 
 mod chart;
 pub mod final_time;
+pub mod scale;
 
 use std::io::Write;
 
@@ -273,16 +274,33 @@ pub fn write_markdown(rows: &[SnrRow], header: &str, out: &mut impl Write) -> Re
         }
         writeln!(out)?;
     }
-    let band = rows
+    // The band of the cells that stated u in at least half as many runs as the most: a
+    // cell of a few runs (the scale's first readings) says little and is not the table's.
+    let most = rows
         .iter()
         .flat_map(|row| row.cells.iter())
-        .filter_map(Cell::band)
-        .fold(0.0, f64::max);
+        .map(|cell| cell.stated)
+        .max()
+        .unwrap_or(0);
+    let fewest = rows
+        .iter()
+        .flat_map(|row| row.cells.iter())
+        .map(|cell| cell.stated)
+        .filter(|&stated| stated > 0 && 2 * stated >= most)
+        .min()
+        .unwrap_or(0);
+    let band = Cell {
+        stated: fewest,
+        ..Cell::default()
+    }
+    .band()
+    .unwrap_or(0.0);
     writeln!(out)?;
     writeln!(
         out,
-        "Each cell: the share of runs whose error is within ±2u (goal 95 %; a true 95 % is observed within ±{:.1} % with these runs, 95 % of the time), the RMS of error/u (1 for a calibrated u) and the runs that stated u. No estimate: the method is still warming up.",
-        100.0 * band
+        "Each cell: the share of runs whose error is within ±2u (goal 95 %; a true 95 % is observed within ±{:.1} % with {} or more runs, 95 % of the time; wider in a cell of fewer), the RMS of error/u (1 for a calibrated u) and the runs that stated u. No estimate: the method is still warming up.",
+        100.0 * band,
+        fewest
     )?;
     Ok(())
 }

@@ -187,3 +187,30 @@ fn the_empty_pans_noise_colour_makes_the_firmware_u_hold_in_the_rigs_noise() {
         "with the metered colour: {metered:?}"
     );
 }
+
+/// The firmware's own scale (`firmware/weighing.toml` as both boards build it) meters the
+/// empty pan's colour itself, in the 0.3 s windows it meters the noise in, and its step
+/// method's `u` rests on it once 3,000 block means are in (`estimator_core::
+/// MIN_METERED_BLOCKS`): after 24 s of empty pan in the rig's noise at 80 dB every run rests
+/// on it at the landing, and ±2u holds the scale's readings 100–400 ms after the landing
+/// at least at the goal's edge less this run count's Monte Carlo band (92 − 2.5 %).
+/// A scale just built has metered nothing of it: no run rests on it.
+#[test]
+fn the_firmware_scale_meters_the_colour_itself_and_its_u_holds_on_it() {
+    use host_sim::coverage::scale::{study, Pan};
+    let rows = study("rig-noise", 300, 1, &[80.0], Pan::Metered).unwrap();
+    let row = &rows[0];
+    assert_eq!(row.coloured, row.runs, "runs resting on the colour");
+    for (t, cell) in TIMES_MS.iter().zip(&row.row.cells) {
+        if (100..=400).contains(t) {
+            let coverage = cell.coverage().expect("a reading with its u");
+            assert!(
+                coverage >= 0.895 && cell.stated >= 290,
+                "{t} ms: {coverage} of {} stated",
+                cell.stated
+            );
+        }
+    }
+    let fresh = study("rig-noise", 20, 1, &[80.0], Pan::Fresh).unwrap();
+    assert_eq!(fresh[0].coloured, 0);
+}

@@ -440,6 +440,10 @@ struct StudyArgs {
     /// SNR sets the white noise; a scene's coloured components stay as the scene has them.
     #[arg(long = "scene")]
     scenes: Vec<String>,
+    /// Coverage: a step method's `u` from the residuals alone, the empty pan's noise colour
+    /// not metered (as a scale runs it before 3,000 block means of its empty pan).
+    #[arg(long)]
+    unmetered: bool,
     /// Where the CSV, the markdown table and the charts go.
     #[arg(long, default_value = "host-sim/charts")]
     out: PathBuf,
@@ -875,7 +879,19 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
             .and_then(|stem| stem.to_str())
             .unwrap_or(scene);
         for (m, method) in methods.iter().enumerate() {
-            let rows = host_sim::coverage::study(scene, method, runs as u64, args.seed, &snr_db)?;
+            let colour = if args.unmetered {
+                host_sim::coverage::Colour::Unknown
+            } else {
+                host_sim::coverage::Colour::Metered
+            };
+            let rows = host_sim::coverage::study_with(
+                scene,
+                method,
+                runs as u64,
+                args.seed,
+                &snr_db,
+                colour,
+            )?;
             let (name, label) = match (defaults, m) {
                 (true, 0) => (
                     format!("coverage-{stem}-firmware"),
@@ -891,6 +907,9 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
             host_sim::coverage::write_chart(&rows, &title, &args.out.join(&name))?;
             charts.push(name);
             let colour = match method {
+                Method::Step(_) if args.unmetered => {
+                    "; its `u` from the residuals alone, the colour not metered".to_string()
+                }
                 Method::Step(_) => format!(
                     "; its `u` on the empty pan's noise colour, metered over {:.0} s",
                     host_sim::coverage::METERING_S
@@ -915,7 +934,42 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
         charts.join(", ")
     );
     if defaults {
+        scale_coverage(&scenes, runs, args.seed, &snr_db, &mut file)?;
+        file.flush()?;
         time_to_final(&methods, runs, args.seed, &snr_db, &args.out)?;
+    }
+    Ok(())
+}
+
+/// The firmware's own scale on each scene (`coverage::scale`): after its empty pan's colour
+/// is metered, and fresh (its `u` from the residuals alone); appended to `coverage.md`.
+fn scale_coverage(
+    scenes: &[String],
+    runs: usize,
+    seed: u64,
+    snr_db: &[f64],
+    file: &mut impl Write,
+) -> Result<()> {
+    use host_sim::coverage::scale::{self, Pan};
+    for scene in scenes {
+        for pan in [Pan::Metered, Pan::Fresh] {
+            let rows = scale::study(scene, runs as u64, seed, snr_db, pan)?;
+            let how = match pan {
+                Pan::Metered => format!(
+                    "after {:.0} s on the empty pan (its colour metered by the scale itself)",
+                    scale::METERED_EMPTY_S
+                ),
+                Pan::Fresh => "just built (its `u` from the residuals alone)".to_string(),
+            };
+            let header = format!(
+                "The firmware's scale (`firmware/weighing.toml`, `Scale::configured`: its own onset detection) on `{scene}`, {how}, the noise running {:.0} s before the landing; its readings at the times after the landing once it saw the landing, {runs} runs per SNR, seed {seed}:",
+                host_sim::coverage::PRE_ROLL_S
+            );
+            scale::write_markdown(&rows, &header, &mut std::io::stdout().lock())?;
+            scale::write_markdown(&rows, &header, file)?;
+            println!();
+            writeln!(file)?;
+        }
     }
     Ok(())
 }
