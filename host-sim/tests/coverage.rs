@@ -226,7 +226,8 @@ fn the_firmware_scale_meters_the_colour_itself_and_its_u_holds_on_it() {
 #[test]
 fn a_fit_that_cancels_the_metered_colour_does_not_state_the_pans_whole_noise() {
     use estimator_core::weighing::RawSample;
-    use host_sim::replay::{self, ConfiguredScale};
+    use host_sim::coverage::scale::{standing_scale, Pan};
+    use host_sim::replay;
     use host_sim::simulated::run_seed;
     let scene = Scene::load("vibration")
         .unwrap()
@@ -234,18 +235,7 @@ fn a_fit_that_cancels_the_metered_colour_does_not_state_the_pans_whole_noise() {
         .delayed(host_sim::coverage::PRE_ROLL_S)
         .unwrap();
     let (weighing, _) = replay::shipped_config().unwrap();
-    let counts = replay::calibration(
-        scene.chain.counts_per_gram(),
-        scene.chain.zero_code(),
-        None,
-        None,
-    );
-    let mut metered = Box::new(ConfiguredScale::configured(&weighing, counts).unwrap());
-    let empty = scene.empty_pan(host_sim::coverage::scale::METERED_EMPTY_S);
-    let mut adc = empty.adc(run_seed(1, u64::MAX));
-    for _ in 0..empty.samples() {
-        metered.push(RawSample::read(&mut adc));
-    }
+    let metered = standing_scale(&weighing, &scene, 1, Pan::Metered).unwrap();
     let (onset, mass_g, _) = scene.studied_step();
     let at = onset + 800; // 200 ms after the landing
     let mut blocked = Vec::new();

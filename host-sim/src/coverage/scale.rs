@@ -14,7 +14,7 @@
 //! shows the empty pan) claims nothing about the load and is not counted.
 
 use anyhow::{anyhow, Result};
-use estimator_core::weighing::RawSample;
+use estimator_core::weighing::{RawSample, WeighingConfig};
 use estimator_core::MIN_METERED_BLOCKS;
 use rayon::prelude::*;
 
@@ -64,23 +64,7 @@ pub fn study(
                 .with_snr_db(snr_db)
                 .delayed(PRE_ROLL_S)
                 .ok_or_else(|| anyhow!("the scene cannot be delayed by {PRE_ROLL_S} s"))?;
-            let counts = replay::calibration(
-                scene.chain.counts_per_gram(),
-                scene.chain.zero_code(),
-                None,
-                None,
-            );
-            let mut scale = Box::new(
-                ConfiguredScale::configured(&weighing, counts)
-                    .map_err(|e| anyhow!("the shipped configuration is refused: {e}"))?,
-            );
-            if pan == Pan::Metered {
-                let empty = scene.empty_pan(METERED_EMPTY_S);
-                let mut adc = empty.adc(run_seed(seed, u64::MAX));
-                for _ in 0..empty.samples() {
-                    scale.push(RawSample::read(&mut adc));
-                }
-            }
+            let scale = standing_scale(&weighing, &scene, seed, pan)?;
             let per_run: Vec<(Vec<Cell>, bool)> = (0..runs)
                 .into_par_iter()
                 .map(|run| one_run(&scene, scale.clone(), run_seed(seed, run)))
@@ -100,6 +84,35 @@ pub fn study(
             })
         })
         .collect()
+}
+
+/// The shipped scale (`weighing` as both boards build it) for `scene`'s chain as it stands
+/// before a run: just built, or after [`METERED_EMPTY_S`] on `scene`'s empty pan (its
+/// colour metered; seed `run_seed(seed, u64::MAX)`, apart from the runs').
+pub fn standing_scale(
+    weighing: &WeighingConfig,
+    scene: &Scene,
+    seed: u64,
+    pan: Pan,
+) -> Result<Box<ConfiguredScale>> {
+    let counts = replay::calibration(
+        scene.chain.counts_per_gram(),
+        scene.chain.zero_code(),
+        None,
+        None,
+    );
+    let mut scale = Box::new(
+        ConfiguredScale::configured(weighing, counts)
+            .map_err(|e| anyhow!("the shipped configuration is refused: {e}"))?,
+    );
+    if pan == Pan::Metered {
+        let empty = scene.empty_pan(METERED_EMPTY_S);
+        let mut adc = empty.adc(run_seed(seed, u64::MAX));
+        for _ in 0..empty.samples() {
+            scale.push(RawSample::read(&mut adc));
+        }
+    }
+    Ok(scale)
 }
 
 /// One drop: the scale's readings at the readout times after the landing, and whether its
