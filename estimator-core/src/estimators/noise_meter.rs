@@ -32,8 +32,10 @@ use crate::estimators::step::MAX_DECIMATION;
 use crate::numerics::real::Real;
 use crate::reading::{ConfigError, InvalidReason};
 
-/// The largest lag of the block means' autocovariance the meter keeps.
-pub const AUTOCOVARIANCE_LAGS: usize = 24;
+/// The largest lag of the block means' autocovariance the meter keeps: the configured step
+/// method's colour lags (`crate::weighing::COLOUR_LAGS`, 24) and its largest order's (8)
+/// beyond them, which the equation error's autocovariance reaches.
+pub const AUTOCOVARIANCE_LAGS: usize = 32;
 
 /// The block means' autocovariance at lags `0..=`[`AUTOCOVARIANCE_LAGS`] (raw units², block
 /// means of the meter's `D` raw samples), and the block means behind lag 0.
@@ -456,10 +458,11 @@ mod tests {
             meter.push(unit_noise(&mut state) as f32).unwrap();
         }
         let found = meter.sums().autocovariance().unwrap();
-        // 50 block means on either side of the break: no pair of lag 24 spans it, 26 + 26
-        // of them, not 76.
+        // 50 block means on either side of the break: no pair of the last lag spans it,
+        // 50 − lag on either side, not 100 − lag.
         assert_eq!(found.blocks, 100);
-        assert_eq!(meter.sums().pairs[AUTOCOVARIANCE_LAGS], 26 + 26);
+        let side = 50 - AUTOCOVARIANCE_LAGS as u32;
+        assert_eq!(meter.sums().pairs[AUTOCOVARIANCE_LAGS], side + side);
         let mut bad = found;
         bad.lags[3] = 2.0 * bad.lags[0];
         assert_eq!(bad.validate(), Err(ConfigError::NoiseReference));

@@ -168,7 +168,7 @@ impl<T: Real> StepConfig<T> {
 /// standard uncertainty of its level for orders up to `L` (the default 0 states none and
 /// keeps the bare estimator's size: the lag sums take `6L² + 3L` numbers, see
 /// `crate::estimators::step_uncertainty`), and able to rest that `u` on the empty pan's
-/// metered noise colour over `C` lags (`2L` is what the coverage study measured; the
+/// metered noise colour over `C` lags (`3L` is what the coverage study measured; the
 /// default 0 keeps nothing and costs nothing: `crate::estimators::metered_noise`).
 ///
 /// Fixed size, no allocation, never panics on data. See the module docs for the method.

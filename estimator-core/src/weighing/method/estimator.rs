@@ -22,10 +22,14 @@ use super::{WeighingConfig, WeighingMethod};
 pub const UNCERTAINTY_ORDERS: usize = 8;
 
 /// The lags over which the configured step method's `u` rests on the empty pan's metered
-/// noise colour ([`StepEstimator`]'s `C`, `crate::estimators::metered_noise`): twice the
-/// lags it keeps, what `host-sim study coverage` measured (16 at D = 24 held the rig's
-/// noise; 8 under-covered it).
-pub const COLOUR_LAGS: usize = 2 * UNCERTAINTY_ORDERS;
+/// noise colour ([`StepEstimator`]'s `C`, `crate::estimators::metered_noise`): three times
+/// the lags it keeps (144 ms at D = 24), what `host-sim study coverage --runs 1000 --seed 1`
+/// measured in the rig's noise, whose vibration near the resonance stays correlated for
+/// longer than a drop's first rows: 8 lags under-covered it; with 16, ±2u held 92.6–93.9 %
+/// 200–400 ms after the landing at 60–70 dB (RMS error/u up to 1.11); with 24, 94.2–97.1 %
+/// (RMS at most 1.02); 40 did no better. The meter keeps the order's lags beyond them
+/// ([`crate::AUTOCOVARIANCE_LAGS`] = 32).
+pub const COLOUR_LAGS: usize = 3 * UNCERTAINTY_ORDERS;
 
 /// The largest data-driven order a board's estimator is built to hold whatever its
 /// configured method: a method uploaded over the console up to this order runs without a
