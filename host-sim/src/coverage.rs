@@ -61,6 +61,12 @@ impl Cell {
         (self.stated > 0).then(|| f64::from(self.covered) / f64::from(self.stated))
     }
 
+    /// The RMS of error/u over the stated runs (1 for a calibrated `u`), `None` without
+    /// stated runs.
+    pub fn rms_z(&self) -> Option<f64> {
+        (self.stated > 0).then(|| (self.z_square_sum / f64::from(self.stated)).sqrt())
+    }
+
     /// The half-width of the 95 % Monte Carlo band around a true 95 % coverage.
     pub fn band(&self) -> Option<f64> {
         (self.stated > 0).then(|| 1.96 * (0.95 * 0.05 / f64::from(self.stated)).sqrt())
@@ -260,16 +266,15 @@ pub fn write_markdown(rows: &[SnrRow], header: &str, out: &mut impl Write) -> Re
     for row in rows {
         write!(out, "| {} dB |", row.snr_db)?;
         for cell in &row.cells {
-            match cell.coverage() {
-                Some(coverage) => write!(
+            match (cell.coverage(), cell.rms_z()) {
+                (Some(coverage), Some(rms_z)) => write!(
                     out,
-                    " {:.1} % (rms z {:.2}, {}) |",
+                    " {:.1} % (rms z {rms_z:.2}, {}) |",
                     100.0 * coverage,
-                    (cell.z_square_sum / f64::from(cell.stated)).sqrt(),
                     cell.stated
                 )?,
-                None if cell.without_u > 0 => write!(out, " no u ({}) |", cell.without_u)?,
-                None => write!(out, " no estimate |")?,
+                _ if cell.without_u > 0 => write!(out, " no u ({}) |", cell.without_u)?,
+                _ => write!(out, " no estimate |")?,
             }
         }
         writeln!(out)?;

@@ -24,7 +24,7 @@ fn two_u_covers_95_percent_of_the_firmware_methods_errors() {
                 continue;
             }
             let coverage = cell.coverage().unwrap();
-            let rms_z = (cell.z_square_sum / f64::from(cell.stated)).sqrt();
+            let rms_z = cell.rms_z().unwrap();
             assert!(cell.stated >= 590, "{} dB {t} ms: {cell:?}", row.snr_db);
             // The goal is 95 % ± 3 %; `study coverage --runs 1000 --seed 1` measures
             // 92.1-95.6 % (RMS error/u 0.98-1.15: u is still slightly small). This test
@@ -204,7 +204,7 @@ fn the_colour_over_24_lags_holds_the_rigs_noise_late_in_a_drop() {
                 continue;
             }
             let coverage = cell.coverage().unwrap();
-            let rms_z = (cell.z_square_sum / f64::from(cell.stated)).sqrt();
+            let rms_z = cell.rms_z().unwrap();
             assert!(
                 (0.92..=0.98).contains(&coverage) && rms_z <= 1.05,
                 "{} dB {t} ms: {:.1} % (rms z {rms_z:.2})",
