@@ -48,7 +48,10 @@ pub use estimators::iv::{
     max_instrument_delay, IvConfig, IvStepEstimator, DEFAULT_MIN_IDENTIFIABILITY,
 };
 pub use estimators::metered_noise::MIN_METERED_BLOCKS;
-pub use estimators::model::{InitialState, ModelBank, ModelConfig, ModelEstimator, SensorModel};
+pub use estimators::model::{
+    InitialState, Interpolation, ModelBank, ModelConfig, ModelEstimator, SensorModel,
+    WHITENING_ORDER,
+};
 pub use estimators::noise_meter::{
     Autocovariance, AutocovarianceMeter, AutocovarianceSums, NoiseMeter, AUTOCOVARIANCE_LAGS,
 };

@@ -164,8 +164,8 @@ pub enum ConfigError {
     /// A field of the weighing decisions' configuration (`ScaleConfig`, named here) is NaN,
     /// infinite where it must be finite, negative, or zero where it must be positive.
     ScaleField(&'static str),
-    /// A field of a baseline's pre-filter (named here: the cell's mode, the placed pair, the
-    /// delay line's capacity) is out of its domain.
+    /// A field of a pre-filter (named here: a baseline's cell mode, placed pair or delay
+    /// line's capacity; a model bank's whitening order) is out of its domain.
     Filter(&'static str),
 }
 

@@ -577,6 +577,8 @@ pub fn method_spec(config: &WeighingConfig, precision: Precision) -> Method {
                 damping_ratio: config.model.damping_ratio,
                 filter_cutoff_hz: config.model.filter_cutoff_hz,
             }),
+            interpolation: Default::default(),
+            whitening: 0,
         }),
     }
 }

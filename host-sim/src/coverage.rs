@@ -11,7 +11,8 @@
 //! The noise runs before the landing ([`PRE_ROLL_S`] of empty pan): a scene's vibration
 //! started with the load made its first 100 ms unlike any real pan's (the shipped `u` then
 //! looked over-cautious where, with the vibration already running, it was over-confident).
-//! A step method's `u` rests on the empty pan's noise colour, metered over [`METERING_S`]
+//! A step method's `u` (and a whitening model bank's fit) rests on the empty pan's noise
+//! colour, metered over [`METERING_S`]
 //! of the same scene's empty pan (another seed), as the scale meters its pan whenever it
 //! is empty and at rest (`estimator_core::AutocovarianceMeter`).
 
@@ -53,9 +54,30 @@ pub struct Cell {
     pub without_u: u32,
     /// Sum of (error/u)² over the stated runs (an RMS z of 1 is a calibrated `u`).
     pub z_square_sum: f64,
+    /// Sum of error² over the stated runs (the estimate's unit², grams for the scale).
+    pub error_square_sum: f64,
+    /// Sum of u² over the stated runs.
+    pub u_square_sum: f64,
+    /// Stated runs whose error lies beyond ±4u: the tail a coverage near 95 % can hide.
+    pub beyond_4u: u32,
+    /// Of those, beyond ±5u.
+    pub beyond_5u: u32,
 }
 
 impl Cell {
+    /// Count a reading of `estimate` with its `u` against the truth `mass`.
+    pub fn record(&mut self, estimate: f64, u: f64, mass: f64) {
+        let error = estimate - mass;
+        let z = error / u;
+        self.stated += 1;
+        self.covered += u32::from(z.abs() <= 2.0);
+        self.z_square_sum += z * z;
+        self.error_square_sum += error * error;
+        self.u_square_sum += u * u;
+        self.beyond_4u += u32::from(z.abs() > 4.0);
+        self.beyond_5u += u32::from(z.abs() > 5.0);
+    }
+
     /// The covered fraction, `None` without stated runs.
     pub fn coverage(&self) -> Option<f64> {
         (self.stated > 0).then(|| f64::from(self.covered) / f64::from(self.stated))
@@ -65,6 +87,17 @@ impl Cell {
     /// stated runs.
     pub fn rms_z(&self) -> Option<f64> {
         (self.stated > 0).then(|| (self.z_square_sum / f64::from(self.stated)).sqrt())
+    }
+
+    /// The RMS error and the RMS `u` over the stated runs, `None` without stated runs.
+    pub fn rms_error_and_u(&self) -> Option<(f64, f64)> {
+        let runs = f64::from(self.stated);
+        (self.stated > 0).then(|| {
+            (
+                (self.error_square_sum / runs).sqrt(),
+                (self.u_square_sum / runs).sqrt(),
+            )
+        })
     }
 
     /// The half-width of the 95 % Monte Carlo band around a true 95 % coverage.
@@ -77,6 +110,10 @@ impl Cell {
         self.covered += other.covered;
         self.without_u += other.without_u;
         self.z_square_sum += other.z_square_sum;
+        self.error_square_sum += other.error_square_sum;
+        self.u_square_sum += other.u_square_sum;
+        self.beyond_4u += other.beyond_4u;
+        self.beyond_5u += other.beyond_5u;
     }
 }
 
@@ -180,12 +217,7 @@ fn one_run(
         if let Some(i) = TIMES_MS.iter().position(|&t| samples_at(t, rate_hz) == k) {
             let cell = &mut cells[i];
             match (reading.estimate, reading.uncertainty) {
-                (Some(estimate), Some(u)) => {
-                    let z = (estimate - mass_g) / u;
-                    cell.stated += 1;
-                    cell.covered += u32::from(z.abs() <= 2.0);
-                    cell.z_square_sum += z * z;
-                }
+                (Some(estimate), Some(u)) => cell.record(estimate, u, mass_g),
                 (Some(_), None) => cell.without_u += 1,
                 (None, _) => {}
             }
@@ -211,6 +243,9 @@ pub fn prepared(
     let metered = match (method, colour) {
         (Method::Step(setup), Colour::Metered) => {
             metered_autocovariance(&scene, setup.decimation, seed)
+        }
+        (Method::Model(spec), Colour::Metered) if spec.whitening > 0 => {
+            metered_autocovariance(&scene, spec.decimation, seed)
         }
         _ => None,
     };
@@ -249,10 +284,40 @@ fn samples_at(ms: u32, rate_hz: f64) -> u64 {
     (f64::from(ms) * 1e-3 * rate_hz).round() as u64
 }
 
-/// The table: coverage in % with the stated runs, RMS z, per SNR and time.
-pub fn write_markdown(rows: &[SnrRow], header: &str, out: &mut impl Write) -> Result<()> {
-    writeln!(out, "{header}")?;
+/// The diagnostic table (`study coverage --diagnose`): per SNR and time, the RMS error and
+/// the RMS `u` (in the estimate's unit) over the runs that stated `u`, and how many of
+/// those lay beyond ±4u and ±5u.
+pub fn write_diagnostics(
+    rows: &[SnrRow],
+    unit: &str,
+    out: &mut (impl Write + ?Sized),
+) -> Result<()> {
     writeln!(out)?;
+    write_columns(out)?;
+    for row in rows {
+        write!(out, "| {} dB |", row.snr_db)?;
+        for cell in &row.cells {
+            match cell.rms_error_and_u() {
+                Some((error, u)) => write!(
+                    out,
+                    " error {error:.2e}, u {u:.2e}; >4u {}, >5u {} |",
+                    cell.beyond_4u, cell.beyond_5u
+                )?,
+                None => write!(out, " |")?,
+            }
+        }
+        writeln!(out)?;
+    }
+    writeln!(out)?;
+    writeln!(
+        out,
+        "Each cell: the RMS error and the RMS `u` ({unit}) over the runs that stated `u`, and how many of them lay beyond ±4u and ±5u."
+    )?;
+    Ok(())
+}
+
+/// A table's header: the SNR, then one column per readout time.
+fn write_columns(out: &mut (impl Write + ?Sized)) -> Result<()> {
     write!(out, "| SNR |")?;
     for t in TIMES_MS {
         write!(out, " {t} ms |")?;
@@ -263,6 +328,14 @@ pub fn write_markdown(rows: &[SnrRow], header: &str, out: &mut impl Write) -> Re
         write!(out, "---|")?;
     }
     writeln!(out)?;
+    Ok(())
+}
+
+/// The table: coverage in % with the stated runs, RMS z, per SNR and time.
+pub fn write_markdown(rows: &[SnrRow], header: &str, out: &mut impl Write) -> Result<()> {
+    writeln!(out, "{header}")?;
+    writeln!(out)?;
+    write_columns(out)?;
     for row in rows {
         write!(out, "| {} dB |", row.snr_db)?;
         for cell in &row.cells {
@@ -308,4 +381,30 @@ pub fn write_markdown(rows: &[SnrRow], header: &str, out: &mut impl Write) -> Re
         fewest
     )?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Cell;
+
+    /// A cell counts what `study coverage --diagnose` prints: the RMS error and `u`, and
+    /// the readings beyond ±4u and ±5u.
+    #[test]
+    fn a_cell_counts_the_tail_and_the_rms() {
+        let mut cell = Cell::default();
+        for (estimate, u) in [(1.015, 0.01), (0.965, 0.01), (1.045, 0.01), (1.06, 0.01)] {
+            cell.record(estimate, u, 1.0);
+        }
+        assert_eq!((cell.stated, cell.covered), (4, 1));
+        assert_eq!((cell.beyond_4u, cell.beyond_5u), (2, 1));
+        let (error, u) = cell.rms_error_and_u().unwrap();
+        let squares = [0.015f64, 0.035, 0.045, 0.06].map(|e| e * e);
+        let expected = (squares.iter().sum::<f64>() / 4.0).sqrt();
+        assert!(
+            (error - expected).abs() < 1e-12,
+            "{error} against {expected}"
+        );
+        assert!((u - 0.01).abs() < 1e-12, "{u}");
+        assert_eq!(Cell::default().rms_error_and_u(), None);
+    }
 }

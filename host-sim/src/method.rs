@@ -4,7 +4,7 @@
 //! ```text
 //! step:n=7,D=16[,lambda=0.999][,precision=f32]     the data-driven estimator (also bare: n=7,D=16)
 //! covariance:n=7,D=16[,lambda=..][,precision=..][,prior=1e-6]   textbook covariance RLS (reference)
-//! model[:D=8][,K=33][,span=0.7-1.3][,cal_g=200][,precision=..]  ModelBank over candidate resonances
+//! model[:D=8][,K=33][,span=0.7-1.3][,cal_g=200][,interp=3][,whiten=0][,precision=..]  ModelBank over candidate resonances
 //! settled[:block=80][,K=10][,band_g=0.5][,precision=..]          wait until stable, then average
 //! moving[:block=80][,K=10][,band_g=0.5][,precision=..]           boxcar mean while stable
 //! compensated:fn_hz=25,zeta=0.03[,ratio=2][,placed_zeta=1][,average=moving][,block..]  pole-zero compensation first
@@ -14,6 +14,12 @@
 //! bc:n=7,D=16[,lambda=..][,noise_var=..][,precision=..]         bias-compensated LS, σ² from the tare
 //! model:D=8,K=33,span=0.68-1.3,fn_hz=25.0,zeta=0.03[,filter_hz=100]  bank on an identified model
 //! ```
+//!
+//! A bank's `interp` is how it combines the candidates around its best fit: 3 (the parabola
+//! through three, the default) or 5 (the quartic through five, `estimator_core::Interpolation`);
+//! `whiten=P` (0, the default: never) fits its block means whitened by the order-`P`
+//! prediction-error filter of the empty pan's metered colour when the context holds one
+//! (`ModelBank::set_noise_autocovariance`; `study coverage` meters it for such a bank).
 //!
 //! A spec is checked when it is parsed: an unknown method, key or value is an error that
 //! names the spec, the key and what was expected. Building a method gives a boxed
@@ -65,9 +71,9 @@ use estimator_core::weighing::UNCERTAINTY_ORDERS;
 use estimator_core::{
     max_instrument_delay, Autocovariance, Baseline, BaselineConfig, BaselineMode,
     BiasCompensatedConfig, BiasCompensatedStepEstimator, CovarianceStepEstimator, Estimator,
-    InitialState, IvConfig, IvStepEstimator, ModelBank, ModelConfig, NoiseMeter, NoiseReference,
-    Prefilter, RampConfig, RampEstimator, Reading, Real, SensorModel, ShaperKind, StepConfig,
-    StepEstimator, Unfiltered, MAX_DECIMATION,
+    InitialState, Interpolation, IvConfig, IvStepEstimator, ModelBank, ModelConfig, NoiseMeter,
+    NoiseReference, Prefilter, RampConfig, RampEstimator, Reading, Real, SensorModel, ShaperKind,
+    StepConfig, StepEstimator, Unfiltered, MAX_DECIMATION,
 };
 
 mod filtered;
@@ -104,6 +110,11 @@ pub struct ModelSpec {
     pub precision: Precision,
     /// The model identified at calibration; `None`: the true model (host-sim's own chain).
     pub identified: Option<IdentifiedModel>,
+    /// How the bank combines the candidates around its best fit (`interp=3|5`).
+    pub interpolation: Interpolation,
+    /// The order of the prediction-error filter that whitens the block means once a noise
+    /// colour is known (`whiten=P`; 0: never).
+    pub whitening: usize,
 }
 
 /// The identified mechanical mode a `model` bank is built from (the spec's `fn_hz`, `zeta`,
@@ -129,6 +140,8 @@ impl Default for ModelSpec {
             calibration_g: 200.0,
             precision: Precision::F64,
             identified: None,
+            interpolation: Interpolation::ThreePoint,
+            whitening: 0,
         }
     }
 }
@@ -490,6 +503,10 @@ fn build_model<T: Real + Send + 'static>(
     context: &BuildContext,
 ) -> Result<Box<dyn Estimator<T> + Send>> {
     let reference = context.noise_reference::<T>();
+    let colour = context.noise_autocovariance.map(|metered| Autocovariance {
+        lags: metered.lags.map(T::from_f64),
+        blocks: metered.blocks,
+    });
     if let Some(identified) = &spec.identified {
         let model = LoadCellModel {
             natural_frequency_hz: identified.natural_frequency_hz,
@@ -499,13 +516,7 @@ fn build_model<T: Real + Send + 'static>(
             counts_per_gram: context.gain,
             sample_rate_hz: context.chain.sample_rate_hz,
         };
-        return identified_bank::<T>(
-            &model,
-            spec.candidates,
-            spec.span,
-            spec.decimation,
-            reference,
-        );
+        return identified_bank::<T>(&model, spec, reference, colour.as_ref());
     }
     let (valid_min, valid_max) = context
         .valid_range
@@ -523,7 +534,12 @@ fn build_model<T: Real + Send + 'static>(
                 }
             })
             .collect();
-    model_bank::<T>(&configs)
+    model_bank::<T>(
+        &configs,
+        spec.interpolation,
+        spec.whitening,
+        colour.as_ref(),
+    )
 }
 
 /// The raw-rate noise variance (raw units²) that `NoiseMeter` measures over an empty-pan
@@ -603,6 +619,9 @@ fn baseline<T: Real + Send + 'static, F: Prefilter<T> + Send + 'static>(
 
 fn model_bank<T: Real + Send + 'static>(
     configs: &[ModelConfig<T, STATES>],
+    interpolation: Interpolation,
+    whitening: usize,
+    colour: Option<&Autocovariance<T>>,
 ) -> Result<Box<dyn Estimator<T> + Send>> {
     let core = |e: estimator_core::ConfigError| anyhow!("{e}");
     Ok(dispatch_const!(
@@ -611,22 +630,29 @@ fn model_bank<T: Real + Send + 'static>(
         "candidate count K",
         |K| {
             let array: [ModelConfig<T, STATES>; K] = core::array::from_fn(|i| configs[i]);
-            Box::new(ModelBank::<T, STATES, K>::new(array).map_err(core)?)
+            let mut bank = ModelBank::<T, STATES, K>::new(array)
+                .map_err(core)?
+                .with_interpolation(interpolation)
+                .with_whitening(whitening)
+                .map_err(core)?;
+            bank.set_noise_autocovariance(colour).map_err(core)?;
+            Box::new(bank)
         }
     ))
 }
 
-/// The core's physical bank of `candidates` models over `span` from an identified model.
+/// The core's physical bank of the spec's candidates over its span from an identified
+/// model.
 fn identified_bank<T: Real + Send + 'static>(
     model: &LoadCellModel,
-    candidates: usize,
-    span: (f64, f64),
-    decimation: u16,
+    spec: &ModelSpec,
     noise_reference: Option<NoiseReference<T>>,
+    colour: Option<&Autocovariance<T>>,
 ) -> Result<Box<dyn Estimator<T> + Send>> {
     let core = |e: estimator_core::ConfigError| anyhow!("{e}");
+    let (span, decimation) = (spec.span, spec.decimation);
     Ok(dispatch_const!(
-        candidates,
+        spec.candidates,
         [1, 3, 5, 9, 17, 33, 65],
         "candidate count K",
         |K| {
@@ -637,7 +663,13 @@ fn identified_bank<T: Real + Send + 'static>(
                     Some(reference) => config.with_noise_reference(reference),
                     None => config,
                 });
-            Box::new(ModelBank::<T, STATES, K>::new(configs).map_err(core)?)
+            let mut bank = ModelBank::<T, STATES, K>::new(configs)
+                .map_err(core)?
+                .with_interpolation(spec.interpolation)
+                .with_whitening(spec.whitening)
+                .map_err(core)?;
+            bank.set_noise_autocovariance(colour).map_err(core)?;
+            Box::new(bank)
         }
     ))
 }
@@ -736,6 +768,8 @@ struct Fields {
     lag_s: Option<f64>,
     count: Option<usize>,
     span: Option<(f64, f64)>,
+    interpolation: Option<Interpolation>,
+    whitening: Option<usize>,
     calibration_g: Option<f64>,
     block: Option<u16>,
     band_g: Option<f64>,
@@ -846,6 +880,23 @@ impl Fields {
             "span" => {
                 self.span = Some(span(value, &bad)?);
                 "span"
+            }
+            "interp" => {
+                self.interpolation = Some(match value {
+                    "3" => Interpolation::ThreePoint,
+                    "5" => Interpolation::FivePoint,
+                    _ => return Err(bad("3 or 5 (the candidates interpolated through)")),
+                });
+                "interp"
+            }
+            "whiten" => {
+                let expected = format!(
+                    "the whitening filter's order, 0 to {}",
+                    estimator_core::WHITENING_ORDER
+                );
+                let within = |order: usize| order <= estimator_core::WHITENING_ORDER;
+                self.whitening = Some(checked(value, &expected, within, &bad)?);
+                "whiten"
             }
             "block" => {
                 let expected = "raw samples per block, 1 to 65535";
@@ -967,6 +1018,8 @@ impl Fields {
                 "D",
                 "K",
                 "span",
+                "interp",
+                "whiten",
                 "cal_g",
                 "precision",
                 "fn_hz",
@@ -1002,6 +1055,8 @@ impl Fields {
             calibration_g: self.calibration_g.unwrap_or(default.calibration_g),
             precision: self.precision.unwrap_or(default.precision),
             identified,
+            interpolation: self.interpolation.unwrap_or(default.interpolation),
+            whitening: self.whitening.unwrap_or(default.whitening),
         })
     }
 
@@ -1219,6 +1274,12 @@ impl fmt::Display for Method {
                     }
                     None => write!(f, ",cal_g={}", spec.calibration_g)?,
                 }
+                if spec.interpolation == Interpolation::FivePoint {
+                    f.write_str(",interp=5")?;
+                }
+                if spec.whitening > 0 {
+                    write!(f, ",whiten={}", spec.whitening)?;
+                }
                 write_precision(f, spec.precision)
             }
             Method::BiasCompensated {
@@ -1284,6 +1345,9 @@ mod tests {
             "bc:n=3,D=16,noise_var=1049.25",
             "bc:n=3,D=16,lambda=0.99",
             "model:D=8,K=33,span=0.68-1.3,fn_hz=25.00031,zeta=0.030001",
+            "model:D=8,K=65,span=0.84-1.15,fn_hz=25,zeta=0.03,interp=5,precision=f32",
+            "model:D=8,K=33,span=0.7-1.3,cal_g=200,interp=5",
+            "model:D=8,K=33,span=0.68-1.3,fn_hz=25,zeta=0.03,interp=5,whiten=32,precision=f32",
             "model:D=4,K=9,span=0.9-1.1,fn_hz=20,zeta=0.05,filter_hz=50,precision=f32",
             "iv:n=7,D=16",
             "iv:n=5,D=1,lambda=0.999,precision=f32,delay=11",
@@ -1330,8 +1394,13 @@ mod tests {
             ("model:span=1.3-0.7", ["`span`", "0 < low < high"]),
             (
                 "model:n=7",
-                ["`n`", "expected D, K, span, cal_g, precision"],
+                [
+                    "`n`",
+                    "expected D, K, span, interp, whiten, cal_g, precision",
+                ],
             ),
+            ("model:D=8,interp=4", ["`interp`", "3 or 5"]),
+            ("model:D=8,whiten=33", ["`whiten`", "0 to 32"]),
             ("settled:band_g=-1", ["`band_g`", "positive"]),
             ("moving:K=7", ["`K`", "block means kept"]),
             ("step:n=7,n=5", ["`n`", "twice"]),

@@ -83,6 +83,8 @@ pub fn identified_bank(config: &WeighingConfig, precision: Precision) -> Method 
             damping_ratio: config.model.damping_ratio,
             filter_cutoff_hz: config.model.filter_cutoff_hz,
         }),
+        interpolation: Default::default(),
+        whitening: 0,
     })
 }
 

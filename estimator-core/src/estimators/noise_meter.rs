@@ -66,6 +66,50 @@ impl<T: Real> Autocovariance<T> {
             Err(ConfigError::NoiseReference)
         }
     }
+
+    /// The prediction-error filter of order `order` (Levinson–Durbin on lags `0..=order`):
+    /// `φ` with `y_m − Σ_i φ_i·y_{m−i}` (`φ_i` at `i − 1`, zero beyond the order) white for
+    /// an autoregressive noise of that order. `None` where a reflection coefficient is not
+    /// within (−1, 1) (lags no stationary noise has, or an arithmetic that lost them) or the
+    /// order exceeds the lags kept.
+    pub fn prediction_filter(&self, order: usize) -> Option<[T; AUTOCOVARIANCE_LAGS]> {
+        if order > AUTOCOVARIANCE_LAGS {
+            return None;
+        }
+        let mut phi = [T::ZERO; AUTOCOVARIANCE_LAGS];
+        let mut error = self.lags[0];
+        for k in 1..=order {
+            if !levinson_step(&self.lags, &mut phi, &mut error, k) {
+                return None;
+            }
+        }
+        (error > T::ZERO).then_some(phi)
+    }
+}
+
+/// One step of the Levinson–Durbin recursion: the prediction-error filter `φ` of order
+/// `k − 1` (`φ_i` at `i − 1`) and its error variance become those of order `k`, from the
+/// autocovariance `gamma` (lags `0..=k`). `false` (and both left as they were) where the
+/// reflection coefficient is not within (−1, 1).
+pub(crate) fn levinson_step<T: Real>(gamma: &[T], phi: &mut [T], error: &mut T, k: usize) -> bool {
+    let mut acc = gamma[k];
+    for i in 1..k {
+        acc -= phi[i - 1] * gamma[k - i];
+    }
+    let reflection = acc / *error;
+    if !(reflection.abs() < T::ONE) {
+        return false;
+    }
+    for i in 1..=k / 2 {
+        let (low, high) = (phi[i - 1], phi[k - i - 1]);
+        phi[i - 1] = low - reflection * high;
+        if k - i != i {
+            phi[k - i - 1] = high - reflection * low;
+        }
+    }
+    phi[k - 1] = reflection;
+    *error *= T::ONE - reflection * reflection;
+    true
 }
 
 /// The sums behind an [`Autocovariance`]: per lag, `Σ x_k·x_{k−l}`, `Σ x_k`, `Σ x_{k−l}` and
@@ -376,6 +420,30 @@ impl<T: Real> NoiseMeter<T> {
 
 #[cfg(test)]
 mod tests {
+    /// Levinson–Durbin on an AR(1)'s lags (γ(l) = ρ^l) finds the AR(1): φ = [ρ, 0, …] at
+    /// every order; lags no stationary noise has (a reflection of 1) give no filter.
+    #[test]
+    fn the_prediction_filter_of_an_ar1_is_its_coefficient() {
+        let ar1 = Autocovariance {
+            lags: core::array::from_fn(|l| 4.0 * libm::pow(0.7, l as f64)),
+            blocks: 1,
+        };
+        for order in [1, 2, 8, AUTOCOVARIANCE_LAGS] {
+            let phi = ar1.prediction_filter(order).unwrap();
+            assert!((phi[0] - 0.7).abs() < 1e-12, "order {order}: {phi:?}");
+            assert!(
+                phi[1..].iter().all(|v| v.abs() < 1e-12),
+                "order {order}: {phi:?}"
+            );
+        }
+        let constant = Autocovariance {
+            lags: [4.0; AUTOCOVARIANCE_LAGS + 1],
+            blocks: 1,
+        };
+        assert_eq!(constant.prediction_filter(2), None);
+        assert_eq!(ar1.prediction_filter(AUTOCOVARIANCE_LAGS + 1), None);
+    }
+
     use super::*;
     use crate::weighing::test_scene::unit_noise;
 

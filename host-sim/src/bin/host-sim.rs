@@ -444,6 +444,10 @@ struct StudyArgs {
     /// not metered (as a scale runs it before 3,000 block means of its empty pan).
     #[arg(long)]
     unmetered: bool,
+    /// Coverage: also the RMS error and RMS `u` per cell and the runs beyond ±4u and ±5u
+    /// (`coverage-diagnostics.md`, and printed).
+    #[arg(long)]
+    diagnose: bool,
     /// Where the CSV, the markdown table and the charts go.
     #[arg(long, default_value = "host-sim/charts")]
     out: PathBuf,
@@ -870,6 +874,11 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
     };
     let path = args.out.join("coverage.md");
     let mut file = create(&path)?;
+    let mut diagnostics = if args.diagnose {
+        Some(create(&args.out.join("coverage-diagnostics.md"))?)
+    } else {
+        None
+    };
     let stdout = std::io::stdout();
     let mut charts = Vec::new();
     for scene in &scenes {
@@ -914,6 +923,10 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
                     "; its `u` on the empty pan's noise colour, metered over {:.0} s",
                     host_sim::coverage::METERING_S
                 ),
+                Method::Model(spec) if spec.whitening > 0 && !args.unmetered => format!(
+                    "; its block means whitened by the empty pan's noise colour, metered over {:.0} s",
+                    host_sim::coverage::METERING_S
+                ),
                 _ => String::new(),
             };
             let header = format!(
@@ -925,6 +938,9 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
             host_sim::coverage::write_markdown(&rows, &header, &mut file)?;
             println!();
             writeln!(file)?;
+            if let Some(diagnostics) = diagnostics.as_mut() {
+                diagnose(&rows, &header, diagnostics)?;
+            }
         }
     }
     file.flush()?;
@@ -934,7 +950,14 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
         charts.join(", ")
     );
     if defaults {
-        scale_coverage(&scenes, runs, args.seed, &snr_db, &mut file)?;
+        scale_coverage(
+            &scenes,
+            runs,
+            args.seed,
+            &snr_db,
+            &mut file,
+            diagnostics.as_mut(),
+        )?;
         file.flush()?;
         time_to_final(&methods, runs, args.seed, &snr_db, &args.out)?;
     }
@@ -949,6 +972,7 @@ fn scale_coverage(
     seed: u64,
     snr_db: &[f64],
     file: &mut impl Write,
+    mut diagnostics: Option<&mut BufWriter<File>>,
 ) -> Result<()> {
     use host_sim::coverage::scale::{self, Pan};
     for scene in scenes {
@@ -969,7 +993,26 @@ fn scale_coverage(
             scale::write_markdown(&rows, &header, file)?;
             println!();
             writeln!(file)?;
+            if let Some(diagnostics) = diagnostics.as_deref_mut() {
+                let cells: Vec<_> = rows.iter().map(|row| row.row.clone()).collect();
+                diagnose(&cells, &header, diagnostics)?;
+            }
         }
+    }
+    Ok(())
+}
+
+/// `study coverage --diagnose`: the diagnostic table of one coverage table, printed and
+/// written to `coverage-diagnostics.md`.
+fn diagnose(
+    rows: &[host_sim::coverage::SnrRow],
+    header: &str,
+    file: &mut BufWriter<File>,
+) -> Result<()> {
+    for out in [&mut std::io::stdout().lock() as &mut dyn Write, file] {
+        writeln!(out, "Diagnostics of: {header}")?;
+        host_sim::coverage::write_diagnostics(rows, "g", out)?;
+        writeln!(out)?;
     }
     Ok(())
 }

@@ -148,12 +148,7 @@ fn one_run(scene: &Scene, mut scale: Box<ConfiguredScale>, seed: u64) -> (Vec<Ce
         {
             let cell = &mut cells[i];
             match (reading.mass_g, reading.uncertainty_g) {
-                (Some(mass), Some(u)) => {
-                    let z = (f64::from(mass) - mass_g) / f64::from(u);
-                    cell.stated += 1;
-                    cell.covered += u32::from(z.abs() <= 2.0);
-                    cell.z_square_sum += z * z;
-                }
+                (Some(mass), Some(u)) => cell.record(f64::from(mass), f64::from(u), mass_g),
                 (Some(_), _) => cell.without_u += 1,
                 (None, _) => {}
             }
