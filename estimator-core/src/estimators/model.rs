@@ -817,10 +817,10 @@ pub struct ModelBank<T: Real, const S: usize, const K: usize> {
     /// The order `P` of the prediction-error filter the block means are whitened with once
     /// a noise colour is set (0: never; see [`Self::with_whitening`]).
     whitening_order: usize,
-    /// The filter of the empty pan's metered noise colour (its first `P` entries), taken at
-    /// the next reset (see [`Self::set_noise_autocovariance`]); and the one of this run,
-    /// with its last block means (the newest at `(next + P − 1) mod P`) and how many it
-    /// holds.
+    /// The empty pan's metered noise colour the block means are whitened with (its lags to
+    /// the filter's order, and the full filter's prediction error), taken at the next reset
+    /// (see [`Self::set_noise_autocovariance`]); and the one of this run, with its last
+    /// block means (the newest at `(next + P − 1) mod P`) and how many it holds.
     whitening: Option<Whitening<T>>,
     run_whitening: Option<Whitening<T>>,
     history: [T; WHITENING_ORDER],
