@@ -568,6 +568,9 @@ impl<T: Real, const S: usize> ModelEstimator<T, S> {
     /// and scaled by `scale`; its row is the same filter over the rows of blocks `0..=m`,
     /// replayed from the run's first block, and scaled alike. The run's propagated row
     /// (`state_row`, the whitened row of block `P`) is left for block `P` on.
+    // Not inlined: the first `P` blocks of a whitened run only; inlined into the bank's
+    // loop over its candidates it would cost every block of every run.
+    #[inline(never)]
     fn update_replayed(&mut self, y: T, filter: &[T], scale: T) {
         let had_estimate = self.intake.estimate().is_some();
         let order = filter.len();
@@ -1453,6 +1456,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     /// through the five at the minimum of the quartic through their residual sums, and the
     /// residual sum's curvature and the estimate's slope there (per grid step). `None`
     /// otherwise, or where the quartic has no minimum within a grid step of the best.
+    #[inline(never)]
     fn five_point(&self, best: usize) -> Option<(T, Option<T>, T, T)> {
         let step = 2 * self.stride;
         if self.interpolation != Interpolation::FivePoint
