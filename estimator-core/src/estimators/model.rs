@@ -1124,22 +1124,16 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
         let order = self.whitening_order;
         let metered =
             autocovariance.filter(|a| K >= 3 && order > 0 && a.blocks >= MIN_METERED_BLOCKS);
-        let filter = metered.and_then(|a| a.prediction_filter(order));
+        let prediction = metered.and_then(|a| a.prediction(order));
         let whitened = self.models.iter_mut().all(|model| {
             model
                 .block
-                .whitened_start(filter.as_ref().map(|f| &f[..order]))
+                .whitened_start(prediction.as_ref().map(|(f, _)| &f[..order]))
         });
-        self.whitening = match (metered, filter) {
-            (Some(metered), Some(_)) if whitened => {
+        self.whitening = match (metered, prediction) {
+            (Some(metered), Some((_, error))) if whitened => {
                 let mut lags = [T::ZERO; WHITENING_ORDER + 1];
                 lags[..=order].copy_from_slice(&metered.lags[..=order]);
-                // The full filter's prediction error, as `prediction_filter` reached it.
-                let mut error = lags[0];
-                let mut phi = [T::ZERO; WHITENING_ORDER];
-                for k in 1..=order {
-                    levinson_step(&lags, &mut phi, &mut error, k);
-                }
                 Some(Whitening { lags, error })
             }
             _ => None,

@@ -73,6 +73,12 @@ impl<T: Real> Autocovariance<T> {
     /// within (−1, 1) (lags no stationary noise has, or an arithmetic that lost them) or the
     /// order exceeds the lags kept.
     pub fn prediction_filter(&self, order: usize) -> Option<[T; AUTOCOVARIANCE_LAGS]> {
+        self.prediction(order).map(|(phi, _)| phi)
+    }
+
+    /// [`Self::prediction_filter`] and the one-step prediction's error variance at that
+    /// order.
+    pub(crate) fn prediction(&self, order: usize) -> Option<([T; AUTOCOVARIANCE_LAGS], T)> {
         if order > AUTOCOVARIANCE_LAGS {
             return None;
         }
@@ -83,7 +89,7 @@ impl<T: Real> Autocovariance<T> {
                 return None;
             }
         }
-        (error > T::ZERO).then_some(phi)
+        (error > T::ZERO).then_some((phi, error))
     }
 }
 
