@@ -479,7 +479,9 @@ enum StudyKind {
     /// The stability map of every estimator.
     Stability,
     /// Whether the stated uncertainty holds: the share of runs within ±2u, per SNR and
-    /// readout time, for the firmware's method (or each `--method`).
+    /// readout time, for the firmware's method, the firmware's bank on the identified model
+    /// and that bank calibrated for its `u` (K = 65, five points, whitened) (or each
+    /// `--method`).
     Coverage,
 }
 
@@ -857,7 +859,11 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
     let defaults = args.methods.is_empty();
     let methods = if args.methods.is_empty() {
         let (firmware, config) = study::firmware_default()?;
-        vec![firmware, study::identified_bank(&config, Precision::F32)]
+        vec![
+            firmware,
+            study::identified_bank(&config, Precision::F32),
+            study::calibrated_bank(&config, Precision::F32),
+        ]
     } else {
         args.methods
     };
@@ -906,9 +912,13 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
                     format!("coverage-{stem}-firmware"),
                     format!("firmware `{method}`"),
                 ),
-                (true, _) => (
+                (true, 1) => (
                     format!("coverage-{stem}-bank"),
                     "identified-model bank (f32)".to_string(),
+                ),
+                (true, _) => (
+                    format!("coverage-{stem}-calibrated-bank"),
+                    "calibrated bank: K = 65, five points, whitened (f32)".to_string(),
                 ),
                 (false, _) => (format!("coverage-{stem}-{m}"), format!("`{method}`")),
             };
