@@ -1029,8 +1029,9 @@ fn diagnose(
 
 /// The time to a final reading on the reference drop, against the fixed 100 ms readout,
 /// of the firmware default (its `u` on the metered colour, and before it is metered) and
-/// the identified-model bank: `time-to-final.md` (a table for each) and a chart for each
-/// (`time-to-final`, `time-to-final-unmetered`, `time-to-final-bank`).
+/// the identified-model bank and that bank calibrated for its `u`: `time-to-final.md` (a
+/// table for each) and a chart for each (`time-to-final`, `time-to-final-unmetered`,
+/// `time-to-final-bank`, `time-to-final-calibrated-bank`).
 fn time_to_final(
     methods: &[Method],
     runs: usize,
@@ -1049,7 +1050,7 @@ fn time_to_final(
     let mut file = create(&path)?;
     let mut charts = Vec::new();
     // The firmware default with its `u` on the metered colour and before it is metered
-    // (the scale's first 18 s of empty pan), then the bank.
+    // (the scale's first 18 s of empty pan), then the banks.
     use host_sim::coverage::Colour;
     let mut runs_of = vec![
         (
@@ -1073,6 +1074,14 @@ fn time_to_final(
             "identified-model bank",
         ));
     }
+    if let Some(&calibrated) = methods.get(2) {
+        runs_of.push((
+            calibrated,
+            Colour::Metered,
+            "time-to-final-calibrated-bank",
+            "calibrated bank (K = 65, five points, whitened)",
+        ));
+    }
     for (m, (method, colour, name, label)) in runs_of.into_iter().enumerate() {
         let rows = final_time::study(
             "reference-step",
@@ -1092,6 +1101,11 @@ fn time_to_final(
             (Method::Step(_), Colour::Unknown) => {
                 " (its `u` from the residuals alone, the colour not yet metered; the runs of `host-sim study speed`)".to_string()
             }
+            (Method::Model(spec), Colour::Metered) if spec.whitening > 0 => format!(
+                " (the noise running {:.0} s before the landing, its block means whitened by the empty pan's noise colour metered over {:.0} s)",
+                host_sim::coverage::PRE_ROLL_S,
+                host_sim::coverage::METERING_S
+            ),
             _ => format!(
                 " (the noise running {:.0} s before the landing)",
                 host_sim::coverage::PRE_ROLL_S
