@@ -64,8 +64,8 @@ pub type EstimatorStorage = MaybeUninit<FirmwareEstimator>;
 pub type FirmwareScale = Scale<&'static mut FirmwareEstimator>;
 
 /// Raw samples a `record` keeps: 1.25 s at 4 kHz (0.25 s before the load change, 1 s
-/// after), 20 KB. None on a board built with the model bank: its 20 KB bank and the 95 KB
-/// of stack building it take the RAM (`record` answers that it is not built there).
+/// after), 20 KB. None on a board built with the model bank: its 20 KB bank and the 93 KB
+/// of stack its boot takes fill the RAM (`record` answers that it is not built there).
 pub const RECORD_SAMPLES: usize = if config::BANK_CANDIDATES > 1 {
     0
 } else {

@@ -1020,16 +1020,20 @@ const THIN_AFTER_TERMS: usize = 32;
 /// The fewest candidates thinning leaves: the two ends and the best with both neighbours.
 const THINNED_CANDIDATES: usize = 5;
 
-impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
-    /// A bank over `K ≥ 1` ordered candidate configurations, which share the decimation
-    /// and the valid range (one block mean is one row of every candidate's regression).
-    pub fn new(configs: [ModelConfig<T, S>; K]) -> Result<Self, ConfigError> {
+/// A bank's candidate configurations, checked ([`ModelBank::new`]'s conditions): what
+/// [`ModelBank::build`] builds without failing.
+#[derive(Clone, Debug)]
+pub(crate) struct BankConfigs<T, const S: usize, const K: usize>([ModelConfig<T, S>; K]);
+
+impl<T: Real, const S: usize, const K: usize> BankConfigs<T, S, K> {
+    /// `K ≥ 1` configurations each a valid [`ModelEstimator`], sharing the decimation and
+    /// the valid range. Each candidate is checked by building it, one at a time: an array
+    /// of estimators beside the bank (20 KB for K = 33) doubled the stack a firmware needs
+    /// to build it.
+    pub(crate) fn check(configs: [ModelConfig<T, S>; K]) -> Result<Self, ConfigError> {
         let Some(shared) = configs.first() else {
             return Err(ConfigError::Model);
         };
-        // Check every candidate first, one at a time, then build the bank once: an array of
-        // options beside the bank (20 KB for K = 33) doubled the stack a firmware needs to
-        // build it. `new` is deterministic, so a candidate that passed builds again.
         for config in configs.iter() {
             ModelEstimator::new(*config)?;
             if config.decimation != shared.decimation {
@@ -1039,11 +1043,28 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
                 return Err(ConfigError::Range);
             }
         }
-        let intake = Self::shared_intake(shared);
-        let shared = SharedStates::find(&configs);
-        Ok(Self {
-            models: configs.map(|c| {
-                let mut model = ModelEstimator::new(c).expect("checked above");
+        Ok(Self(configs))
+    }
+}
+
+impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
+    /// A bank over `K ≥ 1` ordered candidate configurations, which share the decimation
+    /// and the valid range (one block mean is one row of every candidate's regression).
+    pub fn new(configs: [ModelConfig<T, S>; K]) -> Result<Self, ConfigError> {
+        Ok(Self::build(&BankConfigs::check(configs)?))
+    }
+
+    /// The bank over checked configurations: it cannot fail, so a caller can write it
+    /// where it is to live without a `Result` of it in between (each a copy of the 20 KB
+    /// of candidates on the stack of the board that builds it, `Scale::configured_in`).
+    /// `new` is deterministic, so a candidate that passed the check builds again.
+    pub(crate) fn build(configs: &BankConfigs<T, S, K>) -> Self {
+        let configs = &configs.0;
+        let intake = Self::shared_intake(&configs[0]);
+        let shared = SharedStates::find(configs);
+        Self {
+            models: core::array::from_fn(|k| {
+                let mut model = ModelEstimator::new(configs[k]).expect("checked");
                 // A single candidate is checked as a `ModelEstimator` is; a grid is not (see
                 // the type's docs).
                 model.flags_mismatch = K == 1;
@@ -1075,7 +1096,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
             held: 0,
             growing: [T::ZERO; WHITENING_ORDER],
             growing_error: T::ZERO,
-        })
+        }
     }
 
     /// The bank whitening its block means with a prediction-error filter of order `order`

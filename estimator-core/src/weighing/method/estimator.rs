@@ -1,9 +1,11 @@
 //! The configured method as one estimator: the enum the scale runs.
 
+use core::mem::MaybeUninit;
+
 use crate::estimators::bias_compensated::{BiasCompensatedConfig, BiasCompensatedStepEstimator};
 use crate::estimators::consistency::NoiseReference;
 use crate::estimators::iv::{IvConfig, IvStepEstimator};
-use crate::estimators::model::{InitialState, ModelBank};
+use crate::estimators::model::{BankConfigs, InitialState, ModelBank};
 use crate::estimators::noise_meter::Autocovariance;
 use crate::estimators::step::{StepConfig, StepEstimator};
 use crate::numerics::real::Real;
@@ -73,14 +75,7 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
     /// bias-compensated method keeps the configured noise variance: counts², which the gain
     /// does not change.
     pub fn in_counts(config: &WeighingConfig) -> Result<Self, ConfigError> {
-        config
-            .check_region()
-            .map_err(|_| ConfigError::OutsideValidRegion)?;
-        let mut in_counts = *config;
-        in_counts.counts_per_gram = 1.0;
-        in_counts.onset.rail_low = f64::NEG_INFINITY;
-        in_counts.onset.rail_high = f64::INFINITY;
-        Self::with_method(&in_counts, &config.method, 0.0)
+        Ok(Plan::in_counts(config)?.build())
     }
 
     /// Check every run after the next [`Estimator::reset`] against the noise of `reference`
@@ -127,6 +122,50 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
     /// Any method with the constants of `config` (calibration uses it to try candidates),
     /// without the valid-region check.
     pub fn with_method(
+        config: &WeighingConfig,
+        method: &WeighingMethod,
+        zero_counts: f64,
+    ) -> Result<Self, ConfigError> {
+        Ok(Plan::new(config, method, zero_counts)?.build())
+    }
+
+    /// [`Self::in_counts`] written into `storage`, where the estimator is to live: every
+    /// check is made before it is built, so no `Result` of the whole estimator (a model
+    /// bank's 20 KB of candidates) is ever on the stack ([`crate::weighing::Scale::configured_in`]).
+    pub fn in_counts_into<'a>(
+        config: &WeighingConfig,
+        storage: &'a mut MaybeUninit<Self>,
+    ) -> Result<&'a mut Self, ConfigError> {
+        let plan = Plan::in_counts(config)?;
+        Ok(storage.write(plan.build()))
+    }
+}
+
+/// The configured method checked and ready to build: the data-driven estimators built
+/// (a few KB at most), a model bank's candidate configurations checked. Building it cannot
+/// fail ([`Plan::build`]).
+enum Plan<T: Real, const N: usize, const S: usize, const K: usize> {
+    Step(StepEstimator<T, N, UNCERTAINTY_ORDERS, COLOUR_LAGS>),
+    BiasCompensated(BiasCompensatedStepEstimator<T, N>),
+    InstrumentalVariable(IvStepEstimator<T, N>),
+    ModelBank(BankConfigs<T, S, K>),
+}
+
+impl<T: Real, const N: usize, const S: usize, const K: usize> Plan<T, N, S, K> {
+    /// [`WeighingEstimator::in_counts`]'s checks and configuration.
+    fn in_counts(config: &WeighingConfig) -> Result<Self, ConfigError> {
+        config
+            .check_region()
+            .map_err(|_| ConfigError::OutsideValidRegion)?;
+        let mut in_counts = *config;
+        in_counts.counts_per_gram = 1.0;
+        in_counts.onset.rail_low = f64::NEG_INFINITY;
+        in_counts.onset.rail_high = f64::INFINITY;
+        Self::new(&in_counts, &config.method, 0.0)
+    }
+
+    /// [`WeighingEstimator::with_method`]'s checks and configuration.
+    fn new(
         config: &WeighingConfig,
         method: &WeighingMethod,
         zero_counts: f64,
@@ -182,9 +221,20 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
                         InitialState::Unknown,
                     )?
                     .map(|c| c.with_valid_range(low, high));
-                Self::ModelBank(ModelBank::new(configs)?)
+                Self::ModelBank(BankConfigs::check(configs)?)
             }
         })
+    }
+
+    /// The estimator: infallible, every check made.
+    #[inline(always)]
+    fn build(self) -> WeighingEstimator<T, N, S, K> {
+        match self {
+            Self::Step(e) => WeighingEstimator::Step(e),
+            Self::BiasCompensated(e) => WeighingEstimator::BiasCompensated(e),
+            Self::InstrumentalVariable(e) => WeighingEstimator::InstrumentalVariable(e),
+            Self::ModelBank(configs) => WeighingEstimator::ModelBank(ModelBank::build(&configs)),
+        }
     }
 }
 

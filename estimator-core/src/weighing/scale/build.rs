@@ -70,7 +70,7 @@ impl<'a, const N: usize, const S: usize, const K: usize>
         calibration: CountsScale,
     ) -> Result<Self, ConfigError> {
         let config = decisions_for(weighing)?;
-        let estimator = storage.write(WeighingEstimator::in_counts(weighing)?);
+        let estimator = WeighingEstimator::in_counts_into(weighing, storage)?;
         Self::new(config, estimator, calibration)
     }
 }
@@ -83,7 +83,7 @@ pub trait ConfiguredEstimator: ScaleEstimator {
     fn rebuild(&mut self, weighing: &WeighingConfig) -> Result<(), ConfigError>;
 
     /// Whether `method` may be built while the board runs: not a model bank, whose build
-    /// takes most of a board's stack (95 of 102 KB on the QEMU board's bank image) and is
+    /// takes most of a board's stack (93 of 100 KB on the QEMU board's bank image, `cargo xtask bench bank`) and is
     /// done once, at boot; and nothing on an image built with a bank.
     fn rebuilds(method: &WeighingMethod) -> bool
     where
