@@ -1484,9 +1484,10 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     /// residuals are partly fitted and their mean square falls short of the whitened noise's
     /// variance: the whitened bank's `u` came out 4–8 % small (RMS error/u 1.04–1.10 on the
     /// reference drop and off calibration at 30–70 dB, 100–200 ms; `host-sim study
-    /// coverage` with `whiten=`; host-sim's test `the_whitened_banks_u_rests_on_no_less_…`). The metered prediction error is that
-    /// variance itself. The residuals stay the level wherever they exceed it: a misfit of
-    /// the grid, or noise beyond the metered colour, is then in the `u` as before.
+    /// coverage` with `whiten=`; host-sim's test `the_whitened_banks_u_rests_on_no_less_…`).
+    /// The metered prediction error is that variance itself. The residuals stay the level
+    /// wherever they exceed it: a misfit of the grid, or noise beyond the metered colour,
+    /// is then in the `u` as before.
     fn noise_level(&self) -> (T, u32) {
         let degrees = self.combined_terms;
         let residuals = self.combined_sum / T::from_u32(degrees.max(1));

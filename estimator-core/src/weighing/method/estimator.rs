@@ -131,7 +131,8 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
 
     /// [`Self::in_counts`] written into `storage`, where the estimator is to live: every
     /// check is made before it is built, so no `Result` of the whole estimator (a model
-    /// bank's 20 KB of candidates) is ever on the stack ([`crate::weighing::Scale::configured_in`]).
+    /// bank's 20 KB of candidates) is ever on the stack
+    /// ([`crate::weighing::Scale::configured_in`]).
     pub fn in_counts_into<'a>(
         config: &WeighingConfig,
         storage: &'a mut MaybeUninit<Self>,

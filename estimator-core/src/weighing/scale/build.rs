@@ -83,8 +83,9 @@ pub trait ConfiguredEstimator: ScaleEstimator {
     fn rebuild(&mut self, weighing: &WeighingConfig) -> Result<(), ConfigError>;
 
     /// Whether `method` may be built while the board runs: not a model bank, whose build
-    /// takes most of a board's stack (93 of 100 KB on the QEMU board's bank image, `cargo xtask bench bank`) and is
-    /// done once, at boot; and nothing on an image built with a bank.
+    /// takes most of a board's stack (its boot 93 of 100 KB on the QEMU board's bank
+    /// image, `cargo xtask bench bank`) and is done once, at boot; and nothing on an image
+    /// built with a bank.
     fn rebuilds(method: &WeighingMethod) -> bool
     where
         Self: Sized;
