@@ -18,8 +18,10 @@
 //! A bank's `interp` is how it combines the candidates around its best fit: 3 (the parabola
 //! through three, the default) or 5 (the quartic through five, `estimator_core::Interpolation`);
 //! `whiten=P` (0, the default: never) fits its block means whitened by the order-`P`
-//! prediction-error filter of the empty pan's metered colour when the context holds one
-//! (`ModelBank::set_noise_autocovariance`; `study coverage` meters it for such a bank).
+//! prediction-error filter of the empty pan's metered colour, which the context must hold
+//! (`ModelBank::set_noise_autocovariance`; `study coverage` meters it for such a bank;
+//! without one the spec is refused: the bank would state a white-noise `u` in coloured
+//! noise).
 //!
 //! A spec is checked when it is parsed: an unknown method, key or value is an error that
 //! names the spec, the key and what was expected. Building a method gives a boxed
@@ -636,6 +638,7 @@ fn model_bank<T: Real + Send + 'static>(
                 .with_whitening(whitening)
                 .map_err(core)?;
             bank.set_noise_autocovariance(colour).map_err(core)?;
+            whitened_as_asked(whitening, bank.whitens())?;
             Box::new(bank)
         }
     ))
@@ -669,9 +672,22 @@ fn identified_bank<T: Real + Send + 'static>(
                 .with_whitening(spec.whitening)
                 .map_err(core)?;
             bank.set_noise_autocovariance(colour).map_err(core)?;
+            whitened_as_asked(spec.whitening, bank.whitens())?;
             Box::new(bank)
         }
     ))
+}
+
+/// A bank asked to whiten (`whiten=P`) that has no metered colour to whiten with (a context
+/// without one, as `host-sim estimate`'s, or fewer than `MIN_METERED_BLOCKS` block means)
+/// is refused: it would fit coloured noise as white and state an over-confident `u`.
+fn whitened_as_asked(whitening: usize, whitens: bool) -> Result<()> {
+    anyhow::ensure!(
+        whitening == 0 || whitens,
+        "whiten={whitening}: no metered noise colour of the empty pan to whiten with here (at least {} block means at the bank's D; `host-sim study coverage` meters one, `host-sim estimate` does not); without it the bank would fit coloured noise as white and state an over-confident u",
+        estimator_core::MIN_METERED_BLOCKS
+    );
+    Ok(())
 }
 
 fn convert_model<T: Real>(model: &SensorModel<f64, STATES>) -> SensorModel<T, STATES> {
@@ -1499,6 +1515,46 @@ mod tests {
             message.contains("step:n=3,D=1") && message.contains("gain"),
             "{message}"
         );
+    }
+
+    #[test]
+    fn a_bank_asked_to_whiten_needs_a_metered_colour() {
+        use estimator_core::{AutocovarianceMeter, MIN_METERED_BLOCKS};
+        let context = BuildContext::new(SensorChain::reference(), 73.25);
+        for spec in [
+            "model:D=8,K=33,interp=5,whiten=32",
+            "model:D=8,K=33,span=0.68-1.3,fn_hz=25,zeta=0.03,whiten=8",
+        ] {
+            // None in the context (as `host-sim estimate` builds it): refused, by name.
+            let message = parse(spec).build(&context).err().unwrap().to_string();
+            assert!(
+                message.contains("whiten=") && message.contains("over-confident"),
+                "{spec}: {message}"
+            );
+            // A colour metered over too few block means: refused too.
+            // AR(1) noise from a linear congruential generator.
+            let (mut meter, mut state, mut noise) =
+                (AutocovarianceMeter::<f64>::new(8).unwrap(), 1u64, 0.0);
+            let mut blocks = |meter: &mut AutocovarianceMeter<f64>, count: u32| {
+                for _ in 0..count * 8 {
+                    state = state
+                        .wrapping_mul(6_364_136_223_846_793_005)
+                        .wrapping_add(1_442_695_040_888_963_407);
+                    noise = 0.5 * noise + (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+                    meter.push(noise).unwrap();
+                }
+            };
+            blocks(&mut meter, MIN_METERED_BLOCKS / 2);
+            let short = context.with_noise_autocovariance(meter.sums().autocovariance());
+            assert!(parse(spec).build(&short).is_err(), "{spec}");
+            // Enough of it: built, and whitening.
+            blocks(&mut meter, MIN_METERED_BLOCKS);
+            let metered = context.with_noise_autocovariance(meter.sums().autocovariance());
+            let built = parse(spec).build(&metered);
+            assert!(built.is_ok(), "{spec}: {:?}", built.err());
+        }
+        // Without whitening nothing is asked of the context.
+        assert!(parse("model:D=8,K=33,interp=5").build(&context).is_ok());
     }
 
     #[test]
