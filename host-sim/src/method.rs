@@ -625,21 +625,13 @@ fn model_bank<T: Real + Send + 'static>(
     whitening: usize,
     colour: Option<&Autocovariance<T>>,
 ) -> Result<Box<dyn Estimator<T> + Send>> {
-    let core = |e: estimator_core::ConfigError| anyhow!("{e}");
     Ok(dispatch_const!(
         configs.len(),
         [1, 3, 5, 9, 17, 33, 65],
         "candidate count K",
         |K| {
             let array: [ModelConfig<T, STATES>; K] = core::array::from_fn(|i| configs[i]);
-            let mut bank = ModelBank::<T, STATES, K>::new(array)
-                .map_err(core)?
-                .with_interpolation(interpolation)
-                .with_whitening(whitening)
-                .map_err(core)?;
-            bank.set_noise_autocovariance(colour).map_err(core)?;
-            whitened_as_asked(whitening, bank.whitens())?;
-            Box::new(bank)
+            Box::new(bank_with_options(array, interpolation, whitening, colour)?)
         }
     ))
 }
@@ -666,28 +658,40 @@ fn identified_bank<T: Real + Send + 'static>(
                     Some(reference) => config.with_noise_reference(reference),
                     None => config,
                 });
-            let mut bank = ModelBank::<T, STATES, K>::new(configs)
-                .map_err(core)?
-                .with_interpolation(spec.interpolation)
-                .with_whitening(spec.whitening)
-                .map_err(core)?;
-            bank.set_noise_autocovariance(colour).map_err(core)?;
-            whitened_as_asked(spec.whitening, bank.whitens())?;
-            Box::new(bank)
+            Box::new(bank_with_options(
+                configs,
+                spec.interpolation,
+                spec.whitening,
+                colour,
+            )?)
         }
     ))
 }
 
-/// A bank asked to whiten (`whiten=P`) that has no metered colour to whiten with (a context
-/// without one, as `host-sim estimate`'s, or fewer than `MIN_METERED_BLOCKS` block means)
-/// is refused: it would fit coloured noise as white and state an over-confident `u`.
-fn whitened_as_asked(whitening: usize, whitens: bool) -> Result<()> {
+/// The bank over `configs` with a spec's options: its interpolation, and its whitening with
+/// the context's metered colour. A bank asked to whiten (`whiten=P`) that has no metered
+/// colour to whiten with (a context without one, as `host-sim estimate`'s, or fewer than
+/// `MIN_METERED_BLOCKS` block means) is refused: it would fit coloured noise as white and
+/// state an over-confident `u`.
+fn bank_with_options<T: Real, const K: usize>(
+    configs: [ModelConfig<T, STATES>; K],
+    interpolation: Interpolation,
+    whitening: usize,
+    colour: Option<&Autocovariance<T>>,
+) -> Result<ModelBank<T, STATES, K>> {
+    let core = |e: estimator_core::ConfigError| anyhow!("{e}");
+    let mut bank = ModelBank::new(configs)
+        .map_err(core)?
+        .with_interpolation(interpolation)
+        .with_whitening(whitening)
+        .map_err(core)?;
+    bank.set_noise_autocovariance(colour).map_err(core)?;
     anyhow::ensure!(
-        whitening == 0 || whitens,
+        whitening == 0 || bank.whitens(),
         "whiten={whitening}: no metered noise colour of the empty pan to whiten with here (at least {} block means at the bank's D; `host-sim study coverage` meters one, `host-sim estimate` does not); without it the bank would fit coloured noise as white and state an over-confident u",
         estimator_core::MIN_METERED_BLOCKS
     );
-    Ok(())
+    Ok(bank)
 }
 
 fn convert_model<T: Real>(model: &SensorModel<f64, STATES>) -> SensorModel<T, STATES> {
