@@ -34,9 +34,11 @@
 //! - **The noise's colour.** The same windows meter the block means' autocovariance
 //!   ([`crate::AutocovarianceMeter`]); every window that passes the guard adds its sums to
 //!   those of the windows before (a narrow-band noise's lags need thousands of block
-//!   means: [`crate::MIN_METERED_BLOCKS`]), and past [`COLOUR_BLOCKS`] the older windows
-//!   are halved in weight, so the colour follows a pan whose vibration changes over
-//!   minutes. It is handed to the estimator at each restart like the reference
+//!   means: [`crate::MIN_METERED_BLOCKS`]), windows that follow each other as one record
+//!   (the pairs that span two of them count: [`crate::AutocovarianceMeter::take_window`]
+//!   says what windows apart did to the `u` under floor vibration), and past
+//!   [`COLOUR_BLOCKS`] the older windows are halved in weight, so the colour follows a pan
+//!   whose vibration changes over minutes. It is handed to the estimator at each restart like the reference
 //!   (`crate::estimators::metered_noise`: the step method's `u` rests on it once there are
 //!   enough block means). A recalibration keeps it (in counts); `forget_noise_reference`
 //!   and a new configuration drop it.
@@ -182,11 +184,9 @@ impl NoiseMetering {
                 .map(|variance| NoiseReference::new(variance, meter.differences()))
                 .filter(|reference| reference.validate().is_ok());
             meter.reset();
-            let colour = self.colour.as_mut().map(|colour| {
-                let sums = colour.sums().clone();
-                colour.reset();
-                sums
-            });
+            // The next window goes on with the same record (its pairs with this one's last
+            // block means count), unless a drop resets it.
+            let colour = self.colour.as_mut().map(AutocovarianceMeter::take_window);
             if let Some(metered) = metered {
                 if guard_samples == 0 {
                     self.accept(metered, colour);
