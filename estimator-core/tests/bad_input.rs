@@ -4,7 +4,8 @@
 mod support;
 
 use estimator_core::{
-    ConfigError, Estimator, InvalidReason, State, StepConfig, StepEstimator, MAX_DECIMATION,
+    ConfigError, Estimator, InvalidReason, NoiseReference, State, StepConfig, StepEstimator,
+    MAX_DECIMATION,
 };
 use proptest::prelude::*;
 use support::*;
@@ -58,16 +59,19 @@ fn impossible_configurations_are_refused_with_the_field() {
     // A white-noise floor that is not finite and non-negative is refused, and the one set
     // before stays, over a reset too.
     let mut est = StepEstimator::<f32, 7>::new(ok.with_decimation(4)).unwrap();
-    assert_eq!(est.set_white_noise_variance(Some(2.0)), Ok(()));
+    assert_eq!(
+        est.set_white_noise(Some(NoiseReference::new(2.0, 400))),
+        Ok(())
+    );
     for bad in [-1.0, f32::NAN, f32::INFINITY] {
         assert_eq!(
-            est.set_white_noise_variance(Some(bad)),
+            est.set_white_noise(Some(NoiseReference::new(bad, 400))),
             Err(ConfigError::NoiseReference)
         );
     }
     est.reset();
     assert_eq!(est.white_noise_variance(), Some(2.0));
-    assert_eq!(est.set_white_noise_variance(None), Ok(()));
+    assert_eq!(est.set_white_noise(None), Ok(()));
     assert_eq!(est.white_noise_variance(), None);
 }
 

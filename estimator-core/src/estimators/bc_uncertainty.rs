@@ -36,7 +36,7 @@
 //! (`BiasCompensatedStepEstimator<T, N, L>`, `L = 0` by default: no `u`), O(n³) per row,
 //! as the downdate per reading.
 
-use crate::estimators::step_uncertainty::{stated, LagSums, Quadratic};
+use crate::estimators::step_uncertainty::{stated, LagSums, NoiseFloor, Quadratic};
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
 
@@ -120,7 +120,7 @@ impl<T: Real, const N: usize, const L: usize> BcUncertainty<T, N, L> {
             quadratic,
             compensated.lead,
             self.least_squares_sum + excess,
-            (noise_variance > T::ZERO).then_some(noise_variance),
+            NoiseFloor::new(noise_variance, None),
         )?;
         stated(variance, degrees)
     }

@@ -82,6 +82,7 @@
 //! estimator (the mains is in the tare), and a model bank's grid (see [`crate::ModelBank`]).
 //! The first is refused by configuration instead (`crate::tuning::WeighingConfig::check_region`).
 
+use crate::estimators::step_uncertainty::NoiseFloor;
 use crate::numerics::real::Real;
 use crate::reading::ConfigError;
 
@@ -149,6 +150,16 @@ impl<T: Real> NoiseReference<T> {
     fn degrees_of_freedom(&self) -> T {
         T::from_f64(2.0 / 3.0) * T::from_u32(self.differences)
     }
+
+    /// The same as a count for a `u`'s coverage factor: `2M/3`, or no end of them when
+    /// exact.
+    pub(crate) fn degrees(&self) -> u32 {
+        if self.differences == 0 {
+            u32::MAX
+        } else {
+            (2 * u64::from(self.differences) / 3) as u32
+        }
+    }
 }
 
 /// The running residual ratio of one estimator (see the module docs).
@@ -158,6 +169,8 @@ pub(crate) struct ResidualCheck<T> {
     block_variance: T,
     /// `ν_t` of the reference; 0 when exact.
     reference_dof: T,
+    /// The same as a count ([`NoiseReference::degrees`]).
+    reference_degrees: u32,
     /// The estimator's own forgetting factor: the check weighs the rows as the fit does.
     forgetting: T,
     /// Σ βʲ q, Σ βʲ, Σ β²ʲ.
@@ -167,10 +180,11 @@ pub(crate) struct ResidualCheck<T> {
 }
 
 impl<T: Real> ResidualCheck<T> {
-    /// The noise variance of one block mean the reference predicts, in the residuals'
-    /// unit².
-    pub(crate) fn block_variance(&self) -> T {
-        self.block_variance
+    /// The reference as a floor for a fit's noise level: the noise variance of one block
+    /// mean it predicts, in the residuals' unit², and the reference's degrees of freedom
+    /// ([`NoiseReference::degrees`]).
+    pub(crate) fn noise_floor(&self) -> Option<NoiseFloor<T>> {
+        NoiseFloor::new(self.block_variance, Some(self.reference_degrees))
     }
 
     /// The check for residuals in a unit where one raw unit is `scale` (e.g. `1/G`), of
@@ -185,6 +199,7 @@ impl<T: Real> ResidualCheck<T> {
             block_variance: reference.variance * scale * scale
                 / T::from_u32(u32::from(decimation.max(1))),
             reference_dof: reference.degrees_of_freedom(),
+            reference_degrees: reference.degrees(),
             forgetting,
             sum: T::ZERO,
             weight: T::ZERO,

@@ -520,16 +520,12 @@ impl<T: Real, const N: usize, const L: usize> IvStepEstimator<T, N, L> {
             return None;
         }
         let g = self.factor.instrument_weights(n, &solved.last_row);
-        let metered = self
-            .check
-            .as_ref()
-            .map_or(T::ZERO, ResidualCheck::block_variance);
         let (variance, noise, degrees) = self.uncertainty.variance(
             n,
             &solved.theta,
             &g,
             solved.last_row_norm2,
-            (metered > T::ZERO).then_some(metered),
+            self.check.as_ref().and_then(ResidualCheck::noise_floor),
         )?;
         if !self.factor.instruments_strong(n, noise) {
             return None;

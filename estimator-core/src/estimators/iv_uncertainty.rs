@@ -44,7 +44,7 @@
 //! reading is O(n³) already), the least-squares fold, O(n²); memory `L³ + …` numbers.
 //! `L = 0` (the default) keeps none of it and states no `u`.
 
-use crate::estimators::step_uncertainty::{LagSums, Quadratic};
+use crate::estimators::step_uncertainty::{LagSums, NoiseFloor, Quadratic};
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
 use crate::numerics::square::Column;
@@ -109,7 +109,7 @@ impl<T: Real, const N: usize, const L: usize> IvUncertainty<T, N, L> {
         theta: &Column<T, N>,
         g: &Column<T, N>,
         g_norm2: T,
-        block_noise_floor: Option<T>,
+        block_noise_floor: Option<NoiseFloor<T>>,
     ) -> Option<(T, T, u32)> {
         if !Self::covers(n) {
             return None;

@@ -192,17 +192,13 @@ impl<T: Real, const N: usize, const L: usize> RampEstimator<T, N, L> {
         ];
         let (z_lead, z_tail) = self.factor.tail_influence(n, combination)?;
         let (lead, _) = self.factor.solution(n);
-        let metered = self
-            .check
-            .as_ref()
-            .map_or(T::ZERO, ResidualCheck::block_variance);
         self.uncertainty.uncertainty(
             n,
             &lead,
             &z_lead,
             z_tail,
             combination,
-            (metered > T::ZERO).then_some(metered),
+            self.check.as_ref().and_then(ResidualCheck::noise_floor),
         )
     }
 }

@@ -25,7 +25,7 @@
 //! the step estimator.
 
 use crate::estimators::consistency::coefficient;
-use crate::estimators::step_uncertainty::{stated, LagSums, NoiseModel, Quadratic};
+use crate::estimators::step_uncertainty::{stated, LagSums, NoiseFloor, NoiseModel, Quadratic};
 use crate::numerics::real::Real;
 
 /// What the ramp estimator keeps for its reading's `u`, for orders up to `L − 1`.
@@ -74,7 +74,7 @@ impl<T: Real, const L: usize> RampUncertainty<T, L> {
         z_lead: &[T],
         z_tail: [T; 2],
         combination: [T; 2],
-        block_noise_floor: Option<T>,
+        block_noise_floor: Option<NoiseFloor<T>>,
     ) -> Option<(T, u32)> {
         if !Self::covers(n) {
             return None;

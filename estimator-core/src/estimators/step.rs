@@ -42,7 +42,7 @@ use crate::estimators::input::{Decimator, DifferenceWindow};
 use crate::estimators::intake::{estimator_via_intake, intake_config_builders, Intake};
 use crate::estimators::metered_noise::MeteredNoise;
 use crate::estimators::noise_meter::Autocovariance;
-use crate::estimators::step_uncertainty::{Hankel, LagSums};
+use crate::estimators::step_uncertainty::{Hankel, LagSums, NoiseFloor};
 use crate::numerics::factor::Factor;
 use crate::numerics::real::Real;
 use crate::reading::{ConfigError, InvalidReason};
@@ -234,22 +234,26 @@ impl<T: Real, const N: usize, const L: usize, const C: usize> StepEstimator<T, N
     }
 
     /// Never rest the level's `u` on a noise level below the raw samples' white noise,
-    /// `variance` in raw units² per sample as their sample-to-sample differences show it
-    /// (`None`: not known, the default), from now on and after every reset: a fresh fit of
-    /// a few rows can all but interpolate its data and state a `u` far below what the
-    /// noise allows (see `crate::estimators::step_uncertainty`). Its share of a block mean
-    /// (`/D`) is the floor. One that is not finite and non-negative is refused and nothing
-    /// changes.
-    pub fn set_white_noise_variance(&mut self, variance: Option<T>) -> Result<(), ConfigError> {
-        let variance = variance.unwrap_or(T::ZERO);
+    /// `white`: the variance in raw units² per sample as their sample-to-sample differences
+    /// show it, and how many differences (`None`: not known, the default), from now on and
+    /// after every reset: a fresh fit of a few rows can all but interpolate its data and
+    /// state a `u` far below what the noise allows (see
+    /// `crate::estimators::step_uncertainty`). Its share of a block mean (`/D`) is the
+    /// floor; where the `u` rests on it, the coverage factor is that of its degrees of
+    /// freedom ([`NoiseReference::differences`]: `2M/3`, none for an exact one). One whose
+    /// variance is not finite and non-negative is refused and nothing changes.
+    pub fn set_white_noise(&mut self, white: Option<NoiseReference<T>>) -> Result<(), ConfigError> {
+        let variance = white.map_or(T::ZERO, |white| white.variance);
         // Written so that NaN fails too.
         if !(variance >= T::ZERO && variance.is_finite()) {
             return Err(ConfigError::NoiseReference);
         }
         let config = &self.config;
         let block = T::from_u32(u32::from(config.decimation));
-        self.lags
-            .set_white_floor(variance / (config.gain * config.gain * block));
+        self.lags.set_white_floor(
+            variance / (config.gain * config.gain * block),
+            white.map_or(0, |white| white.degrees()),
+        );
         Ok(())
     }
 
@@ -281,7 +285,7 @@ impl<T: Real, const N: usize, const L: usize, const C: usize> StepEstimator<T, N
     }
 
     /// The raw samples' white noise the level's `u` rests on at least (raw units² per
-    /// sample; see [`Self::set_white_noise_variance`]), `None` when not known.
+    /// sample; see [`Self::set_white_noise`]), `None` when not known.
     pub fn white_noise_variance(&self) -> Option<T> {
         let config = &self.config;
         let floor = self.lags.white_floor();
@@ -321,7 +325,9 @@ impl<T: Real, const N: usize, const L: usize, const C: usize> StepEstimator<T, N
 
     fn fresh(&self) -> Result<Self, ConfigError> {
         let mut fresh = Self::new(self.config)?;
-        fresh.lags.set_white_floor(self.lags.white_floor());
+        fresh
+            .lags
+            .set_white_floor(self.lags.white_floor(), self.lags.white_degrees());
         fresh.metered.keep_noise_of(&self.metered);
         Ok(fresh)
     }
@@ -417,15 +423,15 @@ impl<T: Real, const N: usize, const L: usize, const C: usize> StepEstimator<T, N
         // residuals say what does (a floor of the empty pan's level stated u = 0.14 g on
         // errors of 0.003 g under floor vibration at 80 dB).
         let metered = if coloured {
-            T::ZERO
+            None
         } else {
-            self.check
-                .as_ref()
-                .map_or(T::ZERO, ResidualCheck::block_variance)
+            self.check.as_ref().and_then(ResidualCheck::noise_floor)
         };
-        let floor = if metered > white { metered } else { white };
-        self.lags
-            .uncertainty(n, &z, z_level, &lead, (floor > T::ZERO).then_some(floor))
+        let floor = NoiseFloor::higher(
+            metered,
+            NoiseFloor::new(white, Some(self.lags.white_degrees())),
+        );
+        self.lags.uncertainty(n, &z, z_level, &lead, floor)
     }
 }
 

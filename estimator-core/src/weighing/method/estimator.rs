@@ -94,13 +94,14 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
         }
     }
 
-    /// Take the raw samples' white noise as `variance` (per sample; `None`: not known) from
-    /// the next [`Estimator::reset`] on: the step method's `u` never rests on less (see
-    /// [`crate::StepEstimator::set_white_noise_variance`]); the other methods state no `u` from
-    /// the same residuals, or rest it on their model, and take nothing.
-    pub fn set_white_noise_variance(&mut self, variance: Option<T>) -> Result<(), ConfigError> {
+    /// Take the raw samples' white noise, `white` per sample over its sample-to-sample
+    /// differences (`None`: not known), from the next [`Estimator::reset`] on: the step
+    /// method's `u` never rests on less (see [`crate::StepEstimator::set_white_noise`]);
+    /// the other methods state no `u` from the same residuals, or rest it on their model,
+    /// and take nothing.
+    pub fn set_white_noise(&mut self, white: Option<NoiseReference<T>>) -> Result<(), ConfigError> {
         match self {
-            Self::Step(e) => e.set_white_noise_variance(variance),
+            Self::Step(e) => e.set_white_noise(white),
             Self::BiasCompensated(_) | Self::InstrumentalVariable(_) | Self::ModelBank(_) => Ok(()),
         }
     }

@@ -52,7 +52,7 @@ impl<E: ScaleEstimator> Scale<E> {
             // the floor now rather than at its next restart (see `Scale::restart`).
             let _ = self
                 .estimator
-                .set_white_noise_variance(self.white.variance());
+                .set_white_noise(self.white.reference(self.config.block_samples));
         }
         self.push_trend(counts);
         // The zero is removed in integer arithmetic, so the conversion is exact (|counts| is

@@ -30,12 +30,13 @@ pub trait ScaleEstimator: Estimator<f32> {
         reference: Option<NoiseReference<f32>>,
     ) -> Result<(), ConfigError>;
 
-    /// Take the raw samples' white noise as `variance` in counts² per sample (`None`: not
-    /// known) from the next reset on, for an estimator whose `u` rests on its residuals
-    /// (see [`crate::StepEstimator::set_white_noise_variance`]); the default takes nothing. A
-    /// variance that is not finite and non-negative is refused and nothing changes.
-    fn set_white_noise_variance(&mut self, variance: Option<f32>) -> Result<(), ConfigError> {
-        let _ = variance;
+    /// Take the raw samples' white noise, `white` in counts² per sample over its
+    /// sample-to-sample differences (`None`: not known), from the next reset on, for an
+    /// estimator whose `u` rests on its residuals (see
+    /// [`crate::StepEstimator::set_white_noise`]); the default takes nothing. A variance
+    /// that is not finite and non-negative is refused and nothing changes.
+    fn set_white_noise(&mut self, white: Option<NoiseReference<f32>>) -> Result<(), ConfigError> {
+        let _ = white;
         Ok(())
     }
 
@@ -65,8 +66,8 @@ impl<E: ScaleEstimator + ?Sized> ScaleEstimator for &mut E {
         (**self).set_noise_reference(reference)
     }
 
-    fn set_white_noise_variance(&mut self, variance: Option<f32>) -> Result<(), ConfigError> {
-        (**self).set_white_noise_variance(variance)
+    fn set_white_noise(&mut self, white: Option<NoiseReference<f32>>) -> Result<(), ConfigError> {
+        (**self).set_white_noise(white)
     }
 
     fn set_noise_autocovariance(
@@ -97,8 +98,11 @@ macro_rules! scale_estimator {
             }
 
             $(
-                fn $white(&mut self, variance: Option<f32>) -> Result<(), ConfigError> {
-                    Self::$white(self, variance)
+                fn $white(
+                    &mut self,
+                    white: Option<NoiseReference<f32>>,
+                ) -> Result<(), ConfigError> {
+                    Self::$white(self, white)
                 }
 
                 fn $colour(
@@ -114,7 +118,7 @@ macro_rules! scale_estimator {
 
 scale_estimator! {
     [const N: usize, const L: usize, const C: usize] StepEstimator<f32, N, L, C> => |e| e.config().decimation,
-        set_white_noise_variance, set_noise_autocovariance;
+        set_white_noise, set_noise_autocovariance;
     [const N: usize, const L: usize] BiasCompensatedStepEstimator<f32, N, L> => |e| e.config().step.decimation;
     [const N: usize, const L: usize] IvStepEstimator<f32, N, L> => |e| e.config().step.decimation;
     [const S: usize, const K: usize] ModelBank<f32, S, K> => |e| e.decimation();
@@ -139,8 +143,8 @@ impl<const N: usize, const S: usize, const K: usize> ScaleEstimator
         WeighingEstimator::set_noise_reference(self, reference)
     }
 
-    fn set_white_noise_variance(&mut self, variance: Option<f32>) -> Result<(), ConfigError> {
-        WeighingEstimator::set_white_noise_variance(self, variance)
+    fn set_white_noise(&mut self, white: Option<NoiseReference<f32>>) -> Result<(), ConfigError> {
+        WeighingEstimator::set_white_noise(self, white)
     }
 
     fn set_noise_autocovariance(

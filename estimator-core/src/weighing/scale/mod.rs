@@ -537,7 +537,7 @@ impl<E: ScaleEstimator> Scale<E> {
         // Refused only when not finite and non-negative, which the meter never hands over.
         let _ = self
             .estimator
-            .set_white_noise_variance(self.white.variance());
+            .set_white_noise(self.white.reference(self.config.block_samples));
         // Refused only when it is no autocovariance, which the metering never hands over.
         let _ = self
             .estimator

@@ -30,6 +30,8 @@
 /// longer than a heavy drop rings by more than its white noise.
 pub(super) const WHITE_BLOCKS: usize = 16;
 
+use crate::estimators::consistency::NoiseReference;
+
 /// The white noise of the raw samples, block by block (see the module docs).
 #[derive(Clone, Debug)]
 pub(super) struct WhiteNoise {
@@ -98,6 +100,13 @@ impl WhiteNoise {
             .iter()
             .copied()
             .reduce(|a, b| if b < a { b } else { a })
+    }
+
+    /// [`Self::variance`] as the estimator takes it: the differences of one block
+    /// (`block_samples`) are what it rests on.
+    pub(super) fn reference(&self, block_samples: u32) -> Option<NoiseReference<f32>> {
+        self.variance()
+            .map(|variance| NoiseReference::new(variance, block_samples))
     }
 }
 
