@@ -1220,8 +1220,10 @@ mod tests {
         }
         let [without, metered, white] = outside;
         // Without a floor 54 of the 400 first errors lie beyond 2u (13.5 %, where a 95 %
-        // interval allows 5 %); with either none (the floor is the noise's expectation,
-        // and the coverage factor at 3 degrees of freedom is 1.6: conservative, not over).
+        // interval allows 5 %); with the metered floor 7, with the white one 9 (the floor
+        // is the noise's expectation, known exactly here, so the `u` resting on it has no
+        // t-factor since stop 49: `NoiseFloor`; with the residuals' factor, 1.6 at 3
+        // degrees of freedom, none lay beyond).
         assert!(without > runs / 10, "without a floor: {without} of {runs}");
         assert!(metered <= runs / 20, "metered: {metered} of {runs}");
         assert!(white <= runs / 20, "white noise: {white} of {runs}");
