@@ -105,7 +105,9 @@ impl Cell {
         (self.stated > 0).then(|| 1.96 * (0.95 * 0.05 / f64::from(self.stated)).sqrt())
     }
 
-    fn merge(&mut self, other: &Cell) {
+    /// Pool `other`'s runs into this cell (runs of one cell merged in run order, or cells
+    /// of several SNRs pooled).
+    pub fn merge(&mut self, other: &Cell) {
         self.stated += other.stated;
         self.covered += other.covered;
         self.without_u += other.without_u;

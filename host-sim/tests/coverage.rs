@@ -166,14 +166,10 @@ fn the_whitened_banks_u_rests_on_no_less_than_the_metered_noise() {
     let rows = study("reference-step", &bank, 1000, 1, &[30.0, 40.0, 50.0]).unwrap();
     let at_100_ms = TIMES_MS.iter().position(|&t| t == 100).unwrap();
     // The three SNRs' cells at 100 ms pooled into one.
-    let pooled = rows.iter().map(|row| &row.cells[at_100_ms]).fold(
-        host_sim::coverage::Cell::default(),
-        |pooled, cell| host_sim::coverage::Cell {
-            stated: pooled.stated + cell.stated,
-            z_square_sum: pooled.z_square_sum + cell.z_square_sum,
-            ..pooled
-        },
-    );
+    let mut pooled = host_sim::coverage::Cell::default();
+    for row in &rows {
+        pooled.merge(&row.cells[at_100_ms]);
+    }
     let rms_z = pooled.rms_z().unwrap();
     assert!(
         pooled.stated >= 2900 && (0.95..=1.04).contains(&rms_z),

@@ -317,13 +317,10 @@ impl<T: Real> AutocovarianceMeter<T> {
     pub fn take_window(&mut self) -> AutocovarianceSums<T> {
         let fresh = AutocovarianceSums {
             origin: self.sums.origin,
-            products: [T::ZERO; AUTOCOVARIANCE_LAGS + 1],
-            later: [T::ZERO; AUTOCOVARIANCE_LAGS + 1],
-            earlier: [T::ZERO; AUTOCOVARIANCE_LAGS + 1],
-            pairs: [0; AUTOCOVARIANCE_LAGS + 1],
             history: self.sums.history,
             latest: self.sums.latest,
             held: self.sums.held,
+            ..AutocovarianceSums::new()
         };
         core::mem::replace(&mut self.sums, fresh)
     }
