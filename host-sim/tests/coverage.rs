@@ -308,16 +308,19 @@ fn the_firmware_scale_meters_the_colour_itself_and_its_u_holds_on_it() {
 /// ms after the landing. Metered as one record while the windows follow each other
 /// (`AutocovarianceMeter::take_window`), no run falls back there, and the scale's `u` holds
 /// the goal, 92–98 %, 100–200 ms after the landing at 70 and 80 dB (1,000 runs: a true
-/// 95 % is within ±1.4 % of it 95 % of the time). 400 ms after the landing it stays
-/// cautious (98.4 % and 99.2 %), as the estimator with the study's 60 s of colour is
-/// (97.1 %, 98.3 %).
+/// 95 % is within ±1.4 % of it 95 % of the time). 400 ms after the landing, where the
+/// residuals leave more than the metered colour explains in most runs, the metered variance
+/// scaled by that excess made it cautious (98.4 % and 99.2 %; the estimator with the
+/// study's 60 s of colour 97.1 % and 98.3 %) until stop 50: the excess is narrow-band
+/// vibration near the loaded resonance, which reaches the level far less than its power
+/// says. The residuals' own sandwich there holds the goal too (95.1 %, 96.0 %).
 #[test]
 fn the_scales_colour_metered_as_one_record_holds_the_goal_under_floor_vibration() {
     use host_sim::coverage::scale::{study, Pan};
     for row in study("vibration", 1000, 1, &[70.0, 80.0], Pan::Metered).unwrap() {
         assert_eq!(row.coloured, row.runs, "runs resting on the colour");
         for (t, cell) in TIMES_MS.iter().zip(&row.row.cells) {
-            if (100..=200).contains(t) {
+            if (100..=400).contains(t) {
                 let coverage = cell.coverage().expect("a reading with its u");
                 assert!(
                     (0.92..=0.98).contains(&coverage) && cell.stated >= 990,

@@ -42,15 +42,21 @@
 //! thousands of block means, so no t-factor is applied, unless the residuals leave more
 //! than the metered noise explains (their mean square above the 95 % point of `χ²_ν/ν`
 //! times `γ_ε(0)`: a fit that does not explain its data, a load that adds noise of its
-//! own): then the variance and the bias are scaled by that ratio and the t-factor of the
-//! residuals' `ν` applies, as without a metering.
+//! own): then the variance is the larger of the metered sandwich and the residuals' own
+//! (their autocovariance over the lags kept, as without a metering), the bias is scaled by
+//! that ratio and the t-factor of the residuals' `ν` applies. Until stop 50 the variance
+//! too was scaled by the ratio, which made floor vibration at 80 dB cautious 400 ms after
+//! the landing (±2u 98.3 %; the firmware's scale 98.4–99.2 % at 70–80 dB): an excess of
+//! narrow-band vibration near the loaded resonance reaches the level far less than its
+//! power says.
 //!
 //! Cost: the rows' totals for `C` lags (`2CL + L` numbers and `2C` of `γ`; `C = 0`, the
 //! default, keeps `L` numbers and a count; the configured step method keeps
 //! `crate::weighing::COLOUR_LAGS`), one copy of a row's totals per block while a colour is
 //! held; per uncertainty `C + 1` lags of `2n + 1` products each, `(n + 1)²` for the bias
 //! and one weighted sum of the totals (`cargo xtask bench`: the shipped n = 5, D = 24 at
-//! 946 instructions per 4 kHz sample with the colour in use over 24 lags, 901 over 16, 785
+//! 950 instructions per 4 kHz sample with the colour in use over 24 lags (946 before
+//! the residuals' own sandwich where they exceed the colour), 901 over 16, 785
 //! without).
 
 use crate::estimators::noise_meter::{Autocovariance, AUTOCOVARIANCE_LAGS};
