@@ -147,7 +147,7 @@ impl<T: Real> NoiseReference<T> {
     }
 
     /// The reference's degrees of freedom `2M/3`, or 0 when exact.
-    fn degrees_of_freedom(&self) -> T {
+    pub(crate) fn degrees_of_freedom(&self) -> T {
         T::from_f64(2.0 / 3.0) * T::from_u32(self.differences)
     }
 
@@ -167,10 +167,8 @@ impl<T: Real> NoiseReference<T> {
 pub(crate) struct ResidualCheck<T> {
     /// `v`: the noise variance of one block mean, in the residuals' unit².
     block_variance: T,
-    /// `ν_t` of the reference; 0 when exact.
-    reference_dof: T,
-    /// The same as a count ([`NoiseReference::degrees`]).
-    reference_degrees: u32,
+    /// The reference itself, for its degrees of freedom (`ν_t`).
+    reference: NoiseReference<T>,
     /// The estimator's own forgetting factor: the check weighs the rows as the fit does.
     forgetting: T,
     /// Σ βʲ q, Σ βʲ, Σ β²ʲ.
@@ -184,7 +182,7 @@ impl<T: Real> ResidualCheck<T> {
     /// mean it predicts, in the residuals' unit², and the reference's degrees of freedom
     /// ([`NoiseReference::degrees`]).
     pub(crate) fn noise_floor(&self) -> Option<NoiseFloor<T>> {
-        NoiseFloor::new(self.block_variance, Some(self.reference_degrees))
+        NoiseFloor::new(self.block_variance, Some(self.reference.degrees()))
     }
 
     /// The check for residuals in a unit where one raw unit is `scale` (e.g. `1/G`), of
@@ -198,8 +196,7 @@ impl<T: Real> ResidualCheck<T> {
         Self {
             block_variance: reference.variance * scale * scale
                 / T::from_u32(u32::from(decimation.max(1))),
-            reference_dof: reference.degrees_of_freedom(),
-            reference_degrees: reference.degrees(),
+            reference: *reference,
             forgetting,
             sum: T::ZERO,
             weight: T::ZERO,
@@ -277,7 +274,8 @@ impl<T: Real> ResidualCheck<T> {
             return false;
         }
         let rows = self.effective_rows();
-        if !(ratio > mismatch_threshold(rows, self.reference_dof)) {
+        let reference_dof = self.reference.degrees_of_freedom();
+        if !(ratio > mismatch_threshold(rows, reference_dof)) {
             return false;
         }
         let factor = correlation();
@@ -286,7 +284,7 @@ impl<T: Real> ResidualCheck<T> {
         } else {
             T::ONE
         };
-        ratio > mismatch_threshold(rows * factor, self.reference_dof)
+        ratio > mismatch_threshold(rows * factor, reference_dof)
     }
 }
 

@@ -250,10 +250,12 @@ impl<T: Real, const N: usize, const L: usize, const C: usize> StepEstimator<T, N
         }
         let config = &self.config;
         let block = T::from_u32(u32::from(config.decimation));
-        self.lags.set_white_floor(
-            variance / (config.gain * config.gain * block),
-            white.map_or(0, |white| white.degrees()),
-        );
+        self.lags.set_white_floor(white.and_then(|white| {
+            NoiseFloor::new(
+                variance / (config.gain * config.gain * block),
+                Some(white.degrees()),
+            )
+        }));
         Ok(())
     }
 
@@ -288,9 +290,9 @@ impl<T: Real, const N: usize, const L: usize, const C: usize> StepEstimator<T, N
     /// sample; see [`Self::set_white_noise`]), `None` when not known.
     pub fn white_noise_variance(&self) -> Option<T> {
         let config = &self.config;
-        let floor = self.lags.white_floor();
-        (floor > T::ZERO)
-            .then(|| floor * config.gain * config.gain * T::from_u32(u32::from(config.decimation)))
+        self.lags.white_floor().map(|floor| {
+            floor.variance * config.gain * config.gain * T::from_u32(u32::from(config.decimation))
+        })
     }
 
     /// The consistency check's residual ratio: the weighted mean square of the residuals
@@ -325,9 +327,7 @@ impl<T: Real, const N: usize, const L: usize, const C: usize> StepEstimator<T, N
 
     fn fresh(&self) -> Result<Self, ConfigError> {
         let mut fresh = Self::new(self.config)?;
-        fresh
-            .lags
-            .set_white_floor(self.lags.white_floor(), self.lags.white_degrees());
+        fresh.lags.set_white_floor(self.lags.white_floor());
         fresh.metered.keep_noise_of(&self.metered);
         Ok(fresh)
     }
@@ -427,10 +427,7 @@ impl<T: Real, const N: usize, const L: usize, const C: usize> StepEstimator<T, N
         } else {
             self.check.as_ref().and_then(ResidualCheck::noise_floor)
         };
-        let floor = NoiseFloor::higher(
-            metered,
-            NoiseFloor::new(white, Some(self.lags.white_degrees())),
-        );
+        let floor = NoiseFloor::higher(metered, white);
         self.lags.uncertainty(n, &z, z_level, &lead, floor)
     }
 }

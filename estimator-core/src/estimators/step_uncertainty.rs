@@ -136,10 +136,11 @@ pub(crate) struct LagSums<
     residual_latest: u32,
     residuals: u32,
     /// The white noise's share of one block mean's variance (the residuals' unit²), below
-    /// which the noise level is not taken; 0 when not known. Kept over resets by the
-    /// estimator (`StepEstimator::set_white_noise`).
-    white_floor: T,
-    /// The degrees of freedom `white_floor` rests on.
+    /// which the noise level is not taken (0 when not known), and the degrees of freedom it
+    /// rests on: a [`NoiseFloor`] kept as its two numbers ([`Self::white_floor`]), since an
+    /// `Option<NoiseFloor>` takes 8 bytes more and the order-7 estimator is at its 512-byte
+    /// goal. Kept over resets by the estimator (`StepEstimator::set_white_noise`).
+    white_variance: T,
     white_degrees: u32,
 }
 
@@ -159,7 +160,7 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
             residual_lags: [T::ZERO; L],
             residual_history: [T::ZERO; L],
             residual_latest: 0,
-            white_floor: T::ZERO,
+            white_variance: T::ZERO,
             white_degrees: 0,
             residuals: 0,
         }
@@ -231,27 +232,20 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
         self.rows = self.rows.saturating_add(1);
     }
 
+    /// The white-noise floor of a block mean's variance (see `white_variance`).
+    pub(crate) fn white_floor(&self) -> Option<NoiseFloor<T>> {
+        NoiseFloor::new(self.white_variance, Some(self.white_degrees))
+    }
+
+    /// Set the white-noise floor of a block mean's variance (see `white_variance`).
+    pub(crate) fn set_white_floor(&mut self, floor: Option<NoiseFloor<T>>) {
+        self.white_variance = floor.map_or(T::ZERO, |floor| floor.variance);
+        self.white_degrees = floor.and_then(|floor| floor.degrees).unwrap_or(0);
+    }
+
     /// The a-priori residual of a row folded into a determined problem and the row's
     /// weight (`1/(1 + φᵀPφ)`): `weight·residual²` is its contribution to the residual sum
     /// of squares, `weight·residual` its a-posteriori residual.
-    #[inline]
-    /// The white-noise floor of a block mean's variance (see `white_floor`).
-    pub(crate) fn white_floor(&self) -> T {
-        self.white_floor
-    }
-
-    /// Set the white-noise floor of a block mean's variance (see `white_floor`) and the
-    /// degrees of freedom it rests on.
-    pub(crate) fn set_white_floor(&mut self, floor: T, degrees: u32) {
-        self.white_floor = floor;
-        self.white_degrees = degrees;
-    }
-
-    /// The degrees of freedom of the white-noise floor.
-    pub(crate) fn white_degrees(&self) -> u32 {
-        self.white_degrees
-    }
-
     pub(crate) fn push_residual(&mut self, residual: T, weight: T, n: usize) {
         let posterior = weight * residual;
         self.residual_sum += posterior * residual;

@@ -167,10 +167,9 @@ impl<T: Real, const K: usize, F: Prefilter<T>> Baseline<T, K, F> {
                 let block_variance =
                     reference.variance * inv_gain * inv_gain / T::from_u32(u32::from(config.block));
                 let degrees = T::from_u32(K as u32 - 1);
-                let reference_degrees = T::from_f64(2.0 / 3.0) * T::from_u32(reference.differences);
                 Some((
                     block_variance,
-                    mismatch_threshold(degrees, reference_degrees),
+                    mismatch_threshold(degrees, reference.degrees_of_freedom()),
                 ))
             }
             None => None,
