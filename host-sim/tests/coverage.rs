@@ -6,7 +6,7 @@
 //! at 30–70 dB: over-confident by a factor of two.
 
 use estimator_core::sensor::AdcSource;
-use estimator_core::{Autocovariance, Estimator, StepConfig, StepEstimator};
+use estimator_core::{Autocovariance, Estimator, StepConfig, StepEstimator, MIN_METERED_BLOCKS};
 use host_sim::coverage::{metered_autocovariance, study, study_with, Colour, TIMES_MS};
 use host_sim::scene::Scene;
 use host_sim::study::firmware_default;
@@ -44,16 +44,26 @@ fn two_u_covers_95_percent_of_the_firmware_methods_errors() {
 /// readout (100 ms) at 30 and 50 dB, with the `u` from the residuals and resting on the
 /// empty pan's metered noise colour. At 70 dB the first readings after 100 ms differ by up
 /// to 12 % (the f32 influence row `z` on a Hankel matrix that ill-conditioned) and 1 % from
-/// 200 ms: checked from there.
+/// 200 ms: checked from there. Floor vibration at 80 dB, from 200 ms, too: there the
+/// residuals leave more than the metered colour explains in most runs late in a drop, and
+/// the `u` rests on their own sandwich.
 #[test]
 fn f32_states_the_f64_uncertainty() {
-    for (snr_db, from_sample) in [(30.0, 400), (50.0, 400), (70.0, 800)] {
-        let scene = Scene::load("reference-step").unwrap().with_snr_db(snr_db);
+    for (name, snr_db, from_sample) in [
+        ("reference-step", 30.0, 400),
+        ("reference-step", 50.0, 400),
+        ("reference-step", 70.0, 800),
+        ("vibration", 80.0, 800),
+    ] {
+        let scene = Scene::load(name).unwrap().with_snr_db(snr_db);
         let gain = scene.chain.counts_per_gram();
         let zero = scene.chain.zero_code();
         let metered = metered_autocovariance(&scene, 24, 5).unwrap();
         for colour in [None, Some(metered)] {
             let mut worst = 0.0f64;
+            // Readings with the colour whose `u` rests on the residuals (their degrees of
+            // freedom, not the metering's).
+            let mut on_residuals = 0;
             for seed in 1..=40 {
                 let mut adc = scene.adc(seed);
                 let mut e64 = StepEstimator::<f64, 5, 5, 10>::new(
@@ -76,6 +86,7 @@ fn f32_states_the_f64_uncertainty() {
                     if k >= from_sample {
                         let (u64_, u32_) = (a.uncertainty.unwrap(), b.uncertainty.unwrap());
                         worst = worst.max((f64::from(u32_) / u64_ - 1.0).abs());
+                        on_residuals += u32::from(a.degrees_of_freedom < MIN_METERED_BLOCKS);
                     }
                 }
             }
@@ -84,7 +95,13 @@ fn f32_states_the_f64_uncertainty() {
             } else {
                 "residuals"
             };
-            assert!(worst < 0.1, "{snr_db} dB, {label}: f32 u off by {worst}");
+            assert!(
+                worst < 0.1,
+                "{name} {snr_db} dB, {label}: f32 u off by {worst}"
+            );
+            if name == "vibration" && colour.is_some() {
+                assert!(on_residuals > 0, "the residuals' sandwich never checked");
+            }
         }
     }
 }
