@@ -55,7 +55,7 @@
 //! `crate::weighing::COLOUR_LAGS`), one copy of a row's totals per block while a colour is
 //! held; per uncertainty `C + 1` lags of `2n + 1` products each, `(n + 1)²` for the bias
 //! and one weighted sum of the totals (`cargo xtask bench`: the shipped n = 5, D = 24 at
-//! 950 instructions per 4 kHz sample with the colour in use over 24 lags (946 before
+//! 949 instructions per 4 kHz sample with the colour in use over 24 lags (946 before
 //! the residuals' own sandwich where they exceed the colour), 901 over 16, 785
 //! without).
 

@@ -521,9 +521,13 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
         let total = self.total_along(&z_padded);
         let forms = F::forms(&self.cross, n, &z_padded);
         let mut variance = power * z_level;
+        // `[z; z_level]ᵀ·S_lag·[z; z_level]` by lag (at `lag − 1`), kept for the residuals'
+        // own sandwich below should they need it.
+        let mut quadratics = [T::ZERO; L];
         for (lag, &covariance) in equation_error[1..=lags.min(n)].iter().enumerate() {
             let lag = lag + 1;
             let quadratic = self.lag_quadratic(lag, n, &z_padded, z_level, total, &forms);
+            quadratics[lag - 1] = quadratic;
             variance += T::from_f64(2.0) * covariance * quadratic;
         }
         if lags > n {
@@ -568,7 +572,12 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
             let mut observed = mean_square * z_level;
             for lag in 1..=self.lags_for(n) {
                 if let Some(lagged) = self.residual_autocovariance(lag, n) {
-                    let quadratic = self.lag_quadratic(lag, n, &z_padded, z_level, total, &forms);
+                    // Those up to the metered lags and the order were computed above.
+                    let quadratic = if lag <= lags.min(n) {
+                        quadratics[lag - 1]
+                    } else {
+                        self.lag_quadratic(lag, n, &z_padded, z_level, total, &forms)
+                    };
                     observed += T::from_f64(2.0) * lagged * quadratic;
                 }
             }
