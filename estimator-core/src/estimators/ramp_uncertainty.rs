@@ -25,7 +25,9 @@
 //! the step estimator.
 
 use crate::estimators::consistency::coefficient;
-use crate::estimators::step_uncertainty::{stated, LagSums, NoiseFloor, NoiseModel, Quadratic};
+use crate::estimators::step_uncertainty::{
+    stated, with_bias, LagSums, NoiseFloor, NoiseModel, Quadratic,
+};
 use crate::numerics::real::Real;
 
 /// What the ramp estimator keeps for its reading's `u`, for orders up to `L − 1`.
@@ -109,6 +111,6 @@ impl<T: Real, const L: usize> RampUncertainty<T, L> {
             bias += zi * (c(i) - T::from_f64(2.0) * c(i + 1) + c(i + 2));
         }
         bias *= T::from_u32(self.lags.rows()) * noise;
-        stated(variance + bias * bias, degrees)
+        stated(with_bias(variance, bias)?, degrees)
     }
 }
