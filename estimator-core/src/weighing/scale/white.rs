@@ -177,8 +177,11 @@ mod tests {
     /// A board switched on with a load on the pan never reads empty, so it never meters
     /// the empty pan's noise; a run restarted on that resting load (here by a lost sample)
     /// has no transient to fit. Its first `u` rests on the raw samples' white noise: ±2u
-    /// covers the first errors as a 95 % interval should (none of 200 beyond it; without
-    /// the floor 26, 13 %, at 0.3–1 g of noise alike).
+    /// covers the first errors as a 95 % interval should: 96 of 2,000 beyond it (4.8 %;
+    /// 57 while the errors-in-variables bias was counted in full, see
+    /// `step_uncertainty::first_order_weight`; without the floor 26 of 200, 13 %, at 0.3–1 g
+    /// of noise alike). The test allows the 95 % goal's Monte Carlo scatter: 5 % plus three
+    /// binomial standard deviations of the count.
     #[test]
     fn a_run_restarted_on_a_resting_load_is_not_overconfident() {
         use super::super::test_scene::{run, scene};
@@ -186,7 +189,7 @@ mod tests {
         let (mut scale, mut cell) = scene(1.0);
         cell.load_g = 100.0;
         run(&mut scale, &mut cell, 12_000);
-        let restarts = 200;
+        let restarts: u32 = 2000;
         let (mut stated, mut outside) = (0, 0);
         for _ in 0..restarts {
             scale.push(RawSample::Lost);
@@ -200,9 +203,11 @@ mod tests {
             }
         }
         assert_eq!(stated, restarts, "every run states a u");
+        let expected = 0.05 * f64::from(restarts);
+        let allowed = expected + 3.0 * (expected * 0.95).sqrt();
         assert!(
-            outside <= restarts / 20,
-            "{outside} of {restarts} beyond 2u"
+            f64::from(outside) <= allowed,
+            "{outside} of {restarts} beyond 2u (at most {allowed:.0})"
         );
     }
 
