@@ -315,11 +315,17 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
         // White block means: the differences' noise covariance is 2σ² on the diagonal and
         // −σ² beside it.
         let along = noise
-            * along_toeplitz(&z[..n], |d| match d {
-                0 => T::from_f64(2.0),
-                1 => -T::ONE,
-                _ => T::ZERO,
-            });
+            * along_toeplitz(
+                &z[..n],
+                1,
+                |d| {
+                    if d == 0 {
+                        T::from_f64(2.0)
+                    } else {
+                        -T::ONE
+                    }
+                },
+            );
         bias * (T::from_u32(self.rows) * noise) * first_order_weight(self.rows, z_level, along)
     }
 
@@ -431,7 +437,8 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
         };
         let total = self.total_along(&z);
         let forms = F::forms(&self.cross, n, &z);
-        let rounding = self.rounding(n, &z, z_level, total, &forms, lag0);
+        // Σ_l 2·|r_l| over the lags whose forms `rounding` speaks for, model's and observed.
+        let (mut model_spread, mut observed_spread) = (T::ZERO, T::ZERO);
         for lag in 1..=observed_lags {
             // The model's lags (1..=n): its moving average's autocovariance, and the rows'
             // full cross-products. Beyond n the model's covariance is zero and only the
@@ -449,16 +456,20 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
             let quadratic = self.lag_quadratic(lag, n, &z, z_level, total, &forms);
             if model_lag {
                 let weight = T::from_f64(2.0) * noise * covariance;
-                variance += weight * quadratic + weight.abs() * rounding;
+                variance += weight * quadratic;
+                model_spread += weight.abs();
             }
             if let Some(lagged) = self.residual_autocovariance(lag, n) {
                 let weight = T::from_f64(2.0) * lagged;
                 observed += weight * quadratic;
                 if model_lag {
-                    observed += weight.abs() * rounding;
+                    observed_spread += weight.abs();
                 }
             }
         }
+        let rounding = self.rounding(n, &z, z_level, total, &forms, lag0);
+        variance += model_spread * rounding;
+        observed += observed_spread * rounding;
         // Only where residuals were pushed to observe (the estimators without them have
         // `observed` at lag 0 alone, which would undo the lags).
         if self.residuals > 0 && observed > variance {
@@ -536,8 +547,9 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
         let z_padded = pad::<T, N, L>(z, n);
         let total = self.total_along(&z_padded);
         let forms = F::forms(&self.cross, n, &z_padded);
-        let rounding = self.rounding(n, &z_padded, z_level, total, &forms, z_level);
         let mut variance = power * z_level;
+        // Σ_l 2·|γ_ε(l)| over the lags whose forms `rounding` speaks for.
+        let mut spread = T::ZERO;
         // `[z; z_level]ᵀ·S_lag·[z; z_level]` by lag (at `lag − 1`), kept for the residuals'
         // own sandwich below should they need it.
         let mut quadratics = [T::ZERO; L];
@@ -546,8 +558,11 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
             let quadratic = self.lag_quadratic(lag, n, &z_padded, z_level, total, &forms);
             quadratics[lag - 1] = quadratic;
             let weight = T::from_f64(2.0) * covariance;
-            variance += weight * quadratic + weight.abs() * rounding;
+            variance += weight * quadratic;
+            spread += weight.abs();
         }
+        let rounding = self.rounding(n, &z_padded, z_level, total, &forms, z_level);
+        variance += spread * rounding;
         if lags > n {
             variance += T::from_f64(2.0)
                 * metered.constant_parts(
@@ -574,7 +589,7 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
         // The differences' noise covariance from the metered colour:
         // Cov(Δe(i), Δe(j)) = 2γ(d) − γ(d + 1) − γ(|d − 1|), d = |i − j| (`n` is within the
         // metered lags).
-        let along = along_toeplitz(&z[..n], |d| {
+        let along = along_toeplitz(&z[..n], n, |d| {
             T::from_f64(2.0) * gamma[d] - gamma[d + 1] - gamma[d.abs_diff(1)]
         });
         bias *= T::from_u32(self.rows) * first_order_weight(self.rows, z_level, along);
@@ -594,6 +609,7 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
         let (variance, bias, factor, degrees) = if ratio > chi_square_mean_95::<T>(degrees) {
             let factor = coverage_factor::<T>(degrees);
             let mut observed = mean_square * z_level;
+            let mut observed_spread = T::ZERO;
             for lag in 1..=self.lags_for(n) {
                 if let Some(lagged) = self.residual_autocovariance(lag, n) {
                     // Those up to the metered lags and the order were computed above.
@@ -605,10 +621,11 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
                     let weight = T::from_f64(2.0) * lagged;
                     observed += weight * quadratic;
                     if lag <= n {
-                        observed += weight.abs() * rounding;
+                        observed_spread += weight.abs();
                     }
                 }
             }
+            observed += observed_spread * rounding;
             let variance = if observed > variance {
                 observed
             } else {
@@ -1015,10 +1032,10 @@ fn pad<T: Real, const N: usize, const L: usize>(v: &[T; N], n: usize) -> [T; L] 
     padded
 }
 
-/// `zᵀ·Σ·z` for a symmetric Toeplitz `Σ(i, j) = s(|i − j|)`.
-fn along_toeplitz<T: Real>(z: &[T], s: impl Fn(usize) -> T) -> T {
+/// `zᵀ·Σ·z` for a symmetric Toeplitz `Σ(i, j) = s(|i − j|)` that is zero beyond `lags`.
+fn along_toeplitz<T: Real>(z: &[T], lags: usize, s: impl Fn(usize) -> T) -> T {
     let mut sum = T::ZERO;
-    for d in 0..z.len() {
+    for d in 0..z.len().min(lags + 1) {
         let mut products = T::ZERO;
         for (&early, &late) in z.iter().zip(&z[d..]) {
             products += early * late;
