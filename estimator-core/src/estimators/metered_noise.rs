@@ -26,18 +26,30 @@
 //! order `n` the rows' cross-products keep their constant column's part, from the rows'
 //! running totals, as in `step_uncertainty`). The errors-in-variables bias is the same
 //! first-order term with the coloured noise: `N·Σ_i z_i·Σ_m h_m·(γ(|m − (n−1−i)|) − γ(|m −
-//! (n−i)|))`, weighed by `1 − ρ` (`step_uncertainty::first_order_weight`: none where the
-//! regressors' expected noise along the level's row of `P` is as large as what the rows
-//! hold along it) and added to the variance. Until stop 51 it was added in full, and it
-//! kept the rig's noise at 70–80 dB 100 ms after the landing cautious (±2u 98.6–99.1 %,
-//! `host-sim study coverage --runs 1000 --seed 1`): 11 rows in, on one run's own `ℓ` and
-//! `z`, it is mostly its own estimation noise there (its correlation with the run's error
-//! −0.10), yet left out 6 of 1,000 runs at 80 dB lay beyond 5u (up to 16u). Those were the
-//! sandwich's `f32` rounding, not the noise: its lag forms are small differences of large
-//! products there and came out negative in 71 of 1,000 runs (1 in `f64` on the same data)
-//! or far too small, and the bias stood in for them. The sandwich is now stated at the
-//! upper end of its rounding (`LagSums::rounding`), one that is not positive states no
-//! `u`, and those cells hold 97.8 % and 97.9 % (RMS error/u 0.86, 0.81). The noise is known to
+//! (n−i)|))`, added to the variance. Evaluated on one run's own `ℓ` and `z` it is mostly
+//! its own estimation noise, and it is what keeps the rig's noise at 70–80 dB 100 ms after
+//! the landing cautious (±2u 98.6–99.1 %, `host-sim study coverage --runs 1000 --seed 1`):
+//! there it exceeded the sandwich's standard deviation in 453 of 1,000 runs at 80 dB (three
+//! times over in 178), its correlation with the run's error was −0.10 (−0.01 to −0.20 in
+//! every scene, SNR and time looked at), subtracting it from the estimate made the RMS
+//! error larger in every one of them, and the mean error over the runs, the bias it stands
+//! for, stayed within a third of the error's standard deviation. Left out, ±2u held
+//! 94.6–95.8 % there, but with a tail: at 80 dB 6 of 1,000 runs lay beyond 5u (RMS error/u
+//! 1.25), four of them with u = 0.0006–0.0013 g on errors of 0.003–0.018 g (up to 16u), a
+//! sandwich all but cancelled (a fit whose moving average nearly annihilates the vibration,
+//! we take it); with it none lay beyond 4u. Stop 51 found those runs' cause: `f32`
+//! rounding, not the noise. The lag forms are small differences of large products where
+//! the level's row of `P` is large, and the metered sandwich came out negative in 71 of
+//! 1,000 runs at 80 dB (1 in `f64` on the same data) or far too small; the bias stood in
+//! for it. The sandwich is now stated at the upper end of its rounding
+//! (`LagSums::rounding`) and one that is not positive states no `u` (`with_bias`). The
+//! bias stays in full: weighed by `1 − ρ`, `ρ` the regressors' expected noise along the
+//! level's row of `P` as a share of what the rows hold along it, it brought those cells to
+//! 97.8 % and 97.9 %, but the scale then showed a pan emptied by hand as empty 0.056 g off
+//! with u = 0.011 g, 1.08 s after the removal (`host-sim torture --runs 10000 --seed 1`,
+//! run 1796: 16 lines shown settled wrong instead of 9), where the full bias's u of
+//! 0.07 g covered the error. Cautious on average, it holds what a bare sandwich misses
+//! after a change that is not quite a step. The noise is known to
 //! thousands of block means, so no t-factor is applied, unless the residuals leave more
 //! than the metered noise explains (their mean square above the 95 % point of `χ²_ν/ν`
 //! times `γ_ε(0)`: a fit that does not explain its data, a load that adds noise of its
@@ -54,9 +66,9 @@
 //! `crate::weighing::COLOUR_LAGS`), one copy of a row's totals per block while a colour is
 //! held; per uncertainty `C + 1` lags of `2n + 1` products each, `(n + 1)²` for the bias
 //! and one weighted sum of the totals (`cargo xtask bench`: the shipped n = 5, D = 24 at
-//! 958 instructions per 4 kHz sample with the colour in use over 24 lags (949 before the
-//! weighed bias and the rounding allowance, 946 before the residuals' own sandwich where
-//! they exceed the colour), 901 over 16, 794 without).
+//! 952 instructions per 4 kHz sample with the colour in use over 24 lags (949
+//! before the rounding allowance, 946 before the residuals' own sandwich where they
+//! exceed the colour), 901 over 16, 789 without).
 
 use crate::estimators::noise_meter::{Autocovariance, AUTOCOVARIANCE_LAGS};
 use crate::numerics::real::Real;

@@ -292,19 +292,17 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
             self.residual_sum,
             block_noise_floor,
         )?;
-        let bias = self.errors_in_variables_bias(n, z, z_level, &noise_model, noise);
+        let bias = self.errors_in_variables_bias(n, z, &noise_model, noise);
         stated(with_bias(variance, bias)?, degrees)
     }
 
     /// The first-order errors-in-variables bias of the least-squares level whose row of `P`
-    /// is `[z; z_level]` (`z` its leading entries): `E[φ_k·ε_k]` per row, times the rows
-    /// (thesis eq. 4.15), for the first-difference regression with block-mean noise variance
-    /// `noise` (white), weighed by [`first_order_weight`].
+    /// is `z` (leading entries): `E[φ_k·ε_k]` per row, times the rows (thesis eq. 4.15), for
+    /// the first-difference regression with block-mean noise variance `noise`.
     fn errors_in_variables_bias(
         &self,
         n: usize,
         z: &[T; N],
-        z_level: T,
         noise_model: &NoiseModel<T, L>,
         noise: T,
     ) -> T {
@@ -312,21 +310,7 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
         for (i, &zi) in z[..n].iter().enumerate() {
             bias += zi * (noise_model.at(n, n - 1 - i) - noise_model.at(n, n - i));
         }
-        // White block means: the differences' noise covariance is 2σ² on the diagonal and
-        // −σ² beside it.
-        let along = noise
-            * along_toeplitz(
-                &z[..n],
-                1,
-                |d| {
-                    if d == 0 {
-                        T::from_f64(2.0)
-                    } else {
-                        -T::ONE
-                    }
-                },
-            );
-        bias * (T::from_u32(self.rows) * noise) * first_order_weight(self.rows, z_level, along)
+        bias * (T::from_u32(self.rows) * noise)
     }
 
     /// The variance of `zᵀ·θ̂` for a consistent estimator of the first-difference
@@ -586,13 +570,7 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
         for (&zi, pair) in z[..n].iter().rev().zip(shifted[..=n].windows(2)) {
             bias += zi * (pair[0] - pair[1]);
         }
-        // The differences' noise covariance from the metered colour:
-        // Cov(Δe(i), Δe(j)) = 2γ(d) − γ(d + 1) − γ(|d − 1|), d = |i − j| (`n` is within the
-        // metered lags).
-        let along = along_toeplitz(&z[..n], n, |d| {
-            T::from_f64(2.0) * gamma[d] - gamma[d + 1] - gamma[d.abs_diff(1)]
-        });
-        bias *= T::from_u32(self.rows) * first_order_weight(self.rows, z_level, along);
+        bias *= T::from_u32(self.rows);
         // Residuals above what the metered noise explains: the residuals' own sandwich
         // (their autocovariance over the lags kept, as without a metering) where it is the
         // larger, the bias scaled by the ratio, and the t-factor. Not the metered variance
@@ -1032,58 +1010,6 @@ fn pad<T: Real, const N: usize, const L: usize>(v: &[T; N], n: usize) -> [T; L] 
     padded
 }
 
-/// `zᵀ·Σ·z` for a symmetric Toeplitz `Σ(i, j) = s(|i − j|)` that is zero beyond `lags`.
-fn along_toeplitz<T: Real>(z: &[T], lags: usize, s: impl Fn(usize) -> T) -> T {
-    let mut sum = T::ZERO;
-    for d in 0..z.len().min(lags + 1) {
-        let mut products = T::ZERO;
-        for (&early, &late) in z.iter().zip(&z[d..]) {
-            products += early * late;
-        }
-        let weight = if d == 0 {
-            s(0)
-        } else {
-            T::from_f64(2.0) * s(d)
-        };
-        sum += weight * products;
-    }
-    sum
-}
-
-/// The share of the first-order errors-in-variables bias that is counted: `1 − ρ`, none
-/// below zero, with `ρ = rows·zᵀ·Σ_Δ·z / zᵀ·S_Δ·z` the regressors' expected noise along the
-/// level's row of `P` (`noise_along = zᵀ·Σ_Δ·z`, `Σ_Δ` one row's difference-noise
-/// covariance) as a share of what the rows hold along it. `zᵀ·S_Δ·z` (`S_Δ` the difference
-/// columns' block of `ΦᵀΦ`) needs no sums: the normal equations `ΦᵀΦ·[z; z_level] = e_last`
-/// give `S_Δ·z = −C·z_level` and `Cᵀ·z = 1 − rows·z_level` (`C` the columns' totals), so
-/// `zᵀ·S_Δ·z = z_level·(rows·z_level − 1)`, exact in `f32` where the sums' own products
-/// cancel.
-///
-/// The bias (thesis eq. 4.15) expands the level in the regressors' noise. Where `ρ` is small
-/// the rows' signal sets `z` and the expansion holds: under floor vibration at 50 dB the
-/// predicted bias 200 ms after the landing averages −4.6·10⁻³ against a mean error of
-/// −4.3·10⁻³. Where `ρ` reaches 1, `z` points where the rows hold no more than their noise,
-/// and the expansion has nothing small in it: 100 ms after the landing on the rig's noise
-/// at 80 dB (11 rows, `ρ` above 1 in half the runs) the predicted bias was uncorrelated with
-/// the error (−0.10), averaged +1.6·10⁻² against a mean error of −2·10⁻⁴ (in `f64`), and
-/// added in full it held ±2u in 99.1 % of the runs (goal 95 %). The weight is the simplest
-/// that is 1 at `ρ = 0` and 0 from `ρ = 1`; `1/(1 + ρ)` and cut-offs at `ρ = ½` and 1 gave
-/// every cell of that study's four scenes within 93.1–97.3 % as well (instrumented
-/// `host-sim study coverage --runs 1000 --seed 1`, stop 51).
-fn first_order_weight<T: Real>(rows: u32, z_level: T, noise_along: T) -> T {
-    let rows = T::from_u32(rows);
-    let held = z_level * (rows * z_level - T::ONE);
-    if !(held > T::ZERO) {
-        return T::ZERO;
-    }
-    let weight = T::ONE - rows * noise_along / held;
-    if weight > T::ZERO {
-        weight
-    } else {
-        T::ZERO
-    }
-}
-
 /// The sandwich's `variance` with the errors-in-variables `bias` added (module docs);
 /// `None` unless the variance itself is positive. In `f32` the lag sums' quadratic forms
 /// cancel on a fit of few rows whose level row of `P` is large (the step 100 ms after the
@@ -1339,7 +1265,7 @@ mod tests {
             .variance(n, &noise_model, quadratic, sums.residual_sum, None)
             .unwrap();
         assert!((block_noise - 2.0).abs() < 1e-12);
-        let bias = sums.errors_in_variables_bias(n, &z, z_level, &noise_model, block_noise);
+        let bias = sums.errors_in_variables_bias(n, &z, &noise_model, block_noise);
         let expected = (variance + bias * bias).sqrt();
         assert!(
             (from_metering / expected - 1.0).abs() < 1e-9,

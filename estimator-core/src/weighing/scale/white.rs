@@ -177,11 +177,12 @@ mod tests {
     /// A board switched on with a load on the pan never reads empty, so it never meters
     /// the empty pan's noise; a run restarted on that resting load (here by a lost sample)
     /// has no transient to fit. Its first `u` rests on the raw samples' white noise: ±2u
-    /// covers the first errors as a 95 % interval should: 96 of 2,000 beyond it (4.8 %;
-    /// 57 while the errors-in-variables bias was counted in full, see
-    /// `step_uncertainty::first_order_weight`; without the floor 26 of 200, 13 %, at 0.3–1 g
-    /// of noise alike). The test allows the 95 % goal's Monte Carlo scatter: 5 % plus three
-    /// binomial standard deviations of the count.
+    /// covers the first errors as a 95 % interval should: 57 of 2,000 beyond it (2.9 %; 96,
+    /// 4.8 %, with the errors-in-variables bias weighed by the rows' noise share, tried and
+    /// reverted at stop 51; without the floor 26 of 200, 13 %, at 0.3–1 g of noise alike).
+    /// The test allows the 95 % goal's Monte Carlo scatter, 5 % plus three binomial standard
+    /// deviations of the count (until stop 51 it allowed 10 of 200, which a calibrated `u`
+    /// exceeds four times in ten).
     #[test]
     fn a_run_restarted_on_a_resting_load_is_not_overconfident() {
         use super::super::test_scene::{run, scene};
