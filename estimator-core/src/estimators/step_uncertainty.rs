@@ -639,9 +639,6 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
         Some(taper * lagged)
     }
 
-    /// `zᵀ·C(K)` for `z` padded to `L`: the newest rows' share of every lag's
-    /// constant-column part (see `total`), the same for every lag.
-    #[inline]
     /// How far the lags' quadratic forms along `[z; z_level]` (`z` padded) may be off in
     /// `T`'s rounding: the lag-0 form computed from the sums as theirs are, against its
     /// value `lag0` known without them (`z_level` for the step's row of `P`); zero where
@@ -665,6 +662,9 @@ impl<T: Real, const N: usize, const L: usize, const BEYOND_ORDER: bool, F: Cross
         }
     }
 
+    /// `zᵀ·C(K)` for `z` padded to `L`: the newest rows' share of every lag's
+    /// constant-column part (see `total`), the same for every lag.
+    #[inline]
     fn total_along(&self, z: &[T; L]) -> T {
         let mut total = T::ZERO;
         for (&sum, &zi) in self.total.iter().zip(z) {
@@ -797,11 +797,11 @@ impl<T: Real, const L: usize> CrossForm<T, L> for PerLag {
 
     fn forms(_: &Self::Sums, _: usize, _: &[T; L]) -> Self::Forms {}
 
-    #[inline]
     fn square_products(_: &Self::Forms, _: &[T; L], _: usize) -> Option<T> {
         None
     }
 
+    #[inline]
     fn lag_products(products: &Self::Sums, _: &Self::Forms, lag: &Lag<'_, T, L>) -> T {
         let &Lag { lag, n, z, .. } = lag;
         let mut quadratic = T::ZERO;
