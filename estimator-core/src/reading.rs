@@ -6,6 +6,11 @@ use crate::numerics::real::Real;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum InvalidReason {
+    /// The estimator holds no method yet (`ModelBank::UNCONFIGURED`, what a board's
+    /// `static` estimator starts as until it is configured where it lives); latches until
+    /// the estimator is configured. First, so that it is the all-zero value: a `static`
+    /// that starts unconfigured is zero bits, in `.bss`, not a copy in flash.
+    Unconfigured,
     /// A sample was NaN or infinite.
     NonFiniteInput,
     /// A sample lay outside the configured valid range (for example a saturated ADC).
@@ -38,6 +43,7 @@ impl InvalidReason {
     /// The reason in one word, as the console and host-sim write it (`ill_conditioned`).
     pub fn name(self) -> &'static str {
         match self {
+            Self::Unconfigured => "unconfigured",
             Self::NonFiniteInput => "non_finite_input",
             Self::OutOfRange => "out_of_range",
             Self::IllConditioned => "ill_conditioned",

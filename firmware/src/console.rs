@@ -299,7 +299,7 @@ impl<P: SerialPort> Console<P> {
                     "ERR record busy; expected the recording under way to end (RECORD end)\r\n",
                 ),
                 Err(RecordRefusal::NotBuilt) => out.write_str(
-                    "ERR record unavailable; expected a board built without the model bank (no RAM for samples)\r\n",
+                    "ERR record unavailable; expected a board built with room for samples\r\n",
                 ),
             },
             // The operator commands and the settings were decided in `decide`.

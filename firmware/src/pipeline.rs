@@ -7,7 +7,6 @@
 //! hand-off, wait, or lose a sample without counting it.
 
 use core::fmt::Write as _;
-use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicU32, Ordering};
 
 use cortex_m::interrupt::InterruptNumber;
@@ -55,22 +54,20 @@ pub type FirmwareEstimator = WeighingEstimator<
     { config::BANK_CANDIDATES },
 >;
 
-/// Where the configured estimator lives: a zero-initialised `static` (an RTIC `init` local)
-/// that [`scale`] writes it into. The scale holds a reference, so the estimator (a model
-/// bank takes tens of KB) is never moved through the stack with the scale and the pipeline.
-pub type EstimatorStorage = MaybeUninit<FirmwareEstimator>;
+/// Where the configured estimator lives: a `static` (an RTIC `init` local) that starts as
+/// [`FirmwareEstimator::UNCONFIGURED`], built at link time, and that [`scale`] configures in
+/// place. The scale holds a reference, so the estimator (a model bank takes tens of KB) is
+/// never copied through the stack nor moved with the scale and the pipeline.
+pub type EstimatorStorage = FirmwareEstimator;
 
 /// The scale both boards run: the weighing decisions around the configured method.
 pub type FirmwareScale = Scale<&'static mut FirmwareEstimator>;
 
 /// Raw samples a `record` keeps: 1.25 s at 4 kHz (0.25 s before the load change, 1 s
-/// after), 20 KB. None on a board built with the model bank: its 20 KB bank and the 93 KB
-/// of stack its boot takes fill the RAM (`record` answers that it is not built there).
-pub const RECORD_SAMPLES: usize = if config::BANK_CANDIDATES > 1 {
-    0
-} else {
-    5_000
-};
+/// after), 20 KB, on every image: a model bank's image has the RAM for it since its bank is
+/// configured in place (`cargo xtask bench bank`: the boot's stack 33.5 KB, 92 KB before,
+/// when no image with a bank had room for the samples).
+pub const RECORD_SAMPLES: usize = 5_000;
 /// The recorder of `record`, in a `static` of its own (an RTIC `init` local), as the
 /// estimator is.
 pub type FirmwareRecorder = Recorder<RECORD_SAMPLES>;
@@ -490,9 +487,9 @@ fn command_config(limits: CalibrationLimits) -> CommandConfig {
 /// The scale both boards run: the configured method (`firmware/weighing.toml`) with the
 /// decisions' thresholds for it, converting counts with the board's `calibration`.
 ///
-/// The estimator is written into `storage`. Not inlined: building a model bank takes tens
-/// of KB of stack for its temporaries; in a frame of its own that stack is free again once
-/// the scale is built.
+/// The estimator is configured where it lives, in `storage` (a model bank candidate by
+/// candidate). Not inlined: in a frame of its own, the stack its build takes is free again
+/// once the scale is built.
 #[inline(never)]
 pub fn scale(
     calibration: CountsScale,

@@ -25,6 +25,7 @@ pub fn state_name(state: State) -> &'static str {
         State::Invalid(InvalidReason::OutsideModelRange) => "invalid_outside_model_range",
         State::Invalid(InvalidReason::LostDefiniteness) => "invalid_lost_definiteness",
         State::Invalid(InvalidReason::ModelMismatch) => "invalid_model_mismatch",
+        State::Invalid(InvalidReason::Unconfigured) => "invalid_unconfigured",
     }
 }
 

@@ -70,6 +70,15 @@ enum BlockMean<T> {
 }
 
 impl<T: Real> Decimator<T> {
+    /// Blocks of one sample: what an estimator not yet configured holds (see
+    /// `ModelBank::UNCONFIGURED`; zero bits).
+    pub(crate) const PASS_THROUGH: Self = Self {
+        length: 0,
+        mean: BlockMean::Sample,
+        sum: T::ZERO,
+        filled: 0,
+    };
+
     /// Block means as `sum · (1/D)`; `D ≤ 1` passes samples through.
     pub(crate) fn new(length: u16) -> Self {
         let mean = if length <= 1 {

@@ -33,7 +33,23 @@ pub(crate) struct Intake<T> {
 }
 
 impl<T: Real> Intake<T> {
-    /// A fresh intake: warming up, no fault.
+    /// The intake of an estimator not yet configured: [`InvalidReason::Unconfigured`]
+    /// latched, so every sample it is given is flagged (see `ModelBank::UNCONFIGURED`);
+    /// after a reset its valid range takes exactly zero. Zero bits throughout.
+    pub(crate) const UNCONFIGURED: Self = Self {
+        samples: 0,
+        fault: Some(InvalidReason::Unconfigured),
+        valid_min: T::ZERO,
+        valid_max: T::ZERO,
+        inv_gain: T::ZERO,
+        decimator: Decimator::PASS_THROUGH,
+        state: State::Invalid(InvalidReason::Unconfigured),
+        estimate: None,
+        residual: None,
+        uncertainty: None,
+        degrees_of_freedom: 0,
+    };
+
     pub(crate) fn new(inv_gain: T, valid_min: T, valid_max: T, decimator: Decimator<T>) -> Self {
         Self {
             samples: 0,

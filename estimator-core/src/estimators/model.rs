@@ -84,6 +84,18 @@ struct BlockModel<T, const S: usize> {
 }
 
 impl<T: Real, const S: usize> BlockModel<T, S> {
+    /// The block model of no model: every regressor zero (an estimator not yet configured,
+    /// [`ModelBank::UNCONFIGURED`]).
+    const NONE: Self = Self {
+        transition: [[T::ZERO; S]; S],
+        first_row: [T::ZERO; S],
+        step_mean_weights: [T::ZERO; S],
+        step_end_weights: [T::ZERO; S],
+        ringing_blocks: 0,
+        start_row: [T::ZERO; S],
+        start_step: T::ZERO,
+    };
+
     /// The block model, or `None` when `mean_map` is singular (an eigenvalue of `A` a
     /// `D`-th root of unity other than 1: a mode the block means cannot see).
     fn new(model: &SensorModel<T, S>, decimation: u16) -> Option<Self> {
@@ -423,6 +435,35 @@ pub struct ModelEstimator<T: Real, const S: usize> {
 }
 
 impl<T: Real, const S: usize> ModelEstimator<T, S> {
+    /// A candidate not yet configured (see [`ModelBank::UNCONFIGURED`]): no model, every
+    /// sample flagged; zero bits.
+    const UNCONFIGURED: Self = Self {
+        config: ModelConfig {
+            model: SensorModel {
+                a: [[T::ZERO; S]; S],
+                b: [T::ZERO; S],
+                c: [T::ZERO; S],
+            },
+            decimation: 0,
+            initial_state: InitialState::Unknown,
+            valid_min: T::ZERO,
+            valid_max: T::ZERO,
+            noise_reference: None,
+        },
+        block: BlockModel::NONE,
+        intake: Intake::UNCONFIGURED,
+        state_row: [T::ZERO; S],
+        step_response: T::ZERO,
+        factor: Factor::EMPTY,
+        all_weighted: false,
+        rows: 0,
+        residual_sum: T::ZERO,
+        residual_terms: 0,
+        check: None,
+        flags_mismatch: false,
+        states_uncertainty: false,
+    };
+
     /// A new estimator, or why the configuration is impossible.
     pub fn new(config: ModelConfig<T, S>) -> Result<Self, ConfigError> {
         if S == 0 || !config.model.is_finite() {
@@ -922,22 +963,24 @@ struct SharedStates<T: Real, const S: usize> {
     row: [T; S],
     /// The common copy of the candidates' factor columns of the shared states, taken once
     /// every candidate's factor has weight in every column (while they fill, each candidate
-    /// folds its whole row); `None` before.
-    factor: Option<Factor<T, S, 1>>,
+    /// folds its whole row); used only once `taken`.
+    factor: Factor<T, S, 1>,
+    /// 1 once `factor` is taken, 0 before. A `u32`, not a `bool` nor an `Option` around
+    /// `factor`: their spare values would encode `Option<SharedStates>`'s `None`, and an
+    /// unconfigured bank must be zero bits ([`ModelBank::UNCONFIGURED`]).
+    taken: u32,
 }
 
 impl<T: Real, const S: usize> SharedStates<T, S> {
     /// How many states the candidates share: all but the mechanical mode's.
     const COUNT: usize = S.saturating_sub(MODE_STATES);
 
-    /// What the candidates of `configs` share, if they have the filter's states in common
-    /// (see the type's docs); the bank then numbers those first in every candidate
+    /// What the candidates `config(0..K)` share, if they have the filter's states in
+    /// common (see the type's docs); the bank then numbers those first in every candidate
     /// ([`Self::renumber`]). One candidate's block model at a time: a bank's candidates
     /// are 20 KB for K = 33, and the firmware's stack has no room for a copy of them.
-    fn find<const K: usize>(configs: &[ModelConfig<T, S>; K]) -> Option<Self> {
-        let unknown = configs
-            .iter()
-            .all(|c| c.initial_state == InitialState::Unknown);
+    fn find<const K: usize>(config: impl Fn(usize) -> ModelConfig<T, S>) -> Option<Self> {
+        let unknown = (0..K).all(|k| config(k).initial_state == InitialState::Unknown);
         if K < 2 || Self::COUNT == 0 || !unknown {
             return None;
         }
@@ -945,7 +988,7 @@ impl<T: Real, const S: usize> SharedStates<T, S> {
             BlockModel::new(&config.model, config.decimation)
                 .map(|block| block.with_leading(MODE_STATES))
         };
-        let reference = block(&configs[0])?;
+        let reference = block(&config(0))?;
         let common = |block: BlockModel<T, S>| {
             (0..Self::COUNT).all(|j| {
                 block.first_row[j] == reference.first_row[j]
@@ -959,14 +1002,15 @@ impl<T: Real, const S: usize> SharedStates<T, S> {
                     })
             })
         };
-        if !configs.iter().all(|c| block(c).is_some_and(common)) {
+        if !(0..K).all(|k| block(&config(k)).is_some_and(common)) {
             return None;
         }
         Some(Self {
             transition: reference.transition,
             first_row: reference.first_row,
             row: reference.first_row,
-            factor: None,
+            factor: Factor::EMPTY,
+            taken: 0,
         })
     }
 
@@ -979,14 +1023,17 @@ impl<T: Real, const S: usize> SharedStates<T, S> {
     /// Back to the first block, the candidates' factors empty.
     fn reset(&mut self) {
         self.row = self.first_row;
-        self.factor = None;
+        self.taken = 0;
     }
 
     /// Fold the shared entries of the current row with target `y` into the common factor
     /// and step the shared row on: the rotations and the shared part of the next row.
     #[inline(always)]
     fn fold(&mut self, y: T) -> Option<(SharedRotations<T, S>, [T; S])> {
-        let factor = self.factor.as_mut()?;
+        if self.taken == 0 {
+            return None;
+        }
+        let factor = &mut self.factor;
         let rotations = factor.fold_shared(Self::COUNT, self.row, y);
         let mut next = [T::ZERO; S];
         for i in 0..Self::COUNT {
@@ -1020,83 +1067,117 @@ const THIN_AFTER_TERMS: usize = 32;
 /// The fewest candidates thinning leaves: the two ends and the best with both neighbours.
 const THINNED_CANDIDATES: usize = 5;
 
-/// A bank's candidate configurations, checked ([`ModelBank::new`]'s conditions): what
-/// [`ModelBank::build`] builds without failing.
-#[derive(Clone, Debug)]
-pub(crate) struct BankConfigs<T, const S: usize, const K: usize>([ModelConfig<T, S>; K]);
-
-impl<T: Real, const S: usize, const K: usize> BankConfigs<T, S, K> {
-    /// `K ≥ 1` configurations each a valid [`ModelEstimator`], sharing the decimation and
-    /// the valid range. Each candidate is checked by building it, one at a time: an array
-    /// of estimators beside the bank (20 KB for K = 33) doubled the stack a firmware needs
-    /// to build it.
-    pub(crate) fn check(configs: [ModelConfig<T, S>; K]) -> Result<Self, ConfigError> {
-        let Some(shared) = configs.first() else {
-            return Err(ConfigError::Model);
-        };
-        for config in configs.iter() {
-            ModelEstimator::new(*config)?;
-            if config.decimation != shared.decimation {
-                return Err(ConfigError::Decimation);
-            }
-            if config.valid_min != shared.valid_min || config.valid_max != shared.valid_max {
-                return Err(ConfigError::Range);
-            }
-        }
-        Ok(Self(configs))
-    }
-}
-
 impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
+    /// A bank that holds no model yet: what a board's `static` estimator starts as, to be
+    /// configured where it lives ([`Self::configure`]); until then every sample is flagged
+    /// [`InvalidReason::Unconfigured`]. Every field is zero bits (no candidate fitted,
+    /// `end = stride = 0`; the reasons' first variant; `None`s), so such a `static` is in
+    /// `.bss`, not a copy of the candidates in flash: the STM32 image's link
+    /// (`cargo xtask bench bank`) fails if a field stops being zero.
+    pub const UNCONFIGURED: Self = Self {
+        models: [const { ModelEstimator::UNCONFIGURED }; K],
+        intake: Intake::UNCONFIGURED,
+        first: 0,
+        end: 0,
+        stride: 0,
+        combined: Reading {
+            estimate: None,
+            samples: 0,
+            state: State::Invalid(InvalidReason::Unconfigured),
+            residual: None,
+            uncertainty: None,
+            degrees_of_freedom: 0,
+        },
+        prunes: false,
+        thins: false,
+        shared: None,
+        combined_sum: T::ZERO,
+        combined_terms: 0,
+        interpolation: Interpolation::ThreePoint,
+        whitening_order: 0,
+        whitening: None,
+        run_whitening: None,
+        history: [T::ZERO; WHITENING_ORDER],
+        next: 0,
+        held: 0,
+        growing: [T::ZERO; WHITENING_ORDER],
+        growing_error: T::ZERO,
+    };
+
     /// A bank over `K ≥ 1` ordered candidate configurations, which share the decimation
     /// and the valid range (one block mean is one row of every candidate's regression).
     pub fn new(configs: [ModelConfig<T, S>; K]) -> Result<Self, ConfigError> {
-        Ok(Self::build(&BankConfigs::check(configs)?))
+        let mut bank = Self::UNCONFIGURED;
+        bank.configure(|k| Ok(configs[k]))?;
+        Ok(bank)
     }
 
-    /// The bank over checked configurations: it cannot fail, so a caller can write it
-    /// where it is to live without a `Result` of it in between (each a copy of the 20 KB
-    /// of candidates on the stack of the board that builds it, `Scale::configured_in`).
-    /// `new` is deterministic, so a candidate that passed the check builds again.
-    pub(crate) fn build(configs: &BankConfigs<T, S, K>) -> Self {
-        let configs = &configs.0;
-        let intake = Self::shared_intake(&configs[0]);
-        let shared = SharedStates::find(configs);
-        Self {
-            models: core::array::from_fn(|k| {
-                let mut model = ModelEstimator::new(configs[k]).expect("checked");
-                // A single candidate is checked as a `ModelEstimator` is; a grid is not (see
-                // the type's docs).
-                model.flags_mismatch = K == 1;
-                model.states_uncertainty = K == 1;
-                if !model.flags_mismatch {
-                    model.check = None;
-                }
-                if shared.is_some() {
-                    SharedStates::renumber(&mut model);
-                }
-                model
-            }),
-            combined: intake.reading(),
-            intake,
-            first: 0,
-            end: K,
-            stride: 1,
-            prunes: true,
-            thins: true,
-            shared,
-            combined_sum: T::ZERO,
-            combined_terms: 0,
-            interpolation: Interpolation::ThreePoint,
-            whitening_order: 0,
-            whitening: None,
-            run_whitening: None,
-            history: [T::ZERO; WHITENING_ORDER],
-            next: 0,
-            held: 0,
-            growing: [T::ZERO; WHITENING_ORDER],
-            growing_error: T::ZERO,
+    /// [`Self::configure`]'s checks of `config(0..K)`, one candidate at a time: each a
+    /// valid [`ModelEstimator`], with the first's decimation and valid range (returned).
+    pub(crate) fn check(
+        config: &impl Fn(usize) -> Result<ModelConfig<T, S>, ConfigError>,
+    ) -> Result<ModelConfig<T, S>, ConfigError> {
+        if K == 0 {
+            return Err(ConfigError::Model);
         }
+        let shared = config(0)?;
+        for k in 0..K {
+            let candidate = config(k)?;
+            ModelEstimator::new(candidate)?;
+            if candidate.decimation != shared.decimation {
+                return Err(ConfigError::Decimation);
+            }
+            if candidate.valid_min != shared.valid_min || candidate.valid_max != shared.valid_max {
+                return Err(ConfigError::Range);
+            }
+        }
+        Ok(shared)
+    }
+
+    /// Become, where it stands, the bank [`Self::new`] builds over the candidate
+    /// configurations `config(0)`, …, `config(K − 1)` (interpolation and whitening back to
+    /// their defaults). Every candidate is checked first, one at a time (a valid
+    /// [`ModelEstimator`], the first's decimation and valid range): on an error the bank
+    /// is as it was. Then each is written over its slot: no copy of the candidates (20 KB
+    /// for K = 33) is ever on the stack of the board that builds it, where `new` and a
+    /// move into the board's `static` took 93 KB. `config` is called three times per
+    /// candidate, and must give the same configuration each time.
+    pub fn configure(
+        &mut self,
+        config: impl Fn(usize) -> Result<ModelConfig<T, S>, ConfigError>,
+    ) -> Result<(), ConfigError> {
+        let shared = Self::check(&config)?;
+        // Checked: every call from here on gives a valid configuration.
+        let checked = |k: usize| config(k).unwrap_or(shared);
+        let states = SharedStates::find::<K>(checked);
+        for (k, slot) in self.models.iter_mut().enumerate() {
+            let mut model = ModelEstimator::new(checked(k)).expect("checked");
+            // A single candidate is checked as a `ModelEstimator` is; a grid is not (see
+            // the type's docs).
+            model.flags_mismatch = K == 1;
+            model.states_uncertainty = K == 1;
+            if !model.flags_mismatch {
+                model.check = None;
+            }
+            if states.is_some() {
+                SharedStates::renumber(&mut model);
+            }
+            *slot = model;
+        }
+        self.intake = Self::shared_intake(&shared);
+        self.combined = self.intake.reading();
+        (self.first, self.end, self.stride) = (0, K, 1);
+        (self.prunes, self.thins) = (true, true);
+        self.shared = states;
+        (self.combined_sum, self.combined_terms) = (T::ZERO, 0);
+        self.interpolation = Interpolation::ThreePoint;
+        self.whitening_order = 0;
+        (self.whitening, self.run_whitening) = (None, None);
+        self.history = [T::ZERO; WHITENING_ORDER];
+        (self.next, self.held) = (0, 0);
+        self.growing = [T::ZERO; WHITENING_ORDER];
+        self.growing_error = T::ZERO;
+        Ok(())
     }
 
     /// The bank whitening its block means with a prediction-error filter of order `order`
@@ -1247,7 +1328,9 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     /// Index of the best-fitting candidate so far, among those still fitted.
     pub fn best(&self) -> usize {
         let mut best = self.first;
-        for k in (self.first + self.stride..self.end).step_by(self.stride) {
+        // `max(1)`: an unconfigured bank's stride is 0.
+        let stride = self.stride.max(1);
+        for k in (self.first + stride..self.end).step_by(stride) {
             if self.models[k].residual_sum < self.models[best].residual_sum {
                 best = k;
             }
@@ -1257,7 +1340,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
 
     /// The candidates still fitted (see the type's docs on what a sample costs).
     pub fn fitted(&self) -> core::iter::StepBy<core::ops::Range<usize>> {
-        (self.first..self.end).step_by(self.stride)
+        (self.first..self.end).step_by(self.stride.max(1))
     }
 
     /// Fold one block mean into every candidate still fitted, then combine them and drop
@@ -1300,7 +1383,8 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
                     .filter(|m| !m.intake.latched());
                 if live.clone().all(|m| m.all_weighted) {
                     if let Some(model) = live.next() {
-                        shared.factor = Some(model.factor.clone());
+                        shared.factor = model.factor.clone();
+                        shared.taken = 1;
                         shared.row = model.state_row;
                     }
                 }
@@ -1749,6 +1833,72 @@ mod tests {
             .collect()
     }
 
+    /// A bank configured where it stands (the firmware's `static`, which starts
+    /// unconfigured) is the bank [`ModelBank::new`] builds: before it is configured every
+    /// sample is flagged out of range; configured over a bank that had run another grid,
+    /// with whitening and five-point interpolation set, it reads exactly what a new bank
+    /// reads on the same drop; a configuration refused (a candidate with another
+    /// decimation) leaves it reading as it did.
+    #[test]
+    fn a_bank_configured_in_place_reads_as_a_new_one_and_a_refused_configuration_changes_nothing() {
+        let cell = crate::sensor::reference_cell();
+        let configs = |min: f64, max: f64| {
+            cell.bank_configs::<f32, 5, 33>(min, max, 8, InitialState::Unknown)
+                .unwrap()
+        };
+        let mut bank = ModelBank::<f32, 5, 33>::UNCONFIGURED;
+        assert_eq!(bank.fitted().count(), 0);
+        for sample in [0.0, 1.0, -1.0, 1e6] {
+            let reading = bank.push(sample);
+            assert_eq!(reading.estimate, None);
+            assert_eq!(reading.state, State::Invalid(InvalidReason::Unconfigured));
+        }
+        // Reset unconfigured, it takes an exact zero (its valid range) and estimates
+        // nothing from it; any other sample is out of range.
+        let mut reset = bank.clone();
+        reset.reset();
+        for sample in [0.0, 0.0, 2.0, 0.0] {
+            assert_eq!(reset.push(sample).estimate, None);
+        }
+        let data = drop_onto(1.02, 138.0, 30.0, 3, 1200);
+        let other = configs(0.8, 1.2);
+        bank.configure(|k| Ok(other[k])).unwrap();
+        bank = bank
+            .with_whitening(8)
+            .unwrap()
+            .with_interpolation(Interpolation::FivePoint);
+        for &y in &data[..300] {
+            bank.push(y as f32);
+        }
+        let wanted = configs(0.7, 1.3);
+        bank.configure(|k| Ok(wanted[k])).unwrap();
+        let mut new = ModelBank::new(wanted).unwrap();
+        let mut estimates = 0;
+        for (k, &y) in data.iter().enumerate() {
+            let reading = bank.push(y as f32);
+            assert_eq!(reading, new.push(y as f32), "sample {k}");
+            estimates += usize::from(reading.estimate.is_some());
+        }
+        assert!(estimates > 1000, "{estimates}");
+        let mut before = bank.clone();
+        let refused = bank.configure(|k| {
+            let config = configs(0.9, 1.1)[k];
+            Ok(if k == 20 {
+                config.with_decimation(4)
+            } else {
+                config
+            })
+        });
+        assert_eq!(refused.unwrap_err(), ConfigError::Decimation);
+        for (k, &y) in data.iter().enumerate() {
+            assert_eq!(
+                bank.push(y as f32),
+                before.push(y as f32),
+                "after the refusal, {k}"
+            );
+        }
+    }
+
     /// A bank built by the physical law shares its filter's states (a bank of first-order
     /// lags has none to share), and sharing them changes no reading: on noisy drops in the
     /// grid and beyond it, in both precisions, the bank reads exactly what the same bank
@@ -1770,7 +1920,7 @@ mod tests {
                 assert_eq!(reading, own.push(y), "{label}, sample {k}");
                 readings.push(reading);
             }
-            assert!(shared.shared.as_ref().unwrap().factor.is_some(), "{label}");
+            assert_eq!(shared.shared.as_ref().unwrap().taken, 1, "{label}");
             // After a reset the candidates fill their factors again before sharing.
             shared.reset();
             own.reset();

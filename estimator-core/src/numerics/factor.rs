@@ -43,16 +43,19 @@ pub(crate) struct Folded<T> {
 
 impl<T: Real, const N: usize, const E: usize> Factor<T, N, E> {
     pub(crate) fn new() -> Self {
-        Self {
-            lead_coupling: [[T::ZERO; N]; N],
-            cross_coupling: [[T::ZERO; E]; N],
-            tail_coupling: [[T::ZERO; E]; E],
-            lead_weight: [T::ZERO; N],
-            tail_weight: [T::ZERO; E],
-            lead_rhs: [T::ZERO; N],
-            tail_rhs: [T::ZERO; E],
-        }
+        Self::EMPTY
     }
+
+    /// The factor of no rows, as a constant (a `static` estimator's starting value).
+    pub(crate) const EMPTY: Self = Self {
+        lead_coupling: [[T::ZERO; N]; N],
+        cross_coupling: [[T::ZERO; E]; N],
+        tail_coupling: [[T::ZERO; E]; E],
+        lead_weight: [T::ZERO; N],
+        tail_weight: [T::ZERO; E],
+        lead_rhs: [T::ZERO; N],
+        tail_rhs: [T::ZERO; E],
+    };
 
     /// Exponential forgetting: every earlier row's weight is multiplied by λ.
     pub(crate) fn forget(&mut self, active: usize, lambda: T) {

@@ -195,9 +195,8 @@ impl LoadCellModel {
         let ratios = Self::frequency_ratios::<K>(ratio_min, ratio_max)?;
         let mut error = None;
         let configs = ratios.map(|ratio| {
-            match self.with_frequency_ratio(ratio).sensor_model::<T, S>() {
-                Ok(model) => ModelConfig::new(model),
-                Err(e) => {
+            self.bank_config(ratio, decimation, initial_state)
+                .unwrap_or_else(|e| {
                     error.get_or_insert(e);
                     // A placeholder that is never returned.
                     ModelConfig::new(SensorModel {
@@ -205,15 +204,26 @@ impl LoadCellModel {
                         b: [T::ZERO; S],
                         c: [T::ZERO; S],
                     })
-                }
-            }
-            .with_decimation(decimation)
-            .with_initial_state(initial_state)
+                })
         });
         match error {
             Some(e) => Err(e),
             None => Ok(configs),
         }
+    }
+
+    /// One candidate of [`Self::bank_configs`]: this model at frequency ratio `ratio`.
+    pub fn bank_config<T: Real, const S: usize>(
+        &self,
+        ratio: f64,
+        decimation: u16,
+        initial_state: InitialState,
+    ) -> Result<ModelConfig<T, S>, ConfigError> {
+        Ok(
+            ModelConfig::new(self.with_frequency_ratio(ratio).sensor_model::<T, S>()?)
+                .with_decimation(decimation)
+                .with_initial_state(initial_state),
+        )
     }
 }
 

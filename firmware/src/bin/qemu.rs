@@ -69,7 +69,7 @@ mod app {
 
     #[init(local = [
         queue: SampleQueue = SampleQueue::new(),
-        estimator: EstimatorStorage = EstimatorStorage::uninit(),
+        estimator: EstimatorStorage = EstimatorStorage::UNCONFIGURED,
         recorder: FirmwareRecorder = FirmwareRecorder::new(),
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {

@@ -164,7 +164,7 @@ mod app {
         second: [u16; DMA_BLOCK] = [0; DMA_BLOCK],
         #[cfg(not(feature = "ads131m02"))]
         third: [u16; DMA_BLOCK] = [0; DMA_BLOCK],
-        estimator: EstimatorStorage = EstimatorStorage::uninit(),
+        estimator: EstimatorStorage = EstimatorStorage::UNCONFIGURED,
         recorder: FirmwareRecorder = FirmwareRecorder::new(),
         usb_endpoints: [u32; USB_ENDPOINT_WORDS] = [0; USB_ENDPOINT_WORDS],
         usb_bus: Option<UsbBusAllocator<UsbBusType>> = None,

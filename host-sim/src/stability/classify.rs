@@ -12,7 +12,7 @@ pub const BOUND_FACTOR: f64 = 10.0;
 pub const DIVERGED_FACTOR: f64 = 10.0;
 
 /// Every reason the core flags, in a fixed order (for counts and columns).
-pub const REASONS: [InvalidReason; 8] = [
+pub const REASONS: [InvalidReason; 9] = [
     InvalidReason::NonFiniteInput,
     InvalidReason::OutOfRange,
     InvalidReason::IllConditioned,
@@ -21,6 +21,7 @@ pub const REASONS: [InvalidReason; 8] = [
     InvalidReason::LostDefiniteness,
     InvalidReason::OutsideModelRange,
     InvalidReason::ModelMismatch,
+    InvalidReason::Unconfigured,
 ];
 
 fn reason_index(reason: InvalidReason) -> usize {
@@ -34,6 +35,7 @@ fn reason_index(reason: InvalidReason) -> usize {
         InvalidReason::LostDefiniteness => 5,
         InvalidReason::OutsideModelRange => 6,
         InvalidReason::ModelMismatch => 7,
+        InvalidReason::Unconfigured => 8,
     }
 }
 

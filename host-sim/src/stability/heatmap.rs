@@ -457,7 +457,7 @@ mod tests {
         assert_eq!(compact(f64::INFINITY), "–");
         let refused = Cell {
             runs: 2,
-            flagged: [2, 0, 0, 0, 0, 0, 0, 0],
+            flagged: [2, 0, 0, 0, 0, 0, 0, 0, 0],
             ..Cell::default()
         };
         assert_eq!(cell_mark(&refused), (Class::Refused, false, "F".into()));

@@ -1,15 +1,14 @@
 //! The configured method as one estimator: the enum the scale runs.
 
-use core::mem::MaybeUninit;
-
 use crate::estimators::bias_compensated::{BiasCompensatedConfig, BiasCompensatedStepEstimator};
 use crate::estimators::consistency::NoiseReference;
 use crate::estimators::iv::{IvConfig, IvStepEstimator};
-use crate::estimators::model::{BankConfigs, InitialState, ModelBank};
+use crate::estimators::model::{InitialState, ModelBank, ModelConfig};
 use crate::estimators::noise_meter::Autocovariance;
 use crate::estimators::step::{StepConfig, StepEstimator};
 use crate::numerics::real::Real;
 use crate::reading::{ConfigError, Estimator, Reading};
+use crate::sensor::LoadCellModel;
 
 use super::{WeighingConfig, WeighingMethod};
 
@@ -75,7 +74,7 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
     /// bias-compensated method keeps the configured noise variance: counts², which the gain
     /// does not change.
     pub fn in_counts(config: &WeighingConfig) -> Result<Self, ConfigError> {
-        Ok(Plan::in_counts(config)?.build())
+        Plan::in_counts(config)?.build()
     }
 
     /// Check every run after the next [`Estimator::reset`] against the noise of `reference`
@@ -127,30 +126,50 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
         method: &WeighingMethod,
         zero_counts: f64,
     ) -> Result<Self, ConfigError> {
-        Ok(Plan::new(config, method, zero_counts)?.build())
+        Plan::new(config, method, zero_counts)?.build()
     }
 
-    /// [`Self::in_counts`] written into `storage`, where the estimator is to live: every
-    /// check is made before it is built, so no `Result` of the whole estimator (a model
-    /// bank's 20 KB of candidates) is ever on the stack
-    /// ([`crate::weighing::Scale::configured_in`]).
-    pub fn in_counts_into<'a>(
-        config: &WeighingConfig,
-        storage: &'a mut MaybeUninit<Self>,
-    ) -> Result<&'a mut Self, ConfigError> {
-        let plan = Plan::in_counts(config)?;
-        Ok(storage.write(plan.build()))
+    /// An estimator that holds no method yet: what a board's `static` estimator starts as,
+    /// built at link time, to become the configured method where it lives
+    /// ([`Self::configure_in_counts`]). It flags every sample given to it before then.
+    pub const UNCONFIGURED: Self = Self::ModelBank(ModelBank::UNCONFIGURED);
+
+    /// Become [`Self::in_counts`] where it stands: a model bank over a bank (the
+    /// [`Self::UNCONFIGURED`] estimator is one) is configured in place, candidate by
+    /// candidate, so no copy of its candidates (20 KB for K = 33) is ever on the stack
+    /// ([`crate::weighing::Scale::configured_in`]); any other method is written over it.
+    /// Every check is made first: on an error it is as it was.
+    pub fn configure_in_counts(&mut self, config: &WeighingConfig) -> Result<(), ConfigError> {
+        // One arm per method, none of which builds a bank by value: the frame of a match
+        // holds every arm's temporaries, and one bank built by value (`Plan::build`) in it
+        // took 69 KB of the QEMU bank image's stack whichever arm ran.
+        match Plan::<T, N, S, K>::in_counts(config)? {
+            Plan::Step(e) => *self = Self::Step(e),
+            Plan::BiasCompensated(e) => *self = Self::BiasCompensated(e),
+            Plan::InstrumentalVariable(e) => *self = Self::InstrumentalVariable(e),
+            Plan::ModelBank(plan) => {
+                let candidate = |k| plan.candidate(k);
+                ModelBank::<T, S, K>::check(&candidate)?;
+                if !matches!(self, Self::ModelBank(_)) {
+                    // Zero bits: written in place, no copy on the stack.
+                    *self = Self::ModelBank(ModelBank::UNCONFIGURED);
+                }
+                if let Self::ModelBank(bank) = self {
+                    bank.configure(candidate)?;
+                }
+            }
+        }
+        Ok(())
     }
 }
 
 /// The configured method checked and ready to build: the data-driven estimators built
-/// (a few KB at most), a model bank's candidate configurations checked. Building it cannot
-/// fail ([`Plan::build`]).
+/// (a few KB at most), a model bank's candidates as a plan that gives them one at a time.
 enum Plan<T: Real, const N: usize, const S: usize, const K: usize> {
     Step(StepEstimator<T, N, UNCERTAINTY_ORDERS, COLOUR_LAGS>),
     BiasCompensated(BiasCompensatedStepEstimator<T, N>),
     InstrumentalVariable(IvStepEstimator<T, N>),
-    ModelBank(BankConfigs<T, S, K>),
+    ModelBank(BankPlan<T, K>),
 }
 
 impl<T: Real, const N: usize, const S: usize, const K: usize> Plan<T, N, S, K> {
@@ -215,28 +234,50 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> Plan<T, N, S, K> {
                 }
                 let mut model = config.model;
                 model.counts_per_gram = config.counts_per_gram;
-                let configs = model
-                    .bank_configs::<T, S, K>(
-                        ratio_min,
-                        ratio_max,
-                        decimation,
-                        InitialState::Unknown,
-                    )?
-                    .map(|c| c.with_valid_range(low, high));
-                Self::ModelBank(BankConfigs::check(configs)?)
+                Self::ModelBank(BankPlan {
+                    model,
+                    ratios: LoadCellModel::frequency_ratios::<K>(ratio_min, ratio_max)?,
+                    decimation,
+                    valid: (low, high),
+                })
             }
         })
     }
 
-    /// The estimator: infallible, every check made.
+    /// The estimator (a model bank's candidates checked as it is built).
     #[inline(always)]
-    fn build(self) -> WeighingEstimator<T, N, S, K> {
-        match self {
+    fn build(self) -> Result<WeighingEstimator<T, N, S, K>, ConfigError> {
+        Ok(match self {
             Self::Step(e) => WeighingEstimator::Step(e),
             Self::BiasCompensated(e) => WeighingEstimator::BiasCompensated(e),
             Self::InstrumentalVariable(e) => WeighingEstimator::InstrumentalVariable(e),
-            Self::ModelBank(configs) => WeighingEstimator::ModelBank(ModelBank::build(&configs)),
-        }
+            Self::ModelBank(plan) => {
+                let mut bank = ModelBank::UNCONFIGURED;
+                bank.configure(|k| plan.candidate(k))?;
+                WeighingEstimator::ModelBank(bank)
+            }
+        })
+    }
+}
+
+/// A model bank's candidates as the configured method gives them: the identified model
+/// (in counts) at each frequency ratio, by the physical law
+/// ([`LoadCellModel::bank_configs`]' candidates, one at a time).
+struct BankPlan<T, const K: usize> {
+    model: LoadCellModel,
+    ratios: [f64; K],
+    decimation: u16,
+    valid: (T, T),
+}
+
+impl<T: Real, const K: usize> BankPlan<T, K> {
+    /// Candidate `k`'s configuration.
+    fn candidate<const S: usize>(&self, k: usize) -> Result<ModelConfig<T, S>, ConfigError> {
+        let ratio = *self.ratios.get(k).ok_or(ConfigError::Model)?;
+        Ok(self
+            .model
+            .bank_config::<T, S>(ratio, self.decimation, InitialState::Unknown)?
+            .with_valid_range(self.valid.0, self.valid.1))
     }
 }
 

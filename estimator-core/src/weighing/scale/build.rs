@@ -2,7 +2,6 @@
 //! configured method (what tuning chose), owned or in storage of its own.
 
 use core::fmt;
-use core::mem::MaybeUninit;
 
 use super::noise::NoiseMetering;
 use super::{CountsScale, Scale, ScaleConfig, ScaleEstimator};
@@ -59,19 +58,20 @@ impl<const N: usize, const S: usize, const K: usize> Scale<WeighingEstimator<f32
 impl<'a, const N: usize, const S: usize, const K: usize>
     Scale<&'a mut WeighingEstimator<f32, N, S, K>>
 {
-    /// [`Scale::configured`] with the estimator written into `storage` (a zero-initialised
-    /// `static` on a microcontroller) and the scale holding a reference to it. A model bank
-    /// is 20 KB: written into its storage, it is not moved again with the scale (into a
-    /// pipeline, into the RTIC resources), each move a copy on a stack of about 100 KB. A
-    /// value already in `storage` is overwritten, not dropped (the estimators own nothing).
+    /// [`Scale::configured`] with the estimator configured where it lives, in `storage`
+    /// (on a microcontroller a `static` that starts as [`WeighingEstimator::UNCONFIGURED`],
+    /// built at link time), and the scale holding a reference to it. A model bank is
+    /// 20 KB: configured in place ([`WeighingEstimator::configure_in_counts`]), it is never
+    /// copied through a stack of about 100 KB, nor moved again with the scale (into a
+    /// pipeline, into the RTIC resources).
     pub fn configured_in(
         weighing: &WeighingConfig,
-        storage: &'a mut MaybeUninit<WeighingEstimator<f32, N, S, K>>,
+        storage: &'a mut WeighingEstimator<f32, N, S, K>,
         calibration: CountsScale,
     ) -> Result<Self, ConfigError> {
         let config = decisions_for(weighing)?;
-        let estimator = WeighingEstimator::in_counts_into(weighing, storage)?;
-        Self::new(config, estimator, calibration)
+        storage.configure_in_counts(weighing)?;
+        Self::new(config, storage, calibration)
     }
 }
 
@@ -82,10 +82,9 @@ pub trait ConfiguredEstimator: ScaleEstimator {
     /// stay as it was.
     fn rebuild(&mut self, weighing: &WeighingConfig) -> Result<(), ConfigError>;
 
-    /// Whether `method` may be built while the board runs: not a model bank, whose build
-    /// takes most of a board's stack (its boot 93 of 100 KB on the QEMU board's bank
-    /// image, `cargo xtask bench bank`) and is done once, at boot; and nothing on an image
-    /// built with a bank.
+    /// Whether `method` may be built while the board runs: not a model bank, and nothing
+    /// on an image built with a bank. A bank is chosen with its image (`K` is the image's,
+    /// `firmware/weighing.toml`), at calibration; it is configured in place at boot.
     fn rebuilds(method: &WeighingMethod) -> bool
     where
         Self: Sized;
@@ -95,14 +94,11 @@ impl<const N: usize, const S: usize, const K: usize> ConfiguredEstimator
     for WeighingEstimator<f32, N, S, K>
 {
     fn rebuild(&mut self, weighing: &WeighingConfig) -> Result<(), ConfigError> {
-        // A bank image's method is fixed (`rebuilds`); with this branch the rebuild is
-        // compiled out of it, and the boot's build stays the only one (inlined, in place: a
-        // second caller outlined it and its 20 KB copy overflowed the bank image's stack).
+        // A bank image's method is fixed (`rebuilds`).
         if K > 1 {
             return Err(ConfigError::Model);
         }
-        *self = Self::in_counts(weighing)?;
-        Ok(())
+        self.configure_in_counts(weighing)
     }
 
     fn rebuilds(method: &WeighingMethod) -> bool {
@@ -313,7 +309,7 @@ mod tests {
         let config = weighing(ScaleConfig::DEFAULT_METHOD);
         let mut owned =
             Scale::<WeighingEstimator<f32, 8, 5, 1>>::configured(&config, calibration()).unwrap();
-        let mut storage = MaybeUninit::<WeighingEstimator<f32, 8, 5, 1>>::uninit();
+        let mut storage = WeighingEstimator::<f32, 8, 5, 1>::UNCONFIGURED;
         let mut borrowing = Scale::configured_in(&config, &mut storage, calibration()).unwrap();
         let mut cell = Cell::new(0.4);
         for k in 0..6000 {
