@@ -34,9 +34,11 @@ pub use crate::weighing_file::{
     FORMAT_CALIBRATION_MASS_ONLY,
 };
 
-/// The bank size calibration offers (the core's bank is a const generic):
-/// [`estimator_core::weighing::BankCandidate::REFERENCE`].
-pub const BANK_CANDIDATES: usize = 33;
+/// The most candidates a configured bank has on the host (the core's bank is a const
+/// generic, and holds any size up to it): room for
+/// [`estimator_core::weighing::BankCandidate::CALIBRATED_U`]'s 65; calibration's bank,
+/// [`estimator_core::weighing::BankCandidate::REFERENCE`], has 33.
+pub const BANK_CANDIDATES: usize = 65;
 
 /// What `host-sim calibrate` is asked to do.
 #[derive(Clone, Debug)]
@@ -566,6 +568,8 @@ pub fn method_spec(config: &WeighingConfig, precision: Precision) -> Method {
             candidates,
             ratio_min,
             ratio_max,
+            interpolation,
+            whitening,
         } => Method::Model(crate::method::ModelSpec {
             decimation,
             candidates,
@@ -577,8 +581,8 @@ pub fn method_spec(config: &WeighingConfig, precision: Precision) -> Method {
                 damping_ratio: config.model.damping_ratio,
                 filter_cutoff_hz: config.model.filter_cutoff_hz,
             }),
-            interpolation: Default::default(),
-            whitening: 0,
+            interpolation,
+            whitening,
         }),
     }
 }

@@ -878,6 +878,17 @@ fn the_toml_round_trips_and_refuses_what_it_cannot_use() {
             candidates: 33,
             ratio_min: 0.6,
             ratio_max: 1.4,
+            interpolation: estimator_core::Interpolation::ThreePoint,
+            whitening: 0,
+        },
+        // The bank whose `u` holds in coloured noise: five-point, whitened.
+        WeighingMethod::ModelBank {
+            decimation: 8,
+            candidates: 65,
+            ratio_min: 0.6,
+            ratio_max: 1.4,
+            interpolation: estimator_core::Interpolation::FivePoint,
+            whitening: 32,
         },
     ];
     for method in methods {
@@ -945,10 +956,39 @@ fn the_toml_round_trips_and_refuses_what_it_cannot_use() {
                 candidates,
                 ratio_min,
                 ratio_max,
+                interpolation: estimator_core::Interpolation::ThreePoint,
+                whitening: 0,
             }),
             Precision::F32,
         )
     };
+    // A bank's options, by key: the combination and the whitening order.
+    let bank = calibrate::config_toml(&config_with(methods[5]), Precision::F32);
+    let without_spec = |text: &str| -> String {
+        text.lines()
+            .filter(|line| !line.starts_with("spec = "))
+            .map(|line| format!("{line}\n"))
+            .collect()
+    };
+    let bank = without_spec(&bank);
+    assert!(bank.contains("\ninterpolation = \"five_point\"\nwhitening = 32\n"), "{bank}");
+    let message = refused(&bank.replace("\nwhitening = 32", "\nwhitening = 33"));
+    assert!(message.contains("`method.whitening`"), "{message}");
+    let message = refused(&bank.replace("\"five_point\"", "\"seven_point\""));
+    assert!(message.contains("`method.interpolation`"), "{message}");
+    // A file written before the keys: the three-point bank, not whitened.
+    let before = bank
+        .replace("\ninterpolation = \"five_point\"", "")
+        .replace("\nwhitening = 32", "");
+    let (read, _) = calibrate::parse_config(Path::new("w.toml"), &before).unwrap();
+    assert!(matches!(
+        read.method,
+        WeighingMethod::ModelBank {
+            interpolation: estimator_core::Interpolation::ThreePoint,
+            whitening: 0,
+            ..
+        }
+    ));
     let short_bank = bank_toml(33, 0.68, 1.3);
     let message = refused(&short_bank);
     assert!(message.contains("`method.ratio_min`"), "{message}");
@@ -984,8 +1024,10 @@ fn the_toml_round_trips_and_refuses_what_it_cannot_use() {
         .replace("scale_interval_g = 0.1", "scale_interval_g = 0.05");
     let (read, _) = calibrate::parse_config(Path::new("w.toml"), &smaller).unwrap();
     assert_eq!((read.capacity_g, read.scale_interval_g), (300.0, 0.05));
-    // A bank whose size the host's bank type does not hold.
+    // A bank larger than the host's bank type holds; any size up to it reads (17 here).
     let bank = bank_toml(17, 0.6, 1.4);
+    assert!(calibrate::parse_config(Path::new("w.toml"), &bank).is_ok());
+    let bank = bank_toml(calibrate::BANK_CANDIDATES + 1, 0.6, 1.4);
     let message = refused(&bank);
     assert!(message.contains("model bank"), "{message}");
 }
@@ -1023,6 +1065,8 @@ fn the_firmware_constants_size_the_method_and_refuse_by_key() {
         candidates: calibrate::BANK_CANDIDATES,
         ratio_min: 0.6,
         ratio_max: 1.4,
+        interpolation: estimator_core::Interpolation::ThreePoint,
+        whitening: 0,
     };
     let bank_text = calibrate::config_toml(&config_with(bank), Precision::F32);
     let source = calibrate::firmware_constants(path, &bank_text).unwrap();

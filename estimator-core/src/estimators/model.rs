@@ -831,7 +831,11 @@ estimator_via_intake!(ModelEstimator<T, const S>);
 /// remainder did not find it. What fixes it is a denser grid, chosen at calibration.
 #[derive(Clone, Debug)]
 pub struct ModelBank<T: Real, const S: usize, const K: usize> {
+    /// Room for `K` candidates; the first `candidates` are the bank's.
     models: [ModelEstimator<T, S>; K],
+    /// How many candidates the bank was configured with (`1..=K`; 0 unconfigured): a host
+    /// holds one bank type for every size a configuration may name.
+    candidates: usize,
     /// The shared sample check and block mean (gain 1: the models are in raw units); the
     /// candidates' own intakes only hold their readings.
     intake: Intake<T>,
@@ -910,6 +914,7 @@ pub const WHITENING_ORDER: usize = AUTOCOVARIANCE_LAGS;
 /// grid they hold the coverage goal in the coverage study's scenes (the README,
 /// "Uncertainty"), alone or on K = 33 they do not.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Interpolation {
     /// The parabola through the best candidate and its two neighbours.
     #[default]
@@ -975,13 +980,13 @@ impl<T: Real, const S: usize> SharedStates<T, S> {
     /// How many states the candidates share: all but the mechanical mode's.
     const COUNT: usize = S.saturating_sub(MODE_STATES);
 
-    /// What the candidates `config(0..K)` share, if they have the filter's states in
+    /// What the candidates `config(0..count)` share, if they have the filter's states in
     /// common (see the type's docs); the bank then numbers those first in every candidate
     /// ([`Self::renumber`]). One candidate's block model at a time: a bank's candidates
     /// are 20 KB for K = 33, and the firmware's stack has no room for a copy of them.
-    fn find<const K: usize>(config: impl Fn(usize) -> ModelConfig<T, S>) -> Option<Self> {
-        let unknown = (0..K).all(|k| config(k).initial_state == InitialState::Unknown);
-        if K < 2 || Self::COUNT == 0 || !unknown {
+    fn find(count: usize, config: impl Fn(usize) -> ModelConfig<T, S>) -> Option<Self> {
+        let unknown = (0..count).all(|k| config(k).initial_state == InitialState::Unknown);
+        if count < 2 || Self::COUNT == 0 || !unknown {
             return None;
         }
         let block = |config: &ModelConfig<T, S>| {
@@ -1002,7 +1007,7 @@ impl<T: Real, const S: usize> SharedStates<T, S> {
                     })
             })
         };
-        if !(0..K).all(|k| block(&config(k)).is_some_and(common)) {
+        if !(0..count).all(|k| block(&config(k)).is_some_and(common)) {
             return None;
         }
         Some(Self {
@@ -1076,6 +1081,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     /// (`cargo xtask bench bank`) fails if a field stops being zero.
     pub const UNCONFIGURED: Self = Self {
         models: [const { ModelEstimator::UNCONFIGURED }; K],
+        candidates: 0,
         intake: Intake::UNCONFIGURED,
         first: 0,
         end: 0,
@@ -1108,20 +1114,22 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     /// and the valid range (one block mean is one row of every candidate's regression).
     pub fn new(configs: [ModelConfig<T, S>; K]) -> Result<Self, ConfigError> {
         let mut bank = Self::UNCONFIGURED;
-        bank.configure(|k| Ok(configs[k]))?;
+        bank.configure(K, |k| Ok(configs[k]))?;
         Ok(bank)
     }
 
-    /// [`Self::configure`]'s checks of `config(0..K)`, one candidate at a time: each a
-    /// valid [`ModelEstimator`], with the first's decimation and valid range (returned).
+    /// [`Self::configure`]'s checks of `config(0..count)`, one candidate at a time: `count`
+    /// in `1..=K`, each a valid [`ModelEstimator`], with the first's decimation and valid
+    /// range (returned).
     pub(crate) fn check(
+        count: usize,
         config: &impl Fn(usize) -> Result<ModelConfig<T, S>, ConfigError>,
     ) -> Result<ModelConfig<T, S>, ConfigError> {
-        if K == 0 {
+        if count == 0 || count > K {
             return Err(ConfigError::Model);
         }
         let shared = config(0)?;
-        for k in 0..K {
+        for k in 0..count {
             let candidate = config(k)?;
             ModelEstimator::new(candidate)?;
             if candidate.decimation != shared.decimation {
@@ -1134,9 +1142,9 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
         Ok(shared)
     }
 
-    /// Become, where it stands, the bank [`Self::new`] builds over the candidate
-    /// configurations `config(0)`, …, `config(K − 1)` (interpolation and whitening back to
-    /// their defaults). Every candidate is checked first, one at a time (a valid
+    /// Become, where it stands, the bank [`Self::new`] builds over the `count` candidate
+    /// configurations `config(0)`, …, `config(count − 1)`, `count` in `1..=K` (interpolation
+    /// and whitening back to their defaults; the slots beyond `count` unconfigured). Every candidate is checked first, one at a time (a valid
     /// [`ModelEstimator`], the first's decimation and valid range): on an error the bank
     /// is as it was. Then each is written over its slot: no copy of the candidates (20 KB
     /// for K = 33) is ever on the stack of the board that builds it, where `new` and a
@@ -1144,18 +1152,23 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     /// candidate, and must give the same configuration each time.
     pub fn configure(
         &mut self,
+        count: usize,
         config: impl Fn(usize) -> Result<ModelConfig<T, S>, ConfigError>,
     ) -> Result<(), ConfigError> {
-        let shared = Self::check(&config)?;
+        let shared = Self::check(count, &config)?;
         // Checked: every call from here on gives a valid configuration.
         let checked = |k: usize| config(k).unwrap_or(shared);
-        let states = SharedStates::find::<K>(checked);
-        for (k, slot) in self.models.iter_mut().enumerate() {
+        let states = SharedStates::find(count, checked);
+        let (slots, spare) = self.models.split_at_mut(count);
+        for slot in spare {
+            *slot = ModelEstimator::UNCONFIGURED;
+        }
+        for (k, slot) in slots.iter_mut().enumerate() {
             let mut model = ModelEstimator::new(checked(k)).expect("checked");
             // A single candidate is checked as a `ModelEstimator` is; a grid is not (see
             // the type's docs).
-            model.flags_mismatch = K == 1;
-            model.states_uncertainty = K == 1;
+            model.flags_mismatch = count == 1;
+            model.states_uncertainty = count == 1;
             if !model.flags_mismatch {
                 model.check = None;
             }
@@ -1166,7 +1179,8 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
         }
         self.intake = Self::shared_intake(&shared);
         self.combined = self.intake.reading();
-        (self.first, self.end, self.stride) = (0, K, 1);
+        self.candidates = count;
+        (self.first, self.end, self.stride) = (0, count, 1);
         (self.prunes, self.thins) = (true, true);
         self.shared = states;
         (self.combined_sum, self.combined_terms) = (T::ZERO, 0);
@@ -1184,11 +1198,18 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     /// (at most [`WHITENING_ORDER`]; 0, the default, never) once a noise colour is set
     /// ([`Self::set_noise_autocovariance`]).
     pub fn with_whitening(mut self, order: usize) -> Result<Self, ConfigError> {
+        self.set_whitening(order)?;
+        Ok(self)
+    }
+
+    /// [`Self::with_whitening`] where the bank stands (a board's `static` bank); refused
+    /// beyond [`WHITENING_ORDER`], and nothing changes.
+    pub fn set_whitening(&mut self, order: usize) -> Result<(), ConfigError> {
         if order > WHITENING_ORDER {
             return Err(ConfigError::Filter("whitening order"));
         }
         self.whitening_order = order;
-        Ok(self)
+        Ok(())
     }
 
     /// Fit the block means whitened by the empty pan's metered noise colour: `autocovariance`
@@ -1226,10 +1247,10 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
             autocovariance.validate()?;
         }
         let order = self.whitening_order;
-        let metered =
-            autocovariance.filter(|a| K >= 3 && order > 0 && a.blocks >= MIN_METERED_BLOCKS);
+        let metered = autocovariance
+            .filter(|a| self.candidates >= 3 && order > 0 && a.blocks >= MIN_METERED_BLOCKS);
         let prediction = metered.and_then(|a| a.prediction(order));
-        let whitened = self.models.iter_mut().all(|model| {
+        let whitened = self.models[..self.candidates].iter_mut().all(|model| {
             model
                 .block
                 .whitened_start(prediction.as_ref().map(|(f, _)| &f[..order]))
@@ -1247,7 +1268,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
             _ => None,
         };
         if !whitened {
-            for model in self.models.iter_mut() {
+            for model in self.models[..self.candidates].iter_mut() {
                 model.block.whitened_start(None);
             }
         }
@@ -1255,6 +1276,12 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
             self.reset();
         }
         Ok(())
+    }
+
+    /// The order of the filter the block means are whitened with once a colour is set
+    /// ([`Self::with_whitening`]; 0: never).
+    pub fn whitening_order(&self) -> usize {
+        self.whitening_order
     }
 
     /// Whether this run fits whitened block means ([`Self::set_noise_autocovariance`]).
@@ -1290,8 +1317,13 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
 
     /// The bank combining its candidates by `interpolation` (see [`Interpolation`]).
     pub fn with_interpolation(mut self, interpolation: Interpolation) -> Self {
-        self.interpolation = interpolation;
+        self.set_interpolation(interpolation);
         self
+    }
+
+    /// [`Self::with_interpolation`] where the bank stands (a board's `static` bank).
+    pub fn set_interpolation(&mut self, interpolation: Interpolation) {
+        self.interpolation = interpolation;
     }
 
     fn shared_intake(config: &ModelConfig<T, S>) -> Intake<T> {
@@ -1313,7 +1345,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
         if let Some(reference) = &reference {
             reference.validate()?;
         }
-        for model in self.models.iter_mut() {
+        for model in self.models[..self.candidates].iter_mut() {
             model.set_noise_reference(reference)?;
         }
         Ok(())
@@ -1451,7 +1483,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
             // edge model's biased estimate. Not latched: early in a drop the fit may sit at
             // an edge and move inwards (an edge of the candidates still fitted stays until
             // the reset).
-            if K >= 3 && centre.estimate.is_some() {
+            if self.candidates >= 3 && centre.estimate.is_some() {
                 let flagged = Reading {
                     estimate: None,
                     state: State::Invalid(InvalidReason::OutsideModelRange),
@@ -1669,14 +1701,14 @@ impl<T: Real, const S: usize, const K: usize> Estimator<T> for ModelBank<T, S, K
     }
 
     fn reset(&mut self) {
-        for model in self.models.iter_mut() {
+        for model in self.models[..self.candidates].iter_mut() {
             model.reset();
         }
         // `new` built the shared intake from the first candidate's configuration.
         self.intake = Self::shared_intake(&self.models[0].config);
         self.combined = self.intake.reading();
         self.first = 0;
-        self.end = K;
+        self.end = self.candidates;
         self.stride = 1;
         self.combined_sum = T::ZERO;
         self.combined_terms = 0;
@@ -1862,7 +1894,7 @@ mod tests {
         }
         let data = drop_onto(1.02, 138.0, 30.0, 3, 1200);
         let other = configs(0.8, 1.2);
-        bank.configure(|k| Ok(other[k])).unwrap();
+        bank.configure(33, |k| Ok(other[k])).unwrap();
         bank = bank
             .with_whitening(8)
             .unwrap()
@@ -1871,7 +1903,7 @@ mod tests {
             bank.push(y as f32);
         }
         let wanted = configs(0.7, 1.3);
-        bank.configure(|k| Ok(wanted[k])).unwrap();
+        bank.configure(33, |k| Ok(wanted[k])).unwrap();
         let mut new = ModelBank::new(wanted).unwrap();
         let mut estimates = 0;
         for (k, &y) in data.iter().enumerate() {
@@ -1881,7 +1913,7 @@ mod tests {
         }
         assert!(estimates > 1000, "{estimates}");
         let mut before = bank.clone();
-        let refused = bank.configure(|k| {
+        let refused = bank.configure(33, |k| {
             let config = configs(0.9, 1.1)[k];
             Ok(if k == 20 {
                 config.with_decimation(4)

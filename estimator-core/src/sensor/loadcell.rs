@@ -163,21 +163,33 @@ impl LoadCellModel {
         ratio_min: f64,
         ratio_max: f64,
     ) -> Result<[f64; K], ConfigError> {
+        Self::frequency_ratio(ratio_min, ratio_max, K, 0)?;
+        Ok(core::array::from_fn(|i| {
+            Self::frequency_ratio(ratio_min, ratio_max, K, i).unwrap_or(ratio_min)
+        }))
+    }
+
+    /// The `index`-th of [`Self::frequency_ratios`] for `count` candidates, one at a time
+    /// (a bank configured in place, `ModelBank::configure`).
+    pub fn frequency_ratio(
+        ratio_min: f64,
+        ratio_max: f64,
+        count: usize,
+        index: usize,
+    ) -> Result<f64, ConfigError> {
         let valid = ratio_min.is_finite()
             && ratio_max.is_finite()
             && ratio_min > 0.0
-            && (ratio_max > ratio_min || (K == 1 && ratio_max == ratio_min));
-        if K == 0 || !valid {
+            && (ratio_max > ratio_min || (count == 1 && ratio_max == ratio_min));
+        if count == 0 || index >= count || !valid {
             return Err(ConfigError::Model);
         }
-        let span = libm::log(ratio_max / ratio_min);
-        Ok(core::array::from_fn(|i| {
-            if K == 1 {
-                libm::sqrt(ratio_min * ratio_max)
-            } else {
-                ratio_min * libm::exp(span * i as f64 / (K - 1) as f64)
-            }
-        }))
+        Ok(if count == 1 {
+            libm::sqrt(ratio_min * ratio_max)
+        } else {
+            let span = libm::log(ratio_max / ratio_min);
+            ratio_min * libm::exp(span * index as f64 / (count - 1) as f64)
+        })
     }
 
     /// The configurations of a [`crate::ModelBank`] of `K` candidates built from this

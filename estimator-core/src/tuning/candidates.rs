@@ -154,6 +154,8 @@ impl CandidateGrid<'_> {
                     candidates: bank.candidates,
                     ratio_min: bank.ratio_min,
                     ratio_max: bank.ratio_max,
+                    interpolation: bank.interpolation,
+                    whitening: bank.whitening,
                 }),
                 _ => None,
             };

@@ -18,6 +18,7 @@ use super::calibration::{check_frame, crc32, CalibrationError};
 use super::console::Unit;
 use super::method::WeighingMethod;
 use super::scale::ScaleConfig;
+use crate::estimators::model::{Interpolation, WHITENING_ORDER};
 
 /// Bytes of a settings record.
 pub const SETTINGS_LEN: usize = 8 + 4 * ScaleConfig::FIELDS.len() + 4 + METHOD_LEN + 4;
@@ -101,8 +102,16 @@ fn encode_method(method: &WeighingMethod, bytes: &mut [u8]) {
             candidates,
             ratio_min,
             ratio_max,
+            interpolation,
+            whitening,
             ..
-        } => (3, 0, 1.0, candidates, (ratio_min, ratio_max)),
+        } => {
+            // Bytes 14 and 15, zero in a record written before the bank had them: the
+            // three-point combination, not whitened (what those records meant).
+            bytes[14] = u8::from(interpolation == Interpolation::FivePoint);
+            bytes[15] = u8::try_from(whitening).unwrap_or(u8::MAX);
+            (3, 0, 1.0, candidates, (ratio_min, ratio_max))
+        }
     };
     bytes[0] = family;
     bytes[1] = u8::try_from(order).unwrap_or(u8::MAX);
@@ -126,6 +135,12 @@ fn decode_method(bytes: &[u8]) -> Option<WeighingMethod> {
     let forgetting = f64_at(4);
     let candidates = usize::from(u16::from_le_bytes([bytes[12], bytes[13]]));
     let (ratio_min, ratio_max) = (f64_at(16), f64_at(24));
+    let interpolation = match bytes[14] {
+        0 => Interpolation::ThreePoint,
+        1 => Interpolation::FivePoint,
+        _ => return None,
+    };
+    let whitening = usize::from(bytes[15]);
     let data_driven = order >= 1 && decimation >= 1;
     let method = match bytes[0] {
         0 if data_driven && forgetting > 0.0 && forgetting <= 1.0 => WeighingMethod::Step {
@@ -139,13 +154,16 @@ fn decode_method(bytes: &[u8]) -> Option<WeighingMethod> {
             && candidates >= 1
             && ratio_min > 0.0
             && ratio_min < ratio_max
-            && ratio_max.is_finite() =>
+            && ratio_max.is_finite()
+            && whitening <= WHITENING_ORDER =>
         {
             WeighingMethod::ModelBank {
                 decimation,
                 candidates,
                 ratio_min,
                 ratio_max,
+                interpolation,
+                whitening,
             }
         }
         _ => return None,
@@ -238,6 +256,16 @@ mod tests {
                 candidates: 33,
                 ratio_min: 0.68,
                 ratio_max: 1.3,
+                interpolation: Interpolation::ThreePoint,
+                whitening: 0,
+            },
+            WeighingMethod::ModelBank {
+                decimation: 8,
+                candidates: 65,
+                ratio_min: 0.68,
+                ratio_max: 1.3,
+                interpolation: Interpolation::FivePoint,
+                whitening: 32,
             },
         ] {
             let written = Settings {
@@ -308,6 +336,16 @@ mod tests {
                 candidates: 33,
                 ratio_min: 1.3,
                 ratio_max: 0.68,
+                interpolation: Interpolation::ThreePoint,
+                whitening: 0,
+            },
+            WeighingMethod::ModelBank {
+                decimation: 8,
+                candidates: 65,
+                ratio_min: 0.68,
+                ratio_max: 1.3,
+                interpolation: Interpolation::FivePoint,
+                whitening: WHITENING_ORDER + 1,
             },
         ] {
             let bad = Settings {

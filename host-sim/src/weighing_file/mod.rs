@@ -13,6 +13,7 @@
 use crate::montecarlo::Precision;
 use estimator_core::sensor::LoadCellModel;
 use estimator_core::weighing::{OnsetConfig, WeighingMethod};
+use estimator_core::Interpolation;
 
 mod read;
 mod rust_consts;
@@ -48,7 +49,11 @@ fn precision_name(precision: Precision) -> &'static str {
 
 /// The keys of `[method]` after its kind, in the file's order; `float` spells the float
 /// values (the file and the Rust constant spell them differently).
-fn method_keys(method: &WeighingMethod, float: fn(f64) -> String) -> Vec<(&'static str, String)> {
+fn method_keys(
+    method: &WeighingMethod,
+    float: fn(f64) -> String,
+    interpolation_value: fn(Interpolation) -> String,
+) -> Vec<(&'static str, String)> {
     let mut keys = Vec::new();
     if let Some(order) = method.order() {
         keys.push(("order", order.to_string()));
@@ -60,15 +65,27 @@ fn method_keys(method: &WeighingMethod, float: fn(f64) -> String) -> Vec<(&'stat
             candidates,
             ratio_min,
             ratio_max,
+            interpolation,
+            whitening,
             ..
         } => keys.extend([
             ("candidates", candidates.to_string()),
             ("ratio_min", float(ratio_min)),
             ("ratio_max", float(ratio_max)),
+            ("interpolation", interpolation_value(interpolation)),
+            ("whitening", whitening.to_string()),
         ]),
         WeighingMethod::BiasCompensated { .. } | WeighingMethod::InstrumentalVariable { .. } => {}
     }
     keys
+}
+
+/// A bank's interpolation as the file spells it (`interpolation = "five_point"`).
+fn interpolation_name(interpolation: Interpolation) -> &'static str {
+    match interpolation {
+        Interpolation::ThreePoint => "three_point",
+        Interpolation::FivePoint => "five_point",
+    }
 }
 
 /// The keys of `[onset]`, in the file's order (the Rust constant's too); `float` as for

@@ -9,6 +9,7 @@ use estimator_core::weighing::{
     LoadCoverage, LoadScene, LoadScore, OnsetConfig, Prediction, RegionError, WeighingConfig,
     WeighingMethod, MAX_SCENES,
 };
+use estimator_core::{Interpolation, WHITENING_ORDER};
 use serde::Deserialize;
 
 use super::{FORMAT, FORMAT_CALIBRATION_MASS_ONLY, KINDS};
@@ -54,6 +55,12 @@ struct MethodFile {
     candidates: Option<usize>,
     ratio_min: Option<f64>,
     ratio_max: Option<f64>,
+    /// The bank's combination; files written before it was a key: three-point.
+    #[serde(default)]
+    interpolation: Option<String>,
+    /// The bank's whitening order; files written before it was a key: 0 (none).
+    #[serde(default)]
+    whitening: Option<usize>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -277,6 +284,27 @@ impl MethodFile {
                 ratio_max: self
                     .ratio_max
                     .ok_or_else(|| bad(path, "method.ratio_max", "a frequency ratio"))?,
+                interpolation: match self.interpolation.as_deref() {
+                    None | Some("three_point") => Interpolation::ThreePoint,
+                    Some("five_point") => Interpolation::FivePoint,
+                    Some(other) => {
+                        return Err(bad(
+                            path,
+                            "method.interpolation",
+                            &format!("\"three_point\" or \"five_point\", found \"{other}\""),
+                        ))
+                    }
+                },
+                whitening: match self.whitening.unwrap_or(0) {
+                    order if order <= WHITENING_ORDER => order,
+                    order => {
+                        return Err(bad(
+                            path,
+                            "method.whitening",
+                            &format!("a whitening order of 0 to {WHITENING_ORDER}, found {order}"),
+                        ))
+                    }
+                },
             },
             other => {
                 return Err(bad(

@@ -35,8 +35,7 @@ pub fn firmware_constants(path: &Path, text: &str) -> Result<String> {
         );
     }
     let (order_capacity, bank_candidates) = match config.method {
-        // A bank image keeps order 1: building its bank at boot takes 95 of its 102 KB of
-        // stack, and room for order 8 beside it overflowed that (cargo xtask bench).
+        // A bank image keeps order 1: its method is fixed (no console upload).
         WeighingMethod::ModelBank { candidates, .. } => (1, candidates),
         method => (method.order().unwrap_or(1).max(UPLOAD_ORDER_CAPACITY), 1),
     };
@@ -159,7 +158,9 @@ fn method(method: &WeighingMethod) -> String {
     };
     literal(
         &format!("WeighingMethod::{variant}"),
-        &method_keys(method, float),
+        &method_keys(method, float, |interpolation| {
+            format!("Interpolation::{interpolation:?}")
+        }),
     )
 }
 

@@ -6,7 +6,10 @@ use std::fmt::Write as _;
 use estimator_core::tuning::{CandidateScore, Tuned};
 use estimator_core::weighing::{LoadScore, Prediction, WeighingConfig};
 
-use super::{kind_name, method_keys, model_keys, onset_keys, precision_name, FORMAT, KINDS};
+use super::{
+    interpolation_name, kind_name, method_keys, model_keys, onset_keys, precision_name, FORMAT,
+    KINDS,
+};
 use crate::calibrate::{method_spec, percent, scene_name, Outcome};
 use crate::montecarlo::Precision;
 
@@ -147,7 +150,8 @@ fn method(
         "spec = \"{}\"   # the same as host-sim's --method spec",
         method_spec(config, precision)
     );
-    for (key, value) in method_keys(&config.method, number) {
+    let quoted = |interpolation| format!("\"{}\"", interpolation_name(interpolation));
+    for (key, value) in method_keys(&config.method, number, quoted) {
         let _ = writeln!(w, "{key} = {value}");
     }
 }

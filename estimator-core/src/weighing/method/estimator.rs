@@ -3,7 +3,9 @@
 use crate::estimators::bias_compensated::{BiasCompensatedConfig, BiasCompensatedStepEstimator};
 use crate::estimators::consistency::NoiseReference;
 use crate::estimators::iv::{IvConfig, IvStepEstimator};
-use crate::estimators::model::{InitialState, ModelBank, ModelConfig};
+use crate::estimators::model::{
+    InitialState, Interpolation, ModelBank, ModelConfig, WHITENING_ORDER,
+};
 use crate::estimators::noise_meter::Autocovariance;
 use crate::estimators::step::{StepConfig, StepEstimator};
 use crate::numerics::real::Real;
@@ -106,15 +108,19 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
     }
 
     /// Rest the `u` on the empty pan's metered noise colour from now on (see
-    /// [`crate::StepEstimator::set_noise_autocovariance`]): the step method takes it; the
-    /// others state no `u` from the same sandwich, or rest it on their model, and take
-    /// nothing.
+    /// [`crate::StepEstimator::set_noise_autocovariance`]): the step method takes it, and a
+    /// model bank that whitens its block means with it
+    /// ([`crate::ModelBank::set_noise_autocovariance`]); the others state no `u` from the
+    /// same sandwich, or rest it on their model, and take nothing.
     pub fn set_noise_autocovariance(
         &mut self,
         autocovariance: Option<&Autocovariance<T>>,
     ) -> Result<(), ConfigError> {
         match self {
             Self::Step(e) => e.set_noise_autocovariance(autocovariance),
+            Self::ModelBank(e) if e.whitening_order() > 0 => {
+                e.set_noise_autocovariance(autocovariance)
+            }
             Self::BiasCompensated(_) | Self::InstrumentalVariable(_) | Self::ModelBank(_) => Ok(()),
         }
     }
@@ -148,14 +154,13 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
             Plan::BiasCompensated(e) => *self = Self::BiasCompensated(e),
             Plan::InstrumentalVariable(e) => *self = Self::InstrumentalVariable(e),
             Plan::ModelBank(plan) => {
-                let candidate = |k| plan.candidate(k);
-                ModelBank::<T, S, K>::check(&candidate)?;
+                plan.check::<S>()?;
                 if !matches!(self, Self::ModelBank(_)) {
                     // Zero bits: written in place, no copy on the stack.
                     *self = Self::ModelBank(ModelBank::UNCONFIGURED);
                 }
                 if let Self::ModelBank(bank) = self {
-                    bank.configure(candidate)?;
+                    plan.configure(bank)?;
                 }
             }
         }
@@ -228,17 +233,23 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> Plan<T, N, S, K> {
                 candidates,
                 ratio_min,
                 ratio_max,
+                interpolation,
+                whitening,
             } => {
-                if candidates != K {
+                // Any size up to the type's room (a host's one type for every bank).
+                if candidates == 0 || candidates > K {
                     return Err(ConfigError::Model);
                 }
                 let mut model = config.model;
                 model.counts_per_gram = config.counts_per_gram;
                 Self::ModelBank(BankPlan {
                     model,
-                    ratios: LoadCellModel::frequency_ratios::<K>(ratio_min, ratio_max)?,
+                    count: candidates,
+                    span: (ratio_min, ratio_max),
                     decimation,
                     valid: (low, high),
+                    interpolation,
+                    whitening,
                 })
             }
         })
@@ -253,7 +264,7 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> Plan<T, N, S, K> {
             Self::InstrumentalVariable(e) => WeighingEstimator::InstrumentalVariable(e),
             Self::ModelBank(plan) => {
                 let mut bank = ModelBank::UNCONFIGURED;
-                bank.configure(|k| plan.candidate(k))?;
+                plan.configure(&mut bank)?;
                 WeighingEstimator::ModelBank(bank)
             }
         })
@@ -265,15 +276,35 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> Plan<T, N, S, K> {
 /// ([`LoadCellModel::bank_configs`]' candidates, one at a time).
 struct BankPlan<T, const K: usize> {
     model: LoadCellModel,
-    ratios: [f64; K],
+    count: usize,
+    span: (f64, f64),
     decimation: u16,
     valid: (T, T),
+    interpolation: Interpolation,
+    whitening: usize,
 }
 
 impl<T: Real, const K: usize> BankPlan<T, K> {
+    /// Make `bank` this plan's bank where it stands (checked first: on an error it is as
+    /// it was).
+    fn configure<const S: usize>(&self, bank: &mut ModelBank<T, S, K>) -> Result<(), ConfigError> {
+        self.check::<S>()?;
+        bank.configure(self.count, |k| self.candidate(k))?;
+        bank.set_interpolation(self.interpolation);
+        bank.set_whitening(self.whitening)
+    }
+
+    /// Every check [`Self::configure`] makes.
+    fn check<const S: usize>(&self) -> Result<(), ConfigError> {
+        if self.whitening > WHITENING_ORDER {
+            return Err(ConfigError::Filter("whitening order"));
+        }
+        ModelBank::<T, S, K>::check(self.count, &|k| self.candidate(k)).map(|_| ())
+    }
+
     /// Candidate `k`'s configuration.
     fn candidate<const S: usize>(&self, k: usize) -> Result<ModelConfig<T, S>, ConfigError> {
-        let ratio = *self.ratios.get(k).ok_or(ConfigError::Model)?;
+        let ratio = LoadCellModel::frequency_ratio(self.span.0, self.span.1, self.count, k)?;
         Ok(self
             .model
             .bank_config::<T, S>(ratio, self.decimation, InitialState::Unknown)?

@@ -3,6 +3,8 @@
 
 use core::fmt;
 
+use crate::estimators::model::Interpolation;
+
 /// A fully specified weighing method (what [`super::WeighingConfig`] records).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -42,6 +44,12 @@ pub enum WeighingMethod {
         ratio_min: f64,
         /// Highest resonance, relative to the identified one.
         ratio_max: f64,
+        /// How the candidates around the best fit are combined ([`Interpolation`]).
+        interpolation: Interpolation,
+        /// Order of the prediction-error filter the block means are whitened with once the
+        /// scale has metered the empty pan's noise colour (0: never; at most
+        /// [`crate::WHITENING_ORDER`]; [`crate::ModelBank::with_whitening`]).
+        whitening: usize,
     },
 }
 
@@ -110,10 +118,21 @@ impl fmt::Display for WeighingMethod {
                 candidates,
                 ratio_min,
                 ratio_max,
-            } => write!(
-                f,
-                "model bank D={decimation} K={candidates} ratios {ratio_min}-{ratio_max}"
-            ),
+                interpolation,
+                whitening,
+            } => {
+                write!(
+                    f,
+                    "model bank D={decimation} K={candidates} ratios {ratio_min}-{ratio_max}"
+                )?;
+                if interpolation == Interpolation::FivePoint {
+                    write!(f, " five-point")?;
+                }
+                if whitening > 0 {
+                    write!(f, " whitened (order {whitening})")?;
+                }
+                Ok(())
+            }
         }
     }
 }
@@ -130,6 +149,10 @@ pub struct BankCandidate {
     pub ratio_min: f64,
     /// See `ratio_min`.
     pub ratio_max: f64,
+    /// How the candidates around the best fit are combined.
+    pub interpolation: Interpolation,
+    /// Order of the whitening filter (0: none).
+    pub whitening: usize,
 }
 
 impl BankCandidate {
@@ -141,5 +164,20 @@ impl BankCandidate {
         candidates: 33,
         ratio_min: 0.68,
         ratio_max: 1.30,
+        interpolation: Interpolation::ThreePoint,
+        whitening: 0,
+    };
+
+    /// The bank `host-sim study coverage` found to state a `u` that holds in coloured noise
+    /// (README, "Uncertainty"): twice [`Self::REFERENCE`]'s grid (65 candidates 1 % apart
+    /// over the same span), five-point interpolation, its block means whitened by a filter
+    /// of order 32 on the empty pan's metered colour.
+    pub const CALIBRATED_U: Self = Self {
+        decimation: 8,
+        candidates: 65,
+        ratio_min: 0.68,
+        ratio_max: 1.30,
+        interpolation: Interpolation::FivePoint,
+        whitening: 32,
     };
 }

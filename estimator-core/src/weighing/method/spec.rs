@@ -7,6 +7,8 @@
 //! bc:n=5,D=24                         bias-compensated least squares
 //! iv:n=5,D=24                         instrumental variables
 //! model:D=8,K=33,span=0.68-1.3        the model bank on the identified model
+//! model:D=8,K=65,span=0.68-1.3,interp=5,whiten=32
+//!                                     … combined over five candidates, whitened
 //! ```
 //! `precision=f32` may follow (a board computes in `f32`); `f64` is refused. This is the
 //! subset of host-sim's method specs a [`WeighingMethod`] can hold: a key host-sim takes
@@ -15,6 +17,7 @@
 use core::fmt;
 
 use super::WeighingMethod;
+use crate::estimators::model::{Interpolation, WHITENING_ORDER};
 
 /// Why a method spec was refused: the word, and what was expected there.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -44,11 +47,13 @@ impl SpecError {
         match self {
             SpecError::UnknownKind => "step:, bc:, iv: or model: (step:n=5,D=24)",
             SpecError::UnknownKey | SpecError::RepeatedKey => {
-                "n, D and lambda (step), n and D (bc, iv), D, K and span (model), precision, each once"
+                "n, D and lambda (step), n and D (bc, iv), D, K, span, interp and whiten (model), precision, each once"
             }
             SpecError::BadValue { key: "lambda" } => "lambda in (0, 1]",
             SpecError::BadValue { key: "span" } => "span as two ratios low-high (0.68-1.3)",
             SpecError::BadValue { key: "precision" } => "precision=f32 (the board computes in f32)",
+            SpecError::BadValue { key: "interp" } => "interp=3 or interp=5 (candidates combined)",
+            SpecError::BadValue { key: "whiten" } => "whiten=0 to whiten=32 (the whitening filter's order)",
             SpecError::BadValue { .. } => "a whole number from 1 (n, D, K)",
             SpecError::Missing { key: "n" } => "the order n (n=5)",
             SpecError::Missing { key: "D" } => "the block length D (D=24)",
@@ -71,6 +76,8 @@ struct Keys {
     forgetting: Option<f64>,
     candidates: Option<usize>,
     span: Option<(f64, f64)>,
+    interpolation: Option<Interpolation>,
+    whitening: Option<usize>,
 }
 
 impl WeighingMethod {
@@ -118,6 +125,8 @@ impl WeighingMethod {
                     candidates: keys.candidates.ok_or(SpecError::Missing { key: "K" })?,
                     ratio_min,
                     ratio_max,
+                    interpolation: keys.interpolation.unwrap_or_default(),
+                    whitening: keys.whitening.unwrap_or(0),
                 }
             }
         })
@@ -157,10 +166,21 @@ impl fmt::Display for Spec<'_> {
                 candidates,
                 ratio_min,
                 ratio_max,
-            } => write!(
-                f,
-                "model:D={decimation},K={candidates},span={ratio_min}-{ratio_max}"
-            ),
+                interpolation,
+                whitening,
+            } => {
+                write!(
+                    f,
+                    "model:D={decimation},K={candidates},span={ratio_min}-{ratio_max}"
+                )?;
+                if interpolation == Interpolation::FivePoint {
+                    write!(f, ",interp=5")?;
+                }
+                if whitening > 0 {
+                    write!(f, ",whiten={whitening}")?;
+                }
+                Ok(())
+            }
         }
     }
 }
@@ -199,6 +219,22 @@ impl Family {
                 }
                 "K" if !data_driven => keys.candidates.replace(whole(value, "K")?).is_some(),
                 "span" if !data_driven => keys.span.replace(span(value)?).is_some(),
+                "interp" if !data_driven => {
+                    let interpolation = match value {
+                        "3" => Interpolation::ThreePoint,
+                        "5" => Interpolation::FivePoint,
+                        _ => return Err(SpecError::BadValue { key: "interp" }),
+                    };
+                    keys.interpolation.replace(interpolation).is_some()
+                }
+                "whiten" if !data_driven => {
+                    let order = value
+                        .parse::<usize>()
+                        .ok()
+                        .filter(|order| *order <= WHITENING_ORDER)
+                        .ok_or(SpecError::BadValue { key: "whiten" })?;
+                    keys.whitening.replace(order).is_some()
+                }
                 "precision" => {
                     if !value.eq_ignore_ascii_case("f32") {
                         return Err(SpecError::BadValue { key: "precision" });
@@ -272,11 +308,40 @@ mod tests {
                 candidates: 33,
                 ratio_min: 0.68,
                 ratio_max: 1.3,
+                interpolation: Interpolation::ThreePoint,
+                whitening: 0,
+            },
+            WeighingMethod::ModelBank {
+                decimation: 8,
+                candidates: 65,
+                ratio_min: 0.68,
+                ratio_max: 1.3,
+                interpolation: Interpolation::FivePoint,
+                whitening: 32,
             },
         ] {
             let text = method.spec().to_string();
             assert_eq!(WeighingMethod::parse_spec(&text), Ok(method), "{text}");
         }
+        // A bank's options are the defaults unless written, and checked.
+        assert_eq!(
+            WeighingMethod::parse_spec("model:D=8,K=33,span=0.68-1.3,interp=3,whiten=0"),
+            WeighingMethod::parse_spec("model:D=8,K=33,span=0.68-1.3")
+        );
+        for (spec, key) in [
+            ("model:D=8,K=33,span=0.68-1.3,interp=4", "interp"),
+            ("model:D=8,K=33,span=0.68-1.3,whiten=33", "whiten"),
+        ] {
+            assert_eq!(
+                WeighingMethod::parse_spec(spec),
+                Err(SpecError::BadValue { key }),
+                "{spec}"
+            );
+        }
+        assert_eq!(
+            WeighingMethod::parse_spec("step:n=5,D=24,whiten=8"),
+            Err(SpecError::UnknownKey)
+        );
     }
 
     /// What `host-sim calibrate` writes as `spec` in `weighing.toml` is taken verbatim.

@@ -395,6 +395,8 @@ mod tests {
             candidates: 1,
             ratio_min: 0.9,
             ratio_max: 1.1,
+            interpolation: crate::Interpolation::ThreePoint,
+            whitening: 0,
         });
         assert_eq!(asked_wrong.set_method(&bank), Err(MethodRefusal::Fixed));
         // Methods it runs but could never show stable (no `u` on a board) are refused too.

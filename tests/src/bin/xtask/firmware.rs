@@ -566,19 +566,23 @@ pub enum BenchOne {
     InstrumentalVariable,
     /// `cargo xtask bench bank`: the model bank.
     Bank,
+    /// `cargo xtask bench bank-u`: the model bank whose `u` holds in coloured noise.
+    CalibratedBank,
 }
 
-/// `cargo xtask bench step` / `bc` / `iv` / `bank`: only that method's line of [`bench`]
+/// `cargo xtask bench step` / `bc` / `iv` / `bank` / `bank-u`: only that method's line of [`bench`]
 /// (its QEMU image built and run, its STM32 image's size), for a quicker loop on its cost.
 pub fn bench_one(which: BenchOne) -> Result<()> {
     let result = (|| -> Result<()> {
         let shipped = shipped_config()?;
-        let [step, bias_compensated, instrumental_variable, bank] = bench_variants(&shipped)?;
+        let [step, bias_compensated, instrumental_variable, bank, calibrated_bank] =
+            bench_variants(&shipped)?;
         let variant = match which {
             BenchOne::Step => step,
             BenchOne::BiasCompensated => bias_compensated,
             BenchOne::InstrumentalVariable => instrumental_variable,
             BenchOne::Bank => bank,
+            BenchOne::CalibratedBank => calibrated_bank,
         };
         bench_variant(&shipped, &variant)
     })();
@@ -670,17 +674,25 @@ struct BenchVariant {
 /// variables at the shipped order and decimation (what `method bc:…` or `iv:…` on a board's
 /// console runs on its calibration), and the model bank calibration offers
 /// (`tuning::BankCandidate::REFERENCE`), widened as calibration widens it to cover the
-/// shipped load range (`WeighingConfig::bank_covering_loads`).
+/// shipped load range (`WeighingConfig::bank_covering_loads`), and the bank whose `u` holds
+/// in coloured noise (`BankCandidate::CALIBRATED_U`: twice the grid, five-point, whitened),
+/// widened the same way.
 fn bench_variants(
     (shipped, _): &(
         estimator_core::weighing::WeighingConfig,
         host_sim::montecarlo::Precision,
     ),
-) -> Result<[BenchVariant; 4]> {
+) -> Result<[BenchVariant; 5]> {
     use estimator_core::weighing::{BankCandidate, WeighingMethod};
-    let bank = shipped
-        .bank_covering_loads(BankCandidate::REFERENCE)
-        .context("the shipped load range gives no resonance ratios for a bank")?;
+    let covering = |bank| {
+        shipped
+            .bank_covering_loads(bank)
+            .context("the shipped load range gives no resonance ratios for a bank")
+    };
+    let (bank, calibrated_bank) = (
+        covering(BankCandidate::REFERENCE)?,
+        covering(BankCandidate::CALIBRATED_U)?,
+    );
     // The shipped order and D; for a shipped bank, the step default's.
     let data_driven = match shipped.method.order() {
         Some(_) => shipped.method,
@@ -714,6 +726,12 @@ fn bench_variants(
                 .to_string(),
             stem: "weighing-model-bank",
             method: bank,
+        },
+        BenchVariant {
+            label: "the model bank whose u holds in coloured noise (D = 8, K = 65, five-point, whitened at order 32, covering the shipped loads' resonances)"
+                .to_string(),
+            stem: "weighing-model-bank-u",
+            method: calibrated_bank,
         },
     ])
 }

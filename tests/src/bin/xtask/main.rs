@@ -5,7 +5,7 @@
 //! - `cargo xtask demo` runs the firmware demo (see `firmware.rs`).
 //! - `cargo xtask bench` prints benchmark figures (host updates/s, on-target instructions per
 //!   update, estimator sizes); it asserts nothing about speed. `cargo xtask bench step`,
-//!   `bench bc`, `bench iv` and `bench bank` run only that method's on-target part.
+//!   `bench bc`, `bench iv`, `bench bank` and `bench bank-u` run only that method's on-target part.
 //! - `cargo xtask install` only installs the tools.
 //!
 //! It must never hide a failure: every step's outcome is in the summary and the exit status.
@@ -33,6 +33,7 @@ commands:
   bench step              only the step estimator's at n = 7, D = 16 on-target figures
   bench bc | bench iv     only bias compensation's / instrumental variables' at the shipped n, D
   bench bank              only the model bank's on-target figures (a quicker loop)
+  bench bank-u            only those of the bank whose u holds in coloured noise (K = 65)
   install                 install what a fresh machine lacks (thumb target, QEMU, flip-link)
 ";
 
@@ -56,6 +57,8 @@ fn main() -> ExitCode {
         ["bench", "bank"] => {
             install::ensure_tools().and_then(|()| firmware::bench_one(firmware::BenchOne::Bank))
         }
+        ["bench", "bank-u"] => install::ensure_tools()
+            .and_then(|()| firmware::bench_one(firmware::BenchOne::CalibratedBank)),
         ["install"] => install::ensure_tools(),
         ["help"] | ["--help"] | ["-h"] => {
             print!("{USAGE}");
