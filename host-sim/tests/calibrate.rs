@@ -971,7 +971,10 @@ fn the_toml_round_trips_and_refuses_what_it_cannot_use() {
             .collect()
     };
     let bank = without_spec(&bank);
-    assert!(bank.contains("\ninterpolation = \"five_point\"\nwhitening = 32\n"), "{bank}");
+    assert!(
+        bank.contains("\ninterpolation = \"five_point\"\nwhitening = 32\n"),
+        "{bank}"
+    );
     let message = refused(&bank.replace("\nwhitening = 32", "\nwhitening = 33"));
     assert!(message.contains("`method.whitening`"), "{message}");
     let message = refused(&bank.replace("\"five_point\"", "\"seven_point\""));

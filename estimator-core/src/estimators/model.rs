@@ -910,9 +910,12 @@ pub const WHITENING_ORDER: usize = AUTOCOVARIANCE_LAGS;
 /// 2.6e-4 g. Its residuals then no longer carry the grid's misfit, so its `u` rests on the
 /// noise alone and takes it as white (see [`ModelEstimator`]'s `u`): in coloured noise it is
 /// over-confident unless the bank whitens its block means with the empty pan's metered
-/// colour ([`ModelBank::with_whitening`]). Not the firmware's bank: together over twice its
-/// grid they hold the coverage goal in the coverage study's scenes (the README,
-/// "Uncertainty"), alone or on K = 33 they do not.
+/// colour ([`ModelBank::with_whitening`]). Together over twice the grid
+/// (`BankCandidate::CALIBRATED_U`) they hold the coverage goal in the coverage study's
+/// scenes (the README, "Uncertainty"), alone or on K = 33 they do not. A board can be built
+/// with that bank (`cargo xtask bench bank-u`) but does not whiten yet: its scale meters the
+/// empty pan's colour only on a valid reading, and a bank flags an empty pan
+/// [`InvalidReason::OutsideModelRange`] (the candidates cannot be told apart on it).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Interpolation {

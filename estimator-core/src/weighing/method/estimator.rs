@@ -45,15 +45,20 @@ pub const UPLOAD_ORDER_CAPACITY: usize = UNCERTAINTY_ORDERS;
 #[derive(Clone, Debug)]
 // One per scale, built once: the bank variant's size is the point of choosing a smaller one.
 #[allow(clippy::large_enum_variant)]
+// The tag a byte of its own, the bank's 0: [`Self::UNCONFIGURED`] is then zero bits, so a
+// board's `static` of it is in `.bss` whichever variant is the largest (with the tag in a
+// niche of the step's fields it was not, and the ADS131M02 image's flash overflowed with
+// a copy of it in `.data`).
+#[repr(u8)]
 pub enum WeighingEstimator<T: Real, const N: usize, const S: usize, const K: usize> {
     /// [`WeighingMethod::Step`].
-    Step(StepEstimator<T, N, UNCERTAINTY_ORDERS, COLOUR_LAGS>),
+    Step(StepEstimator<T, N, UNCERTAINTY_ORDERS, COLOUR_LAGS>) = 1,
     /// [`WeighingMethod::BiasCompensated`].
-    BiasCompensated(BiasCompensatedStepEstimator<T, N>),
+    BiasCompensated(BiasCompensatedStepEstimator<T, N>) = 2,
     /// [`WeighingMethod::InstrumentalVariable`].
-    InstrumentalVariable(IvStepEstimator<T, N>),
+    InstrumentalVariable(IvStepEstimator<T, N>) = 3,
     /// [`WeighingMethod::ModelBank`].
-    ModelBank(ModelBank<T, S, K>),
+    ModelBank(ModelBank<T, S, K>) = 0,
 }
 
 impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<T, N, S, K> {
@@ -118,7 +123,8 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
     ) -> Result<(), ConfigError> {
         match self {
             Self::Step(e) => e.set_noise_autocovariance(autocovariance),
-            Self::ModelBank(e) if e.whitening_order() > 0 => {
+            // `K ≥ 3`, known when built: no code of it in an image without a grid.
+            Self::ModelBank(e) if K >= 3 && e.whitening_order() > 0 => {
                 e.set_noise_autocovariance(autocovariance)
             }
             Self::BiasCompensated(_) | Self::InstrumentalVariable(_) | Self::ModelBank(_) => Ok(()),
