@@ -162,8 +162,7 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
             Plan::ModelBank(plan) => {
                 plan.check::<S>()?;
                 if !matches!(self, Self::ModelBank(_)) {
-                    // Zero bits: written in place, no copy on the stack.
-                    *self = Self::ModelBank(ModelBank::UNCONFIGURED);
+                    self.become_unconfigured_bank();
                 }
                 if let Self::ModelBank(bank) = self {
                     plan.configure(bank)?;
@@ -171,6 +170,17 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
             }
         }
         Ok(())
+    }
+}
+
+impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<T, N, S, K> {
+    /// Become an unconfigured bank. In a frame of its own, never inlined: the compiler may
+    /// build the bank on the stack before writing it (K = 65: 45 KB, more than a board's
+    /// stack beside it), and a board's estimator starts as one, so never comes here.
+    #[inline(never)]
+    #[cold]
+    fn become_unconfigured_bank(&mut self) {
+        *self = Self::ModelBank(ModelBank::UNCONFIGURED);
     }
 }
 
