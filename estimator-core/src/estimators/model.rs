@@ -1146,12 +1146,13 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     }
 
     /// Become, where it stands, the bank [`Self::new`] builds over the `count` candidate
-    /// configurations `config(0)`, …, `config(count − 1)`, `count` in `1..=K` (interpolation
-    /// and whitening back to their defaults; the slots beyond `count` unconfigured). Every candidate is checked first, one at a time (a valid
+    /// configurations `config(0)`, …, `config(count − 1)`, `count` in `1..=K`
+    /// (interpolation and whitening back to their defaults; the slots beyond `count`
+    /// unconfigured). Every candidate is checked first, one at a time (a valid
     /// [`ModelEstimator`], the first's decimation and valid range): on an error the bank
     /// is as it was. Then each is written over its slot: no copy of the candidates (20 KB
     /// for K = 33) is ever on the stack of the board that builds it, where `new` and a
-    /// move into the board's `static` took 93 KB. `config` is called three times per
+    /// move into the board's `static` took 93 KB. `config` is called several times per
     /// candidate, and must give the same configuration each time.
     pub fn configure(
         &mut self,
@@ -1180,20 +1181,15 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
             }
             *slot = model;
         }
-        self.intake = Self::shared_intake(&shared);
-        self.combined = self.intake.reading();
         self.candidates = count;
-        (self.first, self.end, self.stride) = (0, count, 1);
-        (self.prunes, self.thins) = (true, true);
         self.shared = states;
-        (self.combined_sum, self.combined_terms) = (T::ZERO, 0);
+        (self.prunes, self.thins) = (true, true);
         self.interpolation = Interpolation::ThreePoint;
         self.whitening_order = 0;
-        (self.whitening, self.run_whitening) = (None, None);
-        self.history = [T::ZERO; WHITENING_ORDER];
-        (self.next, self.held) = (0, 0);
-        self.growing = [T::ZERO; WHITENING_ORDER];
-        self.growing_error = T::ZERO;
+        self.whitening = None;
+        // The rest as at the start of every run (the intake from the first candidate's
+        // configuration, every candidate still fitted, no colour).
+        self.reset();
         Ok(())
     }
 
@@ -1870,7 +1866,7 @@ mod tests {
 
     /// A bank configured where it stands (the firmware's `static`, which starts
     /// unconfigured) is the bank [`ModelBank::new`] builds: before it is configured every
-    /// sample is flagged out of range; configured over a bank that had run another grid,
+    /// sample is flagged `Unconfigured`; configured over a bank that had run another grid,
     /// with whitening and five-point interpolation set, it reads exactly what a new bank
     /// reads on the same drop; a configuration refused (a candidate with another
     /// decimation) leaves it reading as it did.

@@ -45,10 +45,9 @@ pub const UPLOAD_ORDER_CAPACITY: usize = UNCERTAINTY_ORDERS;
 #[derive(Clone, Debug)]
 // One per scale, built once: the bank variant's size is the point of choosing a smaller one.
 #[allow(clippy::large_enum_variant)]
-// The tag a byte of its own, the bank's 0: [`Self::UNCONFIGURED`] is then zero bits, so a
-// board's `static` of it is in `.bss` whichever variant is the largest (with the tag in a
-// niche of the step's fields it was not, and the ADS131M02 image's flash overflowed with
-// a copy of it in `.data`).
+// The tag a byte of its own, the bank's 0: [`Self::UNCONFIGURED`] is then zero bits by
+// construction, not by where the niche layout would put the tag, so a board's `static` of
+// it is in `.bss` whichever variant is the largest.
 #[repr(u8)]
 pub enum WeighingEstimator<T: Real, const N: usize, const S: usize, const K: usize> {
     /// [`WeighingMethod::Step`].
@@ -160,8 +159,9 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
             Plan::BiasCompensated(e) => *self = Self::BiasCompensated(e),
             Plan::InstrumentalVariable(e) => *self = Self::InstrumentalVariable(e),
             Plan::ModelBank(plan) => {
-                plan.check::<S>()?;
                 if !matches!(self, Self::ModelBank(_)) {
+                    // Checked before the method it holds is given up.
+                    plan.check::<S>()?;
                     self.become_unconfigured_bank();
                 }
                 if let Self::ModelBank(bank) = self {
@@ -171,9 +171,7 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
         }
         Ok(())
     }
-}
 
-impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<T, N, S, K> {
     /// Become an unconfigured bank. In a frame of its own, never inlined: the compiler may
     /// build the bank on the stack before writing it (K = 65: 45 KB, more than a board's
     /// stack beside it), and a board's estimator starts as one, so never comes here.
@@ -302,9 +300,9 @@ struct BankPlan<T, const K: usize> {
 
 impl<T: Real, const K: usize> BankPlan<T, K> {
     /// Make `bank` this plan's bank where it stands (checked first: on an error it is as
-    /// it was).
+    /// it was; `ModelBank::configure` checks the candidates).
     fn configure<const S: usize>(&self, bank: &mut ModelBank<T, S, K>) -> Result<(), ConfigError> {
-        self.check::<S>()?;
+        self.check_whitening()?;
         bank.configure(self.count, |k| self.candidate(k))?;
         bank.set_interpolation(self.interpolation);
         bank.set_whitening(self.whitening)
@@ -312,10 +310,15 @@ impl<T: Real, const K: usize> BankPlan<T, K> {
 
     /// Every check [`Self::configure`] makes.
     fn check<const S: usize>(&self) -> Result<(), ConfigError> {
+        self.check_whitening()?;
+        ModelBank::<T, S, K>::check(self.count, &|k| self.candidate(k)).map(|_| ())
+    }
+
+    fn check_whitening(&self) -> Result<(), ConfigError> {
         if self.whitening > WHITENING_ORDER {
             return Err(ConfigError::Filter("whitening order"));
         }
-        ModelBank::<T, S, K>::check(self.count, &|k| self.candidate(k)).map(|_| ())
+        Ok(())
     }
 
     /// Candidate `k`'s configuration.
