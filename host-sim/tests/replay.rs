@@ -100,3 +100,59 @@ fn the_monitor_logs_a_replay_and_prints_its_last_frame() {
     );
     assert_eq!(a as f32, b as f32);
 }
+
+/// A board built with the model bank whose `u` holds in coloured noise (the shipped
+/// configuration with `BankCandidate::CALIBRATED_U` covering its loads, as `cargo xtask
+/// bench bank-u` builds it) shows its empty pan empty: at power-up and again after a
+/// removal, and never off by more than half a scale interval. Before, a bank's empty pan
+/// never read valid (its candidates cannot be told apart there: flagged on the grid's edge,
+/// no `u` in between), so such a board never showed it empty, tracked its zero or metered
+/// the noise colour its `u` rests on.
+#[test]
+fn a_board_with_the_model_bank_shows_its_empty_pan_empty() {
+    use estimator_core::weighing::BankCandidate;
+    let (mut config, precision) = host_sim::replay::shipped_config().unwrap();
+    config.method = config
+        .bank_covering_loads(BankCandidate::CALIBRATED_U)
+        .unwrap();
+    let path = support::scratch("replay", "bank-u.toml");
+    std::fs::write(&path, host_sim::calibrate::config_toml(&config, precision)).unwrap();
+    let scene = support::scratch("replay", "empty-drop-removal.toml");
+    std::fs::write(
+        &scene,
+        "description = \"Empty for 3 s, 138.32 g from 3 s to 5 s, empty to 10 s\"\n\
+         duration_s = 10.0\n\
+         [[events]]\ntime_s = 3.0\nmass_g = 138.32\n\
+         [[events]]\ntime_s = 5.0\nmass_g = 0.0\n",
+    )
+    .unwrap();
+    let out = run_ok(
+        host_sim()
+            .args(["replay", "--scene"])
+            .arg(&scene)
+            .arg("--config")
+            .arg(&path),
+    );
+    let rows = rows(&out);
+    let t = |row: &Vec<String>| row[0].parse::<f64>().unwrap();
+    let first_empty_after = |from: f64| {
+        rows.iter()
+            .find(|row| t(row) > from && row[3] == "empty")
+            .map(t)
+    };
+    let at_power_up = first_empty_after(0.0).expect("empty at power-up");
+    assert!(at_power_up < 1.0, "first empty at {at_power_up} s");
+    let after_removal = first_empty_after(5.0).expect("empty after the removal");
+    assert!(after_removal < 9.0, "first empty at {after_removal} s");
+    // The load itself: stable within 0.1 % before it is lifted.
+    let loaded = rows.iter().rfind(|row| t(row) < 5.0).unwrap();
+    assert_eq!(loaded[3], "stable", "{loaded:?}");
+    assert!(
+        (loaded[1].parse::<f64>().unwrap() - 138.32).abs() < 0.138,
+        "{loaded:?}"
+    );
+    for row in rows.iter().filter(|row| row[3] == "empty") {
+        let mass: f64 = row[1].parse().unwrap();
+        assert!(mass.abs() <= 0.05, "{row:?}");
+    }
+}

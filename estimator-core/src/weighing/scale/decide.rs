@@ -154,6 +154,19 @@ impl<E: ScaleEstimator> Scale<E> {
             if self.flagged_samples >= self.config.flag_restart_samples {
                 return self.load_changed();
             }
+        } else if reason == InvalidReason::OutsideModelRange {
+            // A bank's best fit beyond its span: this run's transient is none of its models
+            // (an empty pan's after a removal rings faster than any load's), and its fit
+            // keeps that transient for good. Once the ringing is over a bank reads a resting
+            // load all the same (its candidates read alike there): after `raw_arm_samples`
+            // of such flags in a row, restart on the data since (again, should it still ring
+            // then).
+            self.flagged_samples = self.flagged_samples.saturating_add(1);
+            if self.flagged_samples >= self.config.raw_arm_samples {
+                self.restart();
+                self.state = ScaleState::Estimating;
+                return self.reading();
+            }
         }
         // A flag interrupts stability: the band must hold again over valid readings.
         self.stable_samples = 0;

@@ -55,8 +55,10 @@
 //! data of one load instead of staying blind. A run that never showed a valid reading is
 //! not restarted this way, nor is a latched fault (it restarts on the next good sample
 //! anyway), nor a model bank's `OutsideModelRange`: its best fit on the edge of its span
-//! would be there again after a restart, so an empty pan outside the bank's span would
-//! restart over and over.
+//! would be there again after a restart on the same ringing. It restarts after
+//! `raw_arm_samples` of such flags in a row instead, as often as that takes: once the
+//! ringing is over (an empty pan after a removal rings faster than any load the bank
+//! models) the bank's candidates read the resting load alike, and it reads valid.
 //!
 //! The residual carries the noise of `n + 1` block means scaled by the regression
 //! coefficients, so its thresholds are set in grams from a measurement of the residuals on
