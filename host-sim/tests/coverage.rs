@@ -299,7 +299,7 @@ fn the_colour_over_24_lags_holds_the_rigs_noise_late_in_a_drop() {
 #[test]
 fn the_firmware_scale_meters_the_colour_itself_and_its_u_holds_on_it() {
     use host_sim::coverage::scale::{study, Pan};
-    let rows = study("rig-noise", 300, 1, &[80.0], Pan::Metered).unwrap();
+    let rows = study(&shipped(), "rig-noise", 300, 1, &[80.0], Pan::Metered).unwrap();
     let row = &rows[0];
     assert_eq!(row.coloured, row.runs, "runs resting on the colour");
     for (t, cell) in TIMES_MS.iter().zip(&row.row.cells) {
@@ -312,7 +312,7 @@ fn the_firmware_scale_meters_the_colour_itself_and_its_u_holds_on_it() {
             );
         }
     }
-    let fresh = study("rig-noise", 20, 1, &[80.0], Pan::Fresh).unwrap();
+    let fresh = study(&shipped(), "rig-noise", 20, 1, &[80.0], Pan::Fresh).unwrap();
     assert_eq!(fresh[0].coloured, 0);
 }
 
@@ -334,7 +334,16 @@ fn the_firmware_scale_meters_the_colour_itself_and_its_u_holds_on_it() {
 #[test]
 fn the_scales_colour_metered_as_one_record_holds_the_goal_under_floor_vibration() {
     use host_sim::coverage::scale::{study, Pan};
-    for row in study("vibration", 1000, 1, &[70.0, 80.0], Pan::Metered).unwrap() {
+    for row in study(
+        &shipped(),
+        "vibration",
+        1000,
+        1,
+        &[70.0, 80.0],
+        Pan::Metered,
+    )
+    .unwrap()
+    {
         assert_eq!(row.coloured, row.runs, "runs resting on the colour");
         for (t, cell) in TIMES_MS.iter().zip(&row.row.cells) {
             if (100..=400).contains(t) {
@@ -362,7 +371,7 @@ fn a_u_on_the_noise_floor_takes_the_floors_degrees_of_freedom() {
     use host_sim::coverage::scale::{study, Pan};
     let at_100_ms = TIMES_MS.iter().position(|&t| t == 100).unwrap();
     for scene in ["reference-step", "vibration"] {
-        let rows = study(scene, 1000, 1, &[40.0], Pan::Metered).unwrap();
+        let rows = study(&shipped(), scene, 1000, 1, &[40.0], Pan::Metered).unwrap();
         let cell = &rows[0].row.cells[at_100_ms];
         let coverage = cell.coverage().expect("a reading with its u");
         assert!(
@@ -413,4 +422,9 @@ fn a_fit_that_cancels_the_metered_colour_does_not_state_the_pans_whole_noise() {
         }
     }
     assert!(blocked.is_empty(), "{blocked:?}");
+}
+
+/// The shipped weighing configuration, the firmware's scale's.
+fn shipped() -> estimator_core::weighing::WeighingConfig {
+    host_sim::replay::shipped_config().unwrap().0
 }

@@ -448,6 +448,11 @@ struct StudyArgs {
     /// (`coverage-diagnostics.md`, and printed).
     #[arg(long)]
     diagnose: bool,
+    /// Coverage: only the firmware's scale tables, with the scale built from this weighing
+    /// configuration instead of the shipped one (e.g. the shipped one with a model bank as
+    /// its method: `cargo xtask bench bank-u` writes it under `target/xtask/`).
+    #[arg(long)]
+    config: Option<PathBuf>,
     /// Where the CSV, the markdown table and the charts go.
     #[arg(long, default_value = "host-sim/charts")]
     out: PathBuf,
@@ -856,6 +861,33 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
     } else {
         args.snr_db
     };
+    let runs = args.runs.unwrap_or(1000);
+    let scenes = if args.scenes.is_empty() {
+        host_sim::coverage::SCENES
+            .iter()
+            .map(|s| s.to_string())
+            .collect()
+    } else {
+        args.scenes
+    };
+    if let Some(config) = &args.config {
+        let (weighing, _) = host_sim::calibrate::load_config(config)?;
+        let path = args.out.join("coverage.md");
+        let mut file = create(&path)?;
+        let label = format!("`{}`", config.display());
+        scale_coverage(
+            (&weighing, &label),
+            &scenes,
+            runs,
+            args.seed,
+            &snr_db,
+            &mut file,
+            None,
+        )?;
+        file.flush()?;
+        println!("wrote {}", path.display());
+        return Ok(());
+    }
     let defaults = args.methods.is_empty();
     let methods = if args.methods.is_empty() {
         let (firmware, config) = study::firmware_default()?;
@@ -867,17 +899,8 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
     } else {
         args.methods
     };
-    let runs = args.runs.unwrap_or(1000);
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
-    let scenes = if args.scenes.is_empty() {
-        host_sim::coverage::SCENES
-            .iter()
-            .map(|s| s.to_string())
-            .collect()
-    } else {
-        args.scenes
-    };
     let path = args.out.join("coverage.md");
     let mut file = create(&path)?;
     let mut diagnostics = if args.diagnose {
@@ -960,7 +983,9 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
         charts.join(", ")
     );
     if defaults {
+        let (shipped, _) = host_sim::replay::shipped_config()?;
         scale_coverage(
+            (&shipped, "`firmware/weighing.toml`"),
             &scenes,
             runs,
             args.seed,
@@ -974,9 +999,11 @@ fn study_coverage(args: StudyArgs) -> Result<()> {
     Ok(())
 }
 
-/// The firmware's own scale on each scene (`coverage::scale`): after its empty pan's colour
-/// is metered, and fresh (its `u` from the residuals alone); appended to `coverage.md`.
+/// The firmware's own scale on each scene (`coverage::scale`), built from `weighing` (named
+/// `name` in the tables' headers): after its empty pan's colour is metered, and fresh (its
+/// `u` from the residuals alone); appended to `coverage.md`.
 fn scale_coverage(
+    (weighing, name): (&estimator_core::weighing::WeighingConfig, &str),
     scenes: &[String],
     runs: usize,
     seed: u64,
@@ -987,7 +1014,7 @@ fn scale_coverage(
     use host_sim::coverage::scale::{self, Pan};
     for scene in scenes {
         for pan in [Pan::Metered, Pan::Fresh] {
-            let rows = scale::study(scene, runs as u64, seed, snr_db, pan)?;
+            let rows = scale::study(weighing, scene, runs as u64, seed, snr_db, pan)?;
             let how = match pan {
                 Pan::Metered => format!(
                     "after {:.0} s on the empty pan (its colour metered by the scale itself)",
@@ -996,7 +1023,7 @@ fn scale_coverage(
                 Pan::Fresh => "just built (its `u` from the residuals alone)".to_string(),
             };
             let header = format!(
-                "The firmware's scale (`firmware/weighing.toml`, `Scale::configured`: its own onset detection) on `{scene}`, {how}, the noise running {:.0} s before the landing; its readings at the times after the landing once it saw the landing, {runs} runs per SNR, seed {seed}:",
+                "The firmware's scale ({name}, `Scale::configured`: its own onset detection) on `{scene}`, {how}, the noise running {:.0} s before the landing; its readings at the times after the landing once it saw the landing, {runs} runs per SNR, seed {seed}:",
                 host_sim::coverage::PRE_ROLL_S
             );
             scale::write_markdown(&rows, &header, &mut std::io::stdout().lock())?;

@@ -47,8 +47,11 @@ pub struct ScaleRow {
     pub runs: u32,
 }
 
-/// `runs` seeded drops of `scene` per SNR through the shipped scale.
+/// `runs` seeded drops of `scene` per SNR through the scale `weighing` builds (the shipped
+/// one: [`replay::shipped_config`]; `study coverage --config` another, e.g. with a model
+/// bank).
 pub fn study(
+    weighing: &WeighingConfig,
     scene: &str,
     runs: u64,
     seed: u64,
@@ -56,7 +59,6 @@ pub fn study(
     pan: Pan,
 ) -> Result<Vec<ScaleRow>> {
     let base = Scene::load(scene)?;
-    let (weighing, _) = replay::shipped_config()?;
     snrs_db
         .iter()
         .map(|&snr_db| {
@@ -64,7 +66,7 @@ pub fn study(
                 .with_snr_db(snr_db)
                 .delayed(PRE_ROLL_S)
                 .ok_or_else(|| anyhow!("the scene cannot be delayed by {PRE_ROLL_S} s"))?;
-            let scale = standing_scale(&weighing, &scene, seed, pan)?;
+            let scale = standing_scale(weighing, &scene, seed, pan)?;
             let per_run: Vec<(Vec<Cell>, bool)> = (0..runs)
                 .into_par_iter()
                 .map(|run| one_run(&scene, scale.clone(), run_seed(seed, run)))
