@@ -25,7 +25,6 @@ use estimator_core::weighing::{
     WeighingEstimator, WeighingMethod,
 };
 use estimator_core::ConfigError;
-use estimator_core::Interpolation;
 
 /// The weighing configuration, generated at build time from `firmware/weighing.toml` (what
 /// `host-sim calibrate` wrote) by `build.rs`: `WEIGHING` and the estimator's sizes.
@@ -538,7 +537,7 @@ pub fn log_config() {
         } => defmt::println!(
             "config method=model_bank D={=u16} K={=usize} ratios={=f32}-{=f32} interp={=u8} whiten={=usize} fn_hz={=f32} zeta={=f32} sample_rate_hz={=u32} target_pct={=f32} readout_ms={=f32} mass_g={=f32} p95_g={=f32} p95_bound_g={=f32}",
             decimation, candidates, ratio_min as f32, ratio_max as f32,
-            if interpolation == Interpolation::FivePoint { 5 } else { 3 }, whitening,
+            interpolation.points(), whitening,
             weighing.model.natural_frequency_hz as f32, weighing.model.damping_ratio as f32,
             SAMPLE_RATE_HZ, target_pct, readout_ms, calibration_mass_g, p95_g, p95_upper_g
         ),

@@ -902,11 +902,13 @@ impl Fields {
                 "span"
             }
             "interp" => {
-                self.interpolation = Some(match value {
-                    "3" => Interpolation::ThreePoint,
-                    "5" => Interpolation::FivePoint,
-                    _ => return Err(bad("3 or 5 (the candidates interpolated through)")),
-                });
+                self.interpolation = Some(
+                    value
+                        .parse()
+                        .ok()
+                        .and_then(Interpolation::with_points)
+                        .ok_or_else(|| bad("3 or 5 (the candidates interpolated through)"))?,
+                );
                 "interp"
             }
             "whiten" => {
@@ -1294,8 +1296,8 @@ impl fmt::Display for Method {
                     }
                     None => write!(f, ",cal_g={}", spec.calibration_g)?,
                 }
-                if spec.interpolation == Interpolation::FivePoint {
-                    f.write_str(",interp=5")?;
+                if spec.interpolation != Interpolation::default() {
+                    write!(f, ",interp={}", spec.interpolation.points())?;
                 }
                 if spec.whitening > 0 {
                     write!(f, ",whiten={}", spec.whitening)?;

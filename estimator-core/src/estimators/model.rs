@@ -930,6 +930,26 @@ pub enum Interpolation {
     FivePoint,
 }
 
+impl Interpolation {
+    /// The candidates it combines: 3 or 5 (the method spec's `interp=`, the firmware's
+    /// config line).
+    pub const fn points(self) -> u8 {
+        match self {
+            Self::ThreePoint => 3,
+            Self::FivePoint => 5,
+        }
+    }
+
+    /// The interpolation through `points` candidates (3 or 5); `None` for any other number.
+    pub const fn with_points(points: u8) -> Option<Self> {
+        match points {
+            3 => Some(Self::ThreePoint),
+            5 => Some(Self::FivePoint),
+            _ => None,
+        }
+    }
+}
+
 /// The coefficients `c₀..c₄` of the quartic through `f` at `−2, −1, 0, 1, 2`.
 fn quartic_through<T: Real>(f: [T; 5]) -> [T; 5] {
     let t = T::from_f64;

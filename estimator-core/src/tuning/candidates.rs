@@ -149,14 +149,7 @@ impl CandidateGrid<'_> {
         let data_driven = self.max_order * per_order;
         if index >= data_driven {
             return match self.bank {
-                Some(bank) if index == data_driven => Some(WeighingMethod::ModelBank {
-                    decimation: bank.decimation,
-                    candidates: bank.candidates,
-                    ratio_min: bank.ratio_min,
-                    ratio_max: bank.ratio_max,
-                    interpolation: bank.interpolation,
-                    whitening: bank.whitening,
-                }),
+                Some(bank) if index == data_driven => Some(bank.method()),
                 _ => None,
             };
         }

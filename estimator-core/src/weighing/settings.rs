@@ -213,6 +213,7 @@ pub fn load_settings<S: SettingsStore>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::weighing::BankCandidate;
 
     fn settings() -> Settings {
         let base = ScaleConfig::weighing_default(4000.0);
@@ -251,22 +252,8 @@ mod tests {
                 order: 4,
                 decimation: 32,
             },
-            WeighingMethod::ModelBank {
-                decimation: 8,
-                candidates: 33,
-                ratio_min: 0.68,
-                ratio_max: 1.3,
-                interpolation: Interpolation::ThreePoint,
-                whitening: 0,
-            },
-            WeighingMethod::ModelBank {
-                decimation: 8,
-                candidates: 65,
-                ratio_min: 0.68,
-                ratio_max: 1.3,
-                interpolation: Interpolation::FivePoint,
-                whitening: 32,
-            },
+            BankCandidate::REFERENCE.method(),
+            BankCandidate::CALIBRATED_U.method(),
         ] {
             let written = Settings {
                 method,
@@ -339,14 +326,11 @@ mod tests {
                 interpolation: Interpolation::ThreePoint,
                 whitening: 0,
             },
-            WeighingMethod::ModelBank {
-                decimation: 8,
-                candidates: 65,
-                ratio_min: 0.68,
-                ratio_max: 1.3,
-                interpolation: Interpolation::FivePoint,
+            BankCandidate {
                 whitening: WHITENING_ORDER + 1,
-            },
+                ..BankCandidate::CALIBRATED_U
+            }
+            .method(),
         ] {
             let bad = Settings {
                 method,

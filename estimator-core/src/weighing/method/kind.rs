@@ -156,6 +156,18 @@ pub struct BankCandidate {
 }
 
 impl BankCandidate {
+    /// The configured method this bank is.
+    pub const fn method(self) -> WeighingMethod {
+        WeighingMethod::ModelBank {
+            decimation: self.decimation,
+            candidates: self.candidates,
+            ratio_min: self.ratio_min,
+            ratio_max: self.ratio_max,
+            interpolation: self.interpolation,
+            whitening: self.whitening,
+        }
+    }
+
     /// The bank host-sim's model-based study settled on: D = 8, 33 candidates 2% apart over
     /// frequency ratios 0.68–1.30, which covers 0.3×–3× the calibration mass on the
     /// reference cell with a candidate to spare at each end.

@@ -275,14 +275,14 @@ impl WeighingConfig {
         let (low, high) = self.needed_ratios()?;
         let (mut ratio_min, mut ratio_max) = (bank.ratio_min, bank.ratio_max);
         cover_ratios(bank.candidates, &mut ratio_min, &mut ratio_max, low, high);
-        Some(WeighingMethod::ModelBank {
-            decimation: bank.decimation,
-            candidates: bank.candidates,
-            ratio_min,
-            ratio_max,
-            interpolation: bank.interpolation,
-            whitening: bank.whitening,
-        })
+        Some(
+            BankCandidate {
+                ratio_min,
+                ratio_max,
+                ..bank
+            }
+            .method(),
+        )
     }
 
     /// The lowest and highest resonance ratio (relative to the calibration mass's) of the

@@ -173,8 +173,8 @@ impl fmt::Display for Spec<'_> {
                     f,
                     "model:D={decimation},K={candidates},span={ratio_min}-{ratio_max}"
                 )?;
-                if interpolation == Interpolation::FivePoint {
-                    write!(f, ",interp=5")?;
+                if interpolation != Interpolation::default() {
+                    write!(f, ",interp={}", interpolation.points())?;
                 }
                 if whitening > 0 {
                     write!(f, ",whiten={whitening}")?;
@@ -220,11 +220,11 @@ impl Family {
                 "K" if !data_driven => keys.candidates.replace(whole(value, "K")?).is_some(),
                 "span" if !data_driven => keys.span.replace(span(value)?).is_some(),
                 "interp" if !data_driven => {
-                    let interpolation = match value {
-                        "3" => Interpolation::ThreePoint,
-                        "5" => Interpolation::FivePoint,
-                        _ => return Err(SpecError::BadValue { key: "interp" }),
-                    };
+                    let interpolation = value
+                        .parse()
+                        .ok()
+                        .and_then(Interpolation::with_points)
+                        .ok_or(SpecError::BadValue { key: "interp" })?;
                     keys.interpolation.replace(interpolation).is_some()
                 }
                 "whiten" if !data_driven => {
@@ -281,6 +281,7 @@ mod tests {
     use std::string::ToString;
 
     use super::*;
+    use crate::weighing::BankCandidate;
 
     #[test]
     fn every_family_reads_back_as_written() {
@@ -303,22 +304,8 @@ mod tests {
                 order: 6,
                 decimation: 12,
             },
-            WeighingMethod::ModelBank {
-                decimation: 8,
-                candidates: 33,
-                ratio_min: 0.68,
-                ratio_max: 1.3,
-                interpolation: Interpolation::ThreePoint,
-                whitening: 0,
-            },
-            WeighingMethod::ModelBank {
-                decimation: 8,
-                candidates: 65,
-                ratio_min: 0.68,
-                ratio_max: 1.3,
-                interpolation: Interpolation::FivePoint,
-                whitening: 32,
-            },
+            BankCandidate::REFERENCE.method(),
+            BankCandidate::CALIBRATED_U.method(),
         ] {
             let text = method.spec().to_string();
             assert_eq!(WeighingMethod::parse_spec(&text), Ok(method), "{text}");
