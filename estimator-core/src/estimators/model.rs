@@ -1087,6 +1087,10 @@ const PRUNE_AFTER_TERMS: u32 = 16;
 /// best's by to be dropped: a likelihood ratio of e⁻⁵⁰ under Gaussian noise.
 const RULED_OUT_VARIANCES: u32 = 100;
 
+/// A bank's agreed reading (a pan at rest, `ModelBank::agreed`) is stated only for a level
+/// within this many of its statistical `u` of zero: nothing put on the pan in the run.
+const AGREED_LEVEL_U: f64 = 5.0;
+
 /// Candidates within this many grid steps of the best are never dropped, so that the best
 /// fit can move by a step and still find both neighbours for the interpolation.
 const PRUNE_GUARD: usize = 2;
@@ -1642,16 +1646,34 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
             .any(|k| self.models[k].residual_sum - model.residual_sum > margin)
     }
 
-    /// The reading of a run at rest: where no candidate has been ruled out in this run
-    /// ([`Self::tells_apart`]) and every candidate still fitted reads within the
-    /// best one's statistical `u` of it. Then the level is the data's, not the model's (no
-    /// transient tells the models apart, and none moves the level), and it is stated with
-    /// `u` widened by the candidates' spread, at the best one's own residual level (in a
-    /// whitened fit at least the metered noise), even on the grid's edge. `None` otherwise,
+    /// The reading of a pan at rest with nothing on it since the run began: where no
+    /// candidate has been ruled out in this run ([`Self::tells_apart`]), the best one's
+    /// level is within [`AGREED_LEVEL_U`] of its statistical `u` of zero (no step in the
+    /// run), and every candidate still fitted reads within that `u` of it. Then the level is
+    /// the data's, not the model's (no transient tells the models apart, and none moves the
+    /// level), and it is stated with `u` widened by the candidates' spread, at the best
+    /// one's own residual level (in a whitened fit at least the metered noise), even on the
+    /// grid's edge. `None` otherwise,
     /// and the reading is flagged on an edge and states no `u` inside until the data single
     /// out a candidate (see [`Self::combined`]). A run that ever ruled one out is not at
     /// rest, whatever its levels say later (and a bank that drops ruled-out candidates reads
     /// as the whole grid: test `dropping_ruled_out_candidates_changes_no_reading`).
+    ///
+    /// Only a level near zero: a load off the grid whose data had come to rest rules no
+    /// candidate out either, and its candidates' levels agree with each other, but not
+    /// always with the truth. With loads too (the scale restarting a run flagged
+    /// `OutsideModelRange` for 1.5 s), `host-sim torture --runs 1000 --seed 1 --config
+    /// target/xtask/weighing-model-bank-u.toml` showed 46 readings settled wrong, all loads
+    /// of 420–467 g placed by hand (beyond the covered 341 g: slower than the grid), 0.13–1.2 s
+    /// after they came to rest, 3–5u and more off. The gate costs the scale's metering at
+    /// high SNR: its run's zero is set to whole counts, and at 70–80 dB the empty pan's level
+    /// is then often more than 5u from it (`host-sim study coverage --config`: the reference
+    /// drop at 70 dB and off calibration at 80 dB went unmetered). Widened by three
+    /// block-mean noise standard deviations it metered them, but the torture showed 41
+    /// settled wrong instead of 29, an item of 11 g placed by hand among them (2.1 times
+    /// the permissible error). The 29 are loads placed by hand, as before this reading (20
+    /// of 42,312 lines shown settled at stop 52, 29 of 83,557 now): a bank fits a step, and
+    /// a load put down over 50–300 ms is none.
     ///
     /// Without it an empty pan never read valid under a bank: at rest the best fit wanders
     /// over the grid, onto its edges (`OutsideModelRange`) and in between (no `u`), so the
@@ -1667,6 +1689,10 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
             _ => (residuals, terms),
         };
         let statistical = model.uncertainty_at(noise, degrees)?;
+        // Written so that a level that is not a number refuses the reading.
+        if !(estimate.abs() <= T::from_f64(AGREED_LEVEL_U) * statistical) {
+            return None;
+        }
         let mut spread = T::ZERO;
         for k in self.fitted() {
             let distance = (self.models[k].intake.reading().estimate? - estimate).abs();
@@ -2098,17 +2124,19 @@ mod tests {
         }
     }
 
-    /// A pan at rest reads valid under a bank, with a `u` that covers it, and only at rest:
-    /// an empty pan (no transient tells the candidates apart) and a load whose resonance
-    /// lies beyond the grid, fitted from when it had come to rest, read within ±2u of the
-    /// truth in about 95 % of runs (their last readings, 200 noise seeds each) and state a
-    /// `u` on 95 % of their readings or more from the first that may; the same load fitted from its landing, whose
-    /// ringing is none of the grid's, is still flagged at its end and never reads valid
+    /// An empty pan at rest reads valid under a bank, with a `u` that covers it: within ±2u
+    /// of zero in about 95 % of runs (their last readings, 200 noise seeds, f64 and f32),
+    /// a `u` on 95 % of their readings or more from the first that may. A load off the grid
+    /// is not read so: fitted from when it had come to rest (slower and faster than the
+    /// grid) no reading of it is more than 3u off, and fitted from its landing, whose
+    /// ringing is none of the grid's, it is still flagged at its end and never reads valid
     /// beyond 3u. Before, the empty pan's best fit wandered over the grid: flagged on its
     /// edges, no `u` between, so a scale under a bank never showed it empty.
     #[test]
     fn a_pan_at_rest_reads_valid_under_a_bank() {
-        fn scene<T: Real>(data: &[f64], truth: f64) -> (bool, usize, usize, bool) {
+        /// Whether the last reading covers `truth` within 2u, the readings with a `u`, those
+        /// that may have one, whether any was more than 3u off, whether the last is flagged.
+        fn scene<T: Real>(data: &[f64], truth: f64) -> (bool, usize, usize, bool, bool) {
             let configs = crate::sensor::reference_cell()
                 .bank_configs::<T, 5, 33>(0.7, 1.3, 8, InitialState::Unknown)
                 .unwrap();
@@ -2134,43 +2162,49 @@ mod tests {
                 _ => false,
             };
             let flagged = last.state == State::Invalid(InvalidReason::OutsideModelRange);
-            (covered, stated, readings, flagged && !wrong)
+            (covered, stated, readings, wrong, flagged)
         }
         const RUNS: u64 = 200;
         let sigma = 30.0;
-        for (label, ratio, mass, from) in [
-            ("empty", 1.0, 0.0, 0),
-            ("beyond, at rest", 1.45, 138.0, 12_000),
-        ] {
-            let mut covered = [0u64; 2];
-            for seed in 0..RUNS {
-                let data = drop_onto(ratio, mass, sigma, seed, from + 4000);
-                for (hits, (ok, stated, readings, _)) in covered.iter_mut().zip([
-                    scene::<f64>(&data[from..], mass),
-                    scene::<f32>(&data[from..], mass),
-                ]) {
-                    // Nearly all: at rest the best fit sometimes stands out by chance for a
-                    // block or two, and a fit that singles out its model states `u` only
-                    // from its third such block on.
-                    assert!(
-                        20 * stated >= 19 * readings,
-                        "{label}, seed {seed}: {stated} of {readings}"
-                    );
-                    *hits += u64::from(ok);
-                }
-            }
-            for hits in covered {
-                // 95 % of 200 runs: 190 ± 3.1 (one standard deviation).
+        let mut covered = [0u64; 2];
+        for seed in 0..RUNS {
+            let data = drop_onto(1.0, 0.0, sigma, seed, 4000);
+            for (hits, (ok, stated, readings, _, _)) in covered
+                .iter_mut()
+                .zip([scene::<f64>(&data, 0.0), scene::<f32>(&data, 0.0)])
+            {
+                // Nearly all: at rest the best fit sometimes stands out by chance for a
+                // block or two, and a fit that singles out its model states `u` only
+                // from its third such block on.
                 assert!(
-                    (180..=198).contains(&hits),
-                    "{label}: {hits} of {RUNS} covered"
+                    20 * stated >= 19 * readings,
+                    "seed {seed}: {stated} of {readings}"
+                );
+                *hits += u64::from(ok);
+            }
+        }
+        for hits in covered {
+            // 95 % of 200 runs: 190 ± 3.1 (one standard deviation).
+            assert!((180..=198).contains(&hits), "{hits} of {RUNS} covered");
+        }
+        for ratio in [0.55, 1.45] {
+            for seed in 0..20 {
+                let data = drop_onto(ratio, 138.0, sigma, seed, 16_000);
+                let at_rest = &data[12_000..];
+                assert!(
+                    !scene::<f64>(at_rest, 138.0).3,
+                    "ratio {ratio}, seed {seed}"
+                );
+                assert!(
+                    !scene::<f32>(at_rest, 138.0).3,
+                    "ratio {ratio}, seed {seed}"
                 );
             }
         }
         for seed in 0..20 {
             let data = drop_onto(1.45, 138.0, sigma, seed, 4000);
-            let (_, _, _, flagged_and_never_wrong) = scene::<f32>(&data, 138.0);
-            assert!(flagged_and_never_wrong, "seed {seed}");
+            let (_, _, _, wrong, flagged) = scene::<f32>(&data, 138.0);
+            assert!(flagged && !wrong, "seed {seed}");
         }
     }
 

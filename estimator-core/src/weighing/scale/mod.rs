@@ -56,9 +56,10 @@
 //! not restarted this way, nor is a latched fault (it restarts on the next good sample
 //! anyway), nor a model bank's `OutsideModelRange`: its best fit on the edge of its span
 //! would be there again after a restart on the same ringing. It restarts after
-//! `raw_arm_samples` of such flags in a row instead, as often as that takes: once the
-//! ringing is over (an empty pan after a removal rings faster than any load the bank
-//! models) the bank's candidates read the resting load alike, and it reads valid.
+//! `raw_arm_samples` of such flags in a row whose raw samples average within the empty
+//! band instead, as often as that takes: once the ringing is over (an empty pan after a
+//! removal rings faster than any load the bank models) the bank's candidates read the empty
+//! pan alike, and it reads valid. A load off the grid stays flagged.
 //!
 //! The residual carries the noise of `n + 1` block means scaled by the regression
 //! coefficients, so its thresholds are set in grams from a measurement of the residuals on
@@ -234,8 +235,10 @@ pub struct Scale<E> {
     ringing_decay: f32,
     /// The current run has shown a valid reading.
     valid_in_run: bool,
-    /// Consecutive samples the estimator has flagged without latching.
+    /// Consecutive samples the estimator has flagged without latching, and a bank's
+    /// `OutsideModelRange` samples' centred counts summed over them (`decide::flagged`).
     flagged_samples: u32,
+    flagged_sum_counts: f32,
     /// Restart the estimator on the next good sample (after a fault).
     restart_pending: bool,
     fault: Option<ScaleFault>,
@@ -373,6 +376,7 @@ impl<E: ScaleEstimator> Scale<E> {
             ringing_decay: ringing_decay(config.raw_arm_samples),
             valid_in_run: false,
             flagged_samples: 0,
+            flagged_sum_counts: 0.0,
             restart_pending: false,
             fault: None,
             gross_g: None,
@@ -578,6 +582,7 @@ impl<E: ScaleEstimator> Scale<E> {
         self.after_slow_change = false;
         self.valid_in_run = false;
         self.flagged_samples = 0;
+        self.flagged_sum_counts = 0.0;
         self.gross_g = None;
         self.restart_pending = false;
         self.trend_alarmed = false;
