@@ -1451,25 +1451,25 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
             }
         }
         let best = self.best();
-        self.told_apart = self.told_apart || self.tells_apart(best);
+        let limit = self.ruled_out_limit(best);
+        self.told_apart = self.told_apart || self.tells_apart(limit);
         let resolved;
         (self.combined, resolved) = self.combined(best);
         if let (true, Some(residual)) = (resolved, self.combined.residual) {
             self.combined_sum += residual * residual;
             self.combined_terms = self.combined_terms.saturating_add(1);
         }
-        self.prune(best);
+        self.prune(best, limit);
     }
 
     /// Drop the candidates on either end of those fitted that the data have ruled out (see
     /// the type's docs).
-    fn prune(&mut self, best: usize) {
-        let terms = self.models[best].residual_terms;
-        if !self.prunes || terms < PRUNE_AFTER_TERMS {
+    /// `limit`: [`Self::ruled_out_limit`] of `best`.
+    fn prune(&mut self, best: usize, limit: Option<T>) {
+        let Some(limit) = limit.filter(|_| self.prunes) else {
             return;
-        }
-        let best_sum = self.models[best].residual_sum;
-        let limit = best_sum + T::from_u32(RULED_OUT_VARIANCES) * best_sum / T::from_u32(terms);
+        };
+        let terms = self.models[best].residual_terms;
         // Not a number: nothing is ruled out.
         let ruled_out = |model: &ModelEstimator<T, S>| model.residual_sum > limit;
         let (guard, stride) = (PRUNE_GUARD * self.stride, self.stride);
@@ -1624,9 +1624,21 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
         (reading, resolved)
     }
 
+    /// The residual sum beyond which a candidate is ruled out: the best one's (`best`) and
+    /// [`RULED_OUT_VARIANCES`] of its residual variances more, once it has
+    /// [`PRUNE_AFTER_TERMS`] residuals (`None` before). What `prune` drops by, and
+    /// `tells_apart` judges by.
+    fn ruled_out_limit(&self, best: usize) -> Option<T> {
+        let model = &self.models[best];
+        let terms = model.residual_terms;
+        (terms >= PRUNE_AFTER_TERMS).then(|| {
+            model.residual_sum
+                + T::from_u32(RULED_OUT_VARIANCES) * model.residual_sum / T::from_u32(terms)
+        })
+    }
+
     /// Whether the data have ruled out a candidate still fitted, as `prune` rules one out:
-    /// its residual sum exceeds the best's by more than [`RULED_OUT_VARIANCES`] residual
-    /// variances, once the best has [`PRUNE_AFTER_TERMS`] residuals. On a pan at rest the
+    /// its residual sum beyond `limit` ([`Self::ruled_out_limit`]). On a pan at rest the
     /// candidates' sums differ by what the noise projects onto their few transient columns:
     /// at most 24.4 variances in 100 runs of 10 s (σ = 30 raw units, reference cell, K = 33
     /// over 0.7–1.3); a drop whose ringing is at 0.4–1.45 times the calibrated frequency
@@ -1635,15 +1647,8 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     /// as poor there, and the agreed readings' `u`, at that poor fit's residual level,
     /// held their errors within 0.94u (20 seeds each at σ = 3–3,000; measured with a
     /// throwaway test, not kept).
-    fn tells_apart(&self, best: usize) -> bool {
-        let model = &self.models[best];
-        let terms = model.residual_terms;
-        if terms < PRUNE_AFTER_TERMS {
-            return false;
-        }
-        let margin = T::from_u32(RULED_OUT_VARIANCES) * model.residual_sum / T::from_u32(terms);
-        self.fitted()
-            .any(|k| self.models[k].residual_sum - model.residual_sum > margin)
+    fn tells_apart(&self, limit: Option<T>) -> bool {
+        limit.is_some_and(|limit| self.fitted().any(|k| self.models[k].residual_sum > limit))
     }
 
     /// The reading of a pan at rest with nothing on it since the run began: where no
@@ -1653,9 +1658,8 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     /// the data's, not the model's (no transient tells the models apart, and none moves the
     /// level), and it is stated with `u` widened by the candidates' spread, at the best
     /// one's own residual level (in a whitened fit at least the metered noise), even on the
-    /// grid's edge. `None` otherwise,
-    /// and the reading is flagged on an edge and states no `u` inside until the data single
-    /// out a candidate (see [`Self::combined`]). A run that ever ruled one out is not at
+    /// grid's edge. `None` otherwise, and the reading is flagged on an edge and states no
+    /// `u` inside until the data single out a candidate (see [`Self::combined`]). A run that ever ruled one out is not at
     /// rest, whatever its levels say later (and a bank that drops ruled-out candidates reads
     /// as the whole grid: test `dropping_ruled_out_candidates_changes_no_reading`).
     ///
@@ -1683,11 +1687,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
         let estimate = centre.estimate?;
         let model = &self.models[best];
         let terms = model.residual_terms;
-        let residuals = model.residual_sum / T::from_u32(terms.max(1));
-        let (noise, degrees) = match self.run_whitening.as_ref() {
-            Some(metered) if residuals <= metered.error => (metered.error, metered.blocks),
-            _ => (residuals, terms),
-        };
+        let (noise, degrees) = self.floored(model.residual_sum / T::from_u32(terms.max(1)), terms);
         let statistical = model.uncertainty_at(noise, degrees)?;
         // Written so that a level that is not a number refuses the reading.
         if !(estimate.abs() <= T::from_f64(AGREED_LEVEL_U) * statistical) {
@@ -1730,7 +1730,13 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     /// is then in the `u` as before.
     fn noise_level(&self) -> (T, u32) {
         let degrees = self.combined_terms;
-        let residuals = self.combined_sum / T::from_u32(degrees.max(1));
+        self.floored(self.combined_sum / T::from_u32(degrees.max(1)), degrees)
+    }
+
+    /// A residual level (one block mean's variance) on `degrees` degrees of freedom, in a
+    /// whitened fit never below the metered colour's prediction error, which then brings
+    /// its own degrees (see [`Self::noise_level`]).
+    fn floored(&self, residuals: T, degrees: u32) -> (T, u32) {
         match self.run_whitening.as_ref() {
             // Written so that a NaN residual level keeps the residuals (and states no `u`).
             Some(metered) if residuals <= metered.error => (metered.error, metered.blocks),
