@@ -49,5 +49,5 @@ pub const WEIGHING: WeighingConfig = WeighingConfig {
 pub const ORDER_CAPACITY: usize = 8;
 /// States of the identified model (the bank's candidates): 2 + the filter's order.
 pub const MODEL_STATES: usize = 5;
-/// Candidates of the model bank (1 for the data-driven methods).
-pub const BANK_CANDIDATES: usize = 1;
+/// Candidates of the model bank (0 for the data-driven methods: no bank code in the image).
+pub const BANK_CANDIDATES: usize = 0;

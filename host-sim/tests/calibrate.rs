@@ -1060,7 +1060,7 @@ fn the_firmware_constants_size_the_method_and_refuse_by_key() {
         "{source}"
     );
     assert!(
-        source.contains("pub const BANK_CANDIDATES: usize = 1;"),
+        source.contains("pub const BANK_CANDIDATES: usize = 0;"),
         "{source}"
     );
     let bank = WeighingMethod::ModelBank {

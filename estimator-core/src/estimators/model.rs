@@ -1834,8 +1834,14 @@ impl<T: Real, const S: usize, const K: usize> Estimator<T> for ModelBank<T, S, K
         for model in self.models[..self.candidates].iter_mut() {
             model.reset();
         }
-        // `new` built the shared intake from the first candidate's configuration.
-        self.intake = Self::shared_intake(&self.models[0].config);
+        // `new` built the shared intake from the first candidate's configuration; a bank
+        // with none configured (or no room for one: `K = 0`, a board built without a bank)
+        // keeps flagging every sample `Unconfigured`.
+        self.intake = self.models[..self.candidates]
+            .first()
+            .map_or(Intake::UNCONFIGURED, |model| {
+                Self::shared_intake(&model.config)
+            });
         self.combined = self.intake.reading();
         self.first = 0;
         self.end = self.candidates;
@@ -2016,13 +2022,29 @@ mod tests {
             assert_eq!(reading.estimate, None);
             assert_eq!(reading.state, State::Invalid(InvalidReason::Unconfigured));
         }
-        // Reset unconfigured, it takes an exact zero (its valid range) and estimates
-        // nothing from it; any other sample is out of range.
+        // Reset unconfigured, it still flags every sample (before stop 54 it took an exact
+        // zero, the unconfigured slot's valid range, and called anything else out of
+        // range), and so does a bank with no room for a candidate (`K = 0`: a board built
+        // without a bank), which refuses every configuration and never panics.
         let mut reset = bank.clone();
         reset.reset();
-        for sample in [0.0, 0.0, 2.0, 0.0] {
-            assert_eq!(reset.push(sample).estimate, None);
+        let mut roomless = ModelBank::<f32, 5, 0>::UNCONFIGURED;
+        assert_eq!(
+            roomless.configure(1, |_| Ok(configs(0.9, 1.1)[16])),
+            Err(ConfigError::Model)
+        );
+        roomless.reset();
+        for sample in [0.0, 0.0, 2.0, 0.0, f32::NAN] {
+            for reading in [
+                reset.push(sample),
+                roomless.push(sample),
+                roomless.push_missing(),
+            ] {
+                assert_eq!(reading.estimate, None);
+                assert_eq!(reading.state, State::Invalid(InvalidReason::Unconfigured));
+            }
         }
+        assert_eq!((roomless.decimation(), roomless.best()), (1, 0));
         let data = drop_onto(1.02, 138.0, 30.0, 3, 1200);
         let other = configs(0.8, 1.2);
         bank.configure(33, |k| Ok(other[k])).unwrap();

@@ -480,6 +480,35 @@ mod tests {
             WeighingEstimator::<f32, 8, 5, 2>::new(&config(method), zero).err(),
             Some(ConfigError::Model)
         );
+        // A type with no room for a bank (`K = 0`: the firmware's data-driven images, which
+        // then hold no bank code) refuses one, in place too, and is left as it was; it holds
+        // the data-driven methods as the others do, from its unconfigured start, which
+        // flags every sample and survives a reset.
+        let mut roomless = WeighingEstimator::<f32, 8, 5, 0>::UNCONFIGURED;
+        roomless.reset();
+        let flagged = roomless.push(1.0);
+        assert_eq!(
+            (flagged.estimate, flagged.state),
+            (None, State::Invalid(InvalidReason::Unconfigured))
+        );
+        assert_eq!(
+            WeighingEstimator::<f32, 8, 5, 0>::new(&config(method), zero).err(),
+            Some(ConfigError::Model)
+        );
+        let step_method = WeighingMethod::Step {
+            order: 3,
+            decimation: 32,
+            forgetting: 0.9,
+        };
+        roomless.configure_in_counts(&config(step_method)).unwrap();
+        assert_eq!(
+            roomless.configure_in_counts(&config(method)),
+            Err(ConfigError::Model)
+        );
+        same(
+            roomless,
+            WeighingEstimator::<f32, 8, 5, 3>::in_counts(&config(step_method)).unwrap(),
+        );
         assert_eq!(
             WeighingEstimator::<f32, 8, 5, 3>::new(&config(method), f64::NAN).err(),
             Some(ConfigError::Range)

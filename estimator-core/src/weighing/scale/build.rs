@@ -84,7 +84,9 @@ pub trait ConfiguredEstimator: ScaleEstimator {
 
     /// Whether `method` may be built while the board runs: not a model bank, and nothing
     /// on an image built with a bank. A bank is chosen with its image (`K` is the image's,
-    /// `firmware/weighing.toml`), at calibration; it is configured in place at boot.
+    /// `firmware/weighing.toml`), at calibration; it is configured in place at boot. An
+    /// image built for a data-driven method has no room for a bank (`K = 0`), so none of
+    /// the bank's code is linked into it.
     fn rebuilds(method: &WeighingMethod) -> bool
     where
         Self: Sized;
@@ -95,14 +97,14 @@ impl<const N: usize, const S: usize, const K: usize> ConfiguredEstimator
 {
     fn rebuild(&mut self, weighing: &WeighingConfig) -> Result<(), ConfigError> {
         // A bank image's method is fixed (`rebuilds`).
-        if K > 1 {
+        if K > 0 {
             return Err(ConfigError::Model);
         }
         self.configure_in_counts(weighing)
     }
 
     fn rebuilds(method: &WeighingMethod) -> bool {
-        K == 1 && !matches!(method, WeighingMethod::ModelBank { .. })
+        K == 0 && !matches!(method, WeighingMethod::ModelBank { .. })
     }
 }
 
@@ -274,7 +276,7 @@ mod tests {
                     config.model.filter_order = 0;
                 }
                 let mut scale =
-                    Scale::<WeighingEstimator<f32, 8, 5, 1>>::configured(&config, calibration())
+                    Scale::<WeighingEstimator<f32, 8, 5, 0>>::configured(&config, calibration())
                         .unwrap();
                 let mut cell = Cell::new(0.4);
                 let empty = *run(&mut scale, &mut cell, 4000).last().unwrap();
@@ -308,8 +310,8 @@ mod tests {
         // With the estimator in storage of its own (the firmware's static), the same readings.
         let config = weighing(ScaleConfig::DEFAULT_METHOD);
         let mut owned =
-            Scale::<WeighingEstimator<f32, 8, 5, 1>>::configured(&config, calibration()).unwrap();
-        let mut storage = WeighingEstimator::<f32, 8, 5, 1>::UNCONFIGURED;
+            Scale::<WeighingEstimator<f32, 8, 5, 0>>::configured(&config, calibration()).unwrap();
+        let mut storage = WeighingEstimator::<f32, 8, 5, 0>::UNCONFIGURED;
         let mut borrowing = Scale::configured_in(&config, &mut storage, calibration()).unwrap();
         let mut cell = Cell::new(0.4);
         for k in 0..6000 {
@@ -326,7 +328,7 @@ mod tests {
             forgetting: 1.0,
         });
         assert!(
-            Scale::<WeighingEstimator<f32, 8, 5, 1>>::configured(&too_big, calibration()).is_err()
+            Scale::<WeighingEstimator<f32, 8, 5, 0>>::configured(&too_big, calibration()).is_err()
         );
     }
 
@@ -336,7 +338,7 @@ mod tests {
     /// reason and changes nothing (the readings stay those of a scale never asked).
     #[test]
     fn a_scale_changes_method_in_place_or_refuses_and_keeps_its_own() {
-        type Built = Scale<WeighingEstimator<f32, 8, 5, 1>>;
+        type Built = Scale<WeighingEstimator<f32, 8, 5, 0>>;
         let first = weighing(ScaleConfig::DEFAULT_METHOD);
         let second = weighing(WeighingMethod::Step {
             order: 5,
@@ -463,7 +465,7 @@ mod tests {
             ..weighing(ScaleConfig::DEFAULT_METHOD)
         };
         let mut scale =
-            Scale::<WeighingEstimator<f32, 8, 5, 1>>::configured(&config, calibration()).unwrap();
+            Scale::<WeighingEstimator<f32, 8, 5, 0>>::configured(&config, calibration()).unwrap();
         let decisions = *scale.config();
         assert_eq!(decisions.capacity_g, 300.0);
         assert_eq!(decisions.scale_interval_g, 0.05);

@@ -141,7 +141,71 @@ pub fn e2e_test() -> Result<()> {
     e2e_commands(&elf)?;
     e2e_record_loop(&elf)?;
     e2e_checked_demo(&elf)?;
-    e2e_faults(&elf)
+    e2e_faults(&elf)?;
+    e2e_bank_image()
+}
+
+/// A data-driven image has no room for a bank and links none of its code
+/// (`host_sim::calibrate::firmware_constants`), so this is where the bank's firmware path is
+/// built and run: the bank whose `u` holds in coloured noise (`cargo xtask bench bank-u`'s),
+/// its STM32F411 image within half the flash, and its QEMU image on the demo scene reading
+/// line for line what `host-sim replay` reads with the same configuration (the bank
+/// configured in place at boot, its run, restarts and readings the host's).
+fn e2e_bank_image() -> Result<()> {
+    let shipped = shipped_config()?;
+    let [.., bank] = bench_variants(&shipped)?;
+    let weighing = estimator_core::weighing::WeighingConfig {
+        method: bank.method,
+        ..shipped.0
+    };
+    let config = variant_config(&weighing, shipped.1, &bank)?;
+    let stm32 = image_size(&build_with_config(Board::Stm32f411, false, Some(&config))?)?;
+    let flash_free = 1.0 - stm32.flash as f64 / STM32F411_FLASH_BYTES as f64;
+    println!(
+        "{}: {STM32_BIN} {} B flash, {:.1} % free",
+        bank.label,
+        stm32.flash,
+        100.0 * flash_free
+    );
+    if flash_free < 0.5 {
+        bail!(
+            "the bank's {STM32_BIN} image uses {} B: less than half of the {} KiB flash is free",
+            stm32.flash,
+            STM32F411_FLASH_BYTES / 1024
+        );
+    }
+    let run = build_with_config(Board::Qemu, false, Some(&config))
+        .and_then(|elf| run_firmware(&elf, &ICOUNT_FAST, false, None));
+    // Leave the QEMU image as the shipped config builds it.
+    build(Board::Qemu, false)?;
+    let run = run?;
+    let rows = replay_check::qemu_demo_rows_with(&weighing)?;
+    let mut failures = replay_check::differences(&rows, &run);
+    if !run.exited_successfully {
+        failures.push("QEMU did not exit successfully".to_string());
+    }
+    if !run
+        .lines
+        .iter()
+        .any(|line| line.starts_with("config method=model_bank"))
+    {
+        failures.push("no `config method=model_bank` line".to_string());
+    }
+    if !failures.is_empty() {
+        bail!(
+            "the bank's QEMU image on the demo scene, against `host-sim replay` with its configuration:\n  - {}",
+            failures.join("\n  - ")
+        );
+    }
+    let shown = replay_check::Shown::of(&rows);
+    println!(
+        "the bank's QEMU image on the demo scene: all {} readout lines are the host replay's ({} with a mass, {} stable or empty, {} final)",
+        rows.len(),
+        shown.with_mass,
+        shown.stable,
+        shown.is_final
+    );
+    Ok(())
 }
 
 /// The failures the firmware must not survive silently: a sample clock that stops ends in
