@@ -860,8 +860,6 @@ pub struct ModelBank<T: Real, const S: usize, const K: usize> {
     /// (see [`Self::combined`]).
     combined_sum: T,
     combined_terms: u32,
-    /// The data of this run have ruled out a candidate (see [`Self::tells_apart`]).
-    told_apart: bool,
     /// How the candidates around the best are combined.
     interpolation: Interpolation,
     /// The order `P` of the prediction-error filter the block means are whitened with once
@@ -1130,7 +1128,6 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
         shared: None,
         combined_sum: T::ZERO,
         combined_terms: 0,
-        told_apart: false,
         interpolation: Interpolation::ThreePoint,
         whitening_order: 0,
         whitening: None,
@@ -1452,9 +1449,8 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
         }
         let best = self.best();
         let limit = self.ruled_out_limit(best);
-        self.told_apart = self.told_apart || self.tells_apart(limit);
         let resolved;
-        (self.combined, resolved) = self.combined(best);
+        (self.combined, resolved) = self.combined(best, limit);
         if let (true, Some(residual)) = (resolved, self.combined.residual) {
             self.combined_sum += residual * residual;
             self.combined_terms = self.combined_terms.saturating_add(1);
@@ -1502,13 +1498,12 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     /// Combine the candidates around the best one: the vertex of the parabola through its
     /// and its neighbours' residual sums, and the estimate interpolated there through the
     /// same three candidates.
-    fn combined(&self, best: usize) -> (Reading<T>, bool) {
+    /// `limit`: [`Self::ruled_out_limit`] of `best`.
+    fn combined(&self, best: usize, limit: Option<T>) -> (Reading<T>, bool) {
         let reading = |k: usize| self.models[k].intake.reading();
         let centre = reading(best);
-        if !self.told_apart {
-            if let Some(agreed) = self.agreed(best, centre) {
-                return (agreed, false);
-            }
+        if let Some(agreed) = self.agreed(best, centre, limit) {
+            return (agreed, false);
         }
         if best == self.first || best + 1 == self.end {
             // With three or more candidates a best fit on the edge means the truth may lie
@@ -1626,8 +1621,8 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
 
     /// The residual sum beyond which a candidate is ruled out: the best one's (`best`) and
     /// [`RULED_OUT_VARIANCES`] of its residual variances more, once it has
-    /// [`PRUNE_AFTER_TERMS`] residuals (`None` before). What `prune` drops by, and
-    /// `tells_apart` judges by.
+    /// [`PRUNE_AFTER_TERMS`] residuals (`None` before). What `prune` drops by, and what
+    /// `agreed` leaves out.
     fn ruled_out_limit(&self, best: usize) -> Option<T> {
         let model = &self.models[best];
         let terms = model.residual_terms;
@@ -1637,31 +1632,33 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
         })
     }
 
-    /// Whether the data have ruled out a candidate still fitted, as `prune` rules one out:
-    /// its residual sum beyond `limit` ([`Self::ruled_out_limit`]). On a pan at rest the
-    /// candidates' sums differ by what the noise projects onto their few transient columns:
-    /// at most 24.4 variances in 100 runs of 10 s (σ = 30 raw units, reference cell, K = 33
-    /// over 0.7–1.3); a drop whose ringing is at 0.4–1.45 times the calibrated frequency
-    /// (σ up to 3,000 on a 10,000 step) exceeded 100 at its 16th residual, before any
-    /// candidate may state a `u`. Drops ringing 1.6–3 times as fast never did: every fit is
-    /// as poor there, and the agreed readings' `u`, at that poor fit's residual level,
-    /// held their errors within 0.94u (20 seeds each at σ = 3–3,000; measured with a
-    /// throwaway test, not kept).
-    fn tells_apart(&self, limit: Option<T>) -> bool {
-        limit.is_some_and(|limit| self.fitted().any(|k| self.models[k].residual_sum > limit))
-    }
-
-    /// The reading of a pan at rest with nothing on it since the run began: where no
-    /// candidate has been ruled out in this run ([`Self::tells_apart`]), the best one's
-    /// level is within [`AGREED_LEVEL_U`] of its statistical `u` of zero (no step in the
-    /// run), and every candidate still fitted reads within that `u` of it. Then the level is
-    /// the data's, not the model's (no transient tells the models apart, and none moves the
-    /// level), and it is stated with `u` widened by the candidates' spread, at the best
-    /// one's own residual level (in a whitened fit at least the metered noise), even on the
-    /// grid's edge. `None` otherwise, and the reading is flagged on an edge and states no
-    /// `u` inside until the data single out a candidate (see [`Self::combined`]). A run that ever ruled one out is not at
-    /// rest, whatever its levels say later (and a bank that drops ruled-out candidates reads
-    /// as the whole grid: test `dropping_ruled_out_candidates_changes_no_reading`).
+    /// The reading of a pan at rest with nothing on it since the run began: where the best
+    /// candidate's level is within [`AGREED_LEVEL_U`] of its statistical `u` of zero (no
+    /// step in the run), and every candidate still fitted and not ruled out (its residual
+    /// sum within `limit`, [`Self::ruled_out_limit`]) reads within that `u` of it. Then the
+    /// level is the data's, not the model's (no transient moves it), and it is stated with
+    /// `u` widened by those candidates' spread, at the best one's own residual level (in a
+    /// whitened fit at least the metered noise), even on the grid's edge. `None` otherwise,
+    /// and the reading is flagged on an edge and states no `u` inside until the data single
+    /// out a candidate (see [`Self::combined`]). The candidates ruled out are left out
+    /// whether or not `prune` has dropped them yet, so a bank that drops them reads as the
+    /// whole grid (test `dropping_ruled_out_candidates_changes_no_reading`).
+    ///
+    /// Not only in a run that ruled no candidate out (as from stop 53 to 54): in narrow-band
+    /// vibration the colour alone rules candidates out on a pan at rest (their transient
+    /// columns take up its band unequally), and such a run never read its pan at rest again
+    /// (test `a_pan_at_rest_in_floor_vibration_reads_valid_under_a_bank`), so the scale
+    /// could not show it empty nor meter the colour a whitening bank's `u` rests on. With
+    /// the bank calibrated for its `u` in the rig's noise, the scale metered its empty pan
+    /// in 24 s at 70 dB for 4 of 8 noise seeds and at 80 dB for 5, and now for 7 and 6 of
+    /// the same 8 (`host-sim study coverage --config target/xtask/weighing-model-bank-u.toml
+    /// --scene rig-noise --snr-db 50,60,70,80 --runs 1 --seed S`, S = 1–8). Its tables at
+    /// `--runs 1000 --seed 1`: 65 of 96 cells within 92–98 % instead of 60, 3 below instead
+    /// of 8 (where the pan went unmetered the unwhitened fit is still over-confident: the
+    /// rig's noise 100 ms after the landing at 80 dB, 64.2 %); `host-sim torture --runs 1000
+    /// --seed 1` with that configuration: 29 lines settled wrong of 84,120, as before of
+    /// 83,557; the default study's tables are the same to the digit (a drop's level is far
+    /// beyond 5u).
     ///
     /// Only a level near zero: a load off the grid whose data had come to rest rules no
     /// candidate out either, and its candidates' levels agree with each other, but not
@@ -1683,7 +1680,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     /// over the grid, onto its edges (`OutsideModelRange`) and in between (no `u`), so the
     /// scale never showed it empty, tracked its zero or metered its noise and colour (test
     /// `a_pan_at_rest_reads_valid_under_a_bank`).
-    fn agreed(&self, best: usize, centre: Reading<T>) -> Option<Reading<T>> {
+    fn agreed(&self, best: usize, centre: Reading<T>, limit: Option<T>) -> Option<Reading<T>> {
         let estimate = centre.estimate?;
         let model = &self.models[best];
         let terms = model.residual_terms;
@@ -1694,7 +1691,8 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
             return None;
         }
         let mut spread = T::ZERO;
-        for k in self.fitted() {
+        let ruled_out = |k: usize| limit.is_some_and(|limit| self.models[k].residual_sum > limit);
+        for k in self.fitted().filter(|&k| !ruled_out(k)) {
             let distance = (self.models[k].intake.reading().estimate? - estimate).abs();
             // Written so that a distance that is not a number refuses the reading.
             if !(distance <= statistical) {
@@ -1848,7 +1846,6 @@ impl<T: Real, const S: usize, const K: usize> Estimator<T> for ModelBank<T, S, K
         self.stride = 1;
         self.combined_sum = T::ZERO;
         self.combined_terms = 0;
-        self.told_apart = false;
         if let Some(shared) = self.shared.as_mut() {
             shared.reset();
         }
@@ -2233,6 +2230,53 @@ mod tests {
             let data = drop_onto(1.45, 138.0, sigma, seed, 4000);
             let (_, _, _, wrong, flagged) = scene::<f32>(&data, 138.0);
             assert!(flagged && !wrong, "seed {seed}");
+        }
+    }
+
+    /// An empty pan at rest in narrow-band floor vibration near the cell's resonance (as the
+    /// `rig-noise` scene's: 25 Hz, 4 Hz wide, its RMS 3.7 times the white noise's, as at
+    /// 80 dB there) reads valid under a bank, with a `u`, on 95 % or more of the readings
+    /// that may, in every one of 10 noise seeds. The vibration rules candidates out (their
+    /// transient columns take up its narrow band unequally), and until stop 54 a run that
+    /// had ruled one out never read its pan at rest again (`ModelBank::agreed`): in 2 of
+    /// these seeds it stated a `u` on 0 and 448 of 15,608 readings, and a scale could not
+    /// show such a pan empty, nor meter the colour a whitening bank's `u` rests on. Not
+    /// asserted: the `u` itself, which unwhitened does not see the vibration (up to 8.9u
+    /// off here, before and after: what the metering and the whitening are for).
+    #[test]
+    fn a_pan_at_rest_in_floor_vibration_reads_valid_under_a_bank() {
+        let configs = crate::sensor::reference_cell()
+            .bank_configs::<f32, 5, 33>(0.7, 1.3, 8, InitialState::Unknown)
+            .unwrap();
+        let (length, sigma) = (16_000, 30.0);
+        // A resonator at 25 Hz, 4 Hz wide (its poles' radius e^(-π·4/4000)), driven by
+        // white noise and scaled to 3.7σ RMS.
+        let radius = libm::exp(-core::f64::consts::PI * 4.0 / 4000.0);
+        let (a1, a2) = (
+            2.0 * radius * libm::cos(2.0 * core::f64::consts::PI * 25.0 / 4000.0),
+            -radius * radius,
+        );
+        let gain = ((1.0 + a2) * ((1.0 - a2) * (1.0 - a2) - a1 * a1) / (1.0 - a2)).sqrt();
+        for seed in 0..10u64 {
+            let white = drop_onto(1.0, 0.0, sigma, seed, length);
+            let drive = drop_onto(1.0, 0.0, 1.0, seed + 1000, length);
+            let (mut v1, mut v2) = (0.0, 0.0);
+            let mut bank = ModelBank::new(configs).unwrap();
+            let (mut stated, mut readings) = (0, 0);
+            for (&y, &e) in white.iter().zip(&drive) {
+                let v = a1 * v1 + a2 * v2 + gain * e;
+                (v2, v1) = (v1, v);
+                let reading = bank.push((y + 3.7 * sigma * v) as f32);
+                if reading.samples as usize > 8 * (bank.models[0].block.ringing_blocks as usize + 4)
+                {
+                    readings += 1;
+                    stated += usize::from(reading.uncertainty.is_some());
+                }
+            }
+            assert!(
+                20 * stated >= 19 * readings,
+                "seed {seed}: {stated} of {readings} readings stated u"
+            );
         }
     }
 
