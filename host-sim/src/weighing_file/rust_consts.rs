@@ -21,8 +21,8 @@ use crate::montecarlo::Precision;
 /// image holds the configured method and the methods a console may choose, and no more: a
 /// data-driven image has no room for a bank, so none of the bank's code is linked into it
 /// (a console cannot choose a bank, which is built at boot only). With room for one
-/// candidate, as before stop 54, the STM32F411 image took 258,908 B, 3.2 KB short of the
-/// 256 KiB program area; without, 228,428 B (`cargo xtask test`'s flash check).
+/// candidate, as before stop 54, the STM32F411 image took 258,908 B, leaving 3.2 KB of the
+/// 256 KiB program area; without, 228,428 B, 33.7 KB (`cargo xtask test`'s flash check).
 ///
 /// One parser: this is [`parse_config`], the same that `estimate --config` uses, so the
 /// file the firmware accepts is the file host-sim accepts. On top of it the firmware asks
