@@ -1661,8 +1661,8 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     /// beyond 5u).
     ///
     /// Only a level near zero: a load off the grid whose data had come to rest rules no
-    /// candidate out either, and its candidates' levels agree with each other, but not
-    /// always with the truth. With loads too (the scale restarting a run flagged
+    /// candidate out, and its candidates' levels agree with each other, but not always with
+    /// the truth. With loads too (the scale restarting a run flagged
     /// `OutsideModelRange` for 1.5 s), `host-sim torture --runs 1000 --seed 1 --config
     /// target/xtask/weighing-model-bank-u.toml` showed 46 readings settled wrong, all loads
     /// of 420–467 g placed by hand (beyond the covered 341 g: slower than the grid), 0.13–1.2 s
@@ -1673,7 +1673,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     /// block-mean noise standard deviations it metered them, but the torture showed 41
     /// settled wrong instead of 29, an item of 11 g placed by hand among them (2.1 times
     /// the permissible error). The 29 are loads placed by hand, as before this reading (20
-    /// of 42,312 lines shown settled at stop 52, 29 of 83,557 now): a bank fits a step, and
+    /// of 42,312 lines shown settled at stop 52, 29 of 83,557 at stop 53): a bank fits a step, and
     /// a load put down over 50–300 ms is none.
     ///
     /// Without it an empty pan never read valid under a bank: at rest the best fit wanders
