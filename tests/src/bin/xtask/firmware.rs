@@ -154,26 +154,9 @@ pub fn e2e_test() -> Result<()> {
 fn e2e_bank_image() -> Result<()> {
     let shipped = shipped_config()?;
     let [.., bank] = bench_variants(&shipped)?;
-    let weighing = estimator_core::weighing::WeighingConfig {
-        method: bank.method,
-        ..shipped.0
-    };
-    let config = variant_config(&weighing, shipped.1, &bank)?;
+    let (weighing, config) = variant_config(&shipped, &bank)?;
     let stm32 = image_size(&build_with_config(Board::Stm32f411, false, Some(&config))?)?;
-    let flash_free = 1.0 - stm32.flash as f64 / STM32F411_FLASH_BYTES as f64;
-    println!(
-        "{}: {STM32_BIN} {} B flash, {:.1} % free",
-        bank.label,
-        stm32.flash,
-        100.0 * flash_free
-    );
-    if flash_free < 0.5 {
-        bail!(
-            "the bank's {STM32_BIN} image uses {} B: less than half of the {} KiB flash is free",
-            stm32.flash,
-            STM32F411_FLASH_BYTES / 1024
-        );
-    }
+    require_half_flash_free(&format!("{STM32_BIN} with {}", bank.label), stm32.flash)?;
     let run = build_with_config(Board::Qemu, false, Some(&config))
         .and_then(|elf| run_firmware(&elf, &ICOUNT_FAST, false, None));
     // Leave the QEMU image as the shipped config builds it.
@@ -273,21 +256,24 @@ fn require_passed(summary: &str, failures: &[String], what: &str) -> Result<()> 
 /// The STM32F411 image, with either converter, leaves at least half the chip's flash free.
 fn check_stm32_flash() -> Result<()> {
     for board in [Board::Stm32f411, Board::Stm32f411Ads131m02] {
-        let stm32_size = image_size(&build(board, false)?)?;
-        let flash_free = 1.0 - stm32_size.flash as f64 / STM32F411_FLASH_BYTES as f64;
-        let label = board.label();
-        println!(
-            "{label}: {} B flash, {:.1} % of the STM32F411CE's flash free",
-            stm32_size.flash,
-            100.0 * flash_free
+        require_half_flash_free(board.label(), image_size(&build(board, false)?)?.flash)?;
+    }
+    Ok(())
+}
+
+/// Print an STM32F411 image's flash and fail unless half of the chip's flash is free (the
+/// other half holds the calibration store).
+fn require_half_flash_free(label: &str, flash: u64) -> Result<()> {
+    let flash_free = 1.0 - flash as f64 / STM32F411_FLASH_BYTES as f64;
+    println!(
+        "{label}: {flash} B flash, {:.1} % of the STM32F411CE's flash free",
+        100.0 * flash_free
+    );
+    if flash_free < 0.5 {
+        bail!(
+            "{label} uses {flash} B: less than half of the {} KiB flash is free",
+            STM32F411_FLASH_BYTES / 1024
         );
-        if flash_free < 0.5 {
-            bail!(
-                "{label} uses {} B: less than half of the {} KiB flash is free",
-                stm32_size.flash,
-                STM32F411_FLASH_BYTES / 1024
-            );
-        }
     }
     Ok(())
 }
@@ -663,12 +649,7 @@ fn bench_variant(
     ),
     variant: &BenchVariant,
 ) -> Result<()> {
-    let (shipped, precision) = shipped;
-    let weighing = estimator_core::weighing::WeighingConfig {
-        method: variant.method,
-        ..*shipped
-    };
-    let config = variant_config(&weighing, *precision, variant)?;
+    let (weighing, config) = variant_config(shipped, variant)?;
     let elf = build_with_config(Board::Qemu, true, Some(&config))?;
     let stm32 = image_size(&build_with_config(Board::Stm32f411, false, Some(&config))?)?;
     println!(
@@ -800,23 +781,29 @@ fn bench_variants(
     ])
 }
 
-/// The shipped weighing configuration with the method replaced by `variant`'s, written under
-/// the target directory (a build input, regenerated on every bench).
+/// The shipped weighing configuration with the method replaced by `variant`'s, and the path
+/// it is written to under the target directory (a build input, regenerated on every bench).
 fn variant_config(
-    config: &estimator_core::weighing::WeighingConfig,
-    precision: host_sim::montecarlo::Precision,
+    (shipped, precision): &(
+        estimator_core::weighing::WeighingConfig,
+        host_sim::montecarlo::Precision,
+    ),
     variant: &BenchVariant,
-) -> Result<PathBuf> {
+) -> Result<(estimator_core::weighing::WeighingConfig, PathBuf)> {
+    let config = estimator_core::weighing::WeighingConfig {
+        method: variant.method,
+        ..*shipped
+    };
     let dir = target_dir().join("xtask");
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let path = dir.join(format!("{}.toml", variant.stem));
     let text = format!(
         "# The shipped firmware/weighing.toml with {} as its method (cargo xtask bench).\n{}",
         variant.label,
-        host_sim::calibrate::config_toml(config, precision)
+        host_sim::calibrate::config_toml(&config, *precision)
     );
     std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
-    Ok(path)
+    Ok((config, path))
 }
 
 /// An exception frame with the FPU's context: 26 words, and one more to align the stack to
