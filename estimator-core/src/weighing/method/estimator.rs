@@ -101,12 +101,14 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
 
     /// Take the raw samples' white noise, `white` per sample over its sample-to-sample
     /// differences (`None`: not known), from the next [`Estimator::reset`] on: the step
-    /// method's `u` never rests on less (see [`crate::StepEstimator::set_white_noise`]);
-    /// the other methods state no `u` from the same residuals, or rest it on their model,
-    /// and take nothing.
+    /// method's `u` never rests on less (see [`crate::StepEstimator::set_white_noise`]),
+    /// nor a model bank's while it does not whiten ([`crate::ModelBank::set_white_noise`]);
+    /// the other methods state no `u` from the same residuals and take nothing.
     pub fn set_white_noise(&mut self, white: Option<NoiseReference<T>>) -> Result<(), ConfigError> {
         match self {
             Self::Step(e) => e.set_white_noise(white),
+            // `K ≥ 3`, known when built: no code of it in an image without a grid.
+            Self::ModelBank(e) if K >= 3 => e.set_white_noise(white),
             Self::BiasCompensated(_) | Self::InstrumentalVariable(_) | Self::ModelBank(_) => Ok(()),
         }
     }
@@ -127,6 +129,18 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
                 e.set_noise_autocovariance(autocovariance)
             }
             Self::BiasCompensated(_) | Self::InstrumentalVariable(_) | Self::ModelBank(_) => Ok(()),
+        }
+    }
+
+    /// The level, in the estimate's unit, a pan at rest with nothing on it reads at: a model
+    /// bank reads its empty pan against it ([`crate::ModelBank::set_rest_level`]); the
+    /// others take nothing. Refused, and nothing changes, when not finite.
+    pub fn set_rest_level(&mut self, level: T) -> Result<(), ConfigError> {
+        match self {
+            // `K ≥ 3`, known when built: no code of it in an image without a grid.
+            Self::ModelBank(e) if K >= 3 => e.set_rest_level(level),
+            Self::Step(_) | Self::BiasCompensated(_) | Self::InstrumentalVariable(_) => Ok(()),
+            Self::ModelBank(_) => Ok(()),
         }
     }
 

@@ -52,6 +52,16 @@ pub trait ScaleEstimator: Estimator<f32> {
         let _ = autocovariance;
         Ok(())
     }
+
+    /// The level, in counts, the scale's empty pan reads at in the runs from now on (the
+    /// tracked zero's fraction of a count beyond the whole counts removed), for an
+    /// estimator that reads a pan at rest against it (see
+    /// [`crate::ModelBank::set_rest_level`]); the default takes nothing. One that is not
+    /// finite is refused and nothing changes.
+    fn set_rest_level(&mut self, level: f32) -> Result<(), ConfigError> {
+        let _ = level;
+        Ok(())
+    }
 }
 
 impl<E: ScaleEstimator + ?Sized> ScaleEstimator for &mut E {
@@ -75,6 +85,10 @@ impl<E: ScaleEstimator + ?Sized> ScaleEstimator for &mut E {
         autocovariance: Option<&Autocovariance<f32>>,
     ) -> Result<(), ConfigError> {
         (**self).set_noise_autocovariance(autocovariance)
+    }
+
+    fn set_rest_level(&mut self, level: f32) -> Result<(), ConfigError> {
+        (**self).set_rest_level(level)
     }
 }
 
@@ -152,5 +166,9 @@ impl<const N: usize, const S: usize, const K: usize> ScaleEstimator
         autocovariance: Option<&Autocovariance<f32>>,
     ) -> Result<(), ConfigError> {
         WeighingEstimator::set_noise_autocovariance(self, autocovariance)
+    }
+
+    fn set_rest_level(&mut self, level: f32) -> Result<(), ConfigError> {
+        WeighingEstimator::set_rest_level(self, level)
     }
 }

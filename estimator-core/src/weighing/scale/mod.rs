@@ -551,6 +551,10 @@ impl<E: ScaleEstimator> Scale<E> {
         self.estimator.reset();
         self.noise.interrupt();
         self.run_zero_counts = round_to_i32(self.zero_counts);
+        // Refused only when not finite, which a zero that rounds to whole counts is not.
+        let _ = self
+            .estimator
+            .set_rest_level(self.zero_counts - self.run_zero_counts as f32);
         self.residual_cusum = TwoSidedCusum::default();
         self.raw_cusum = TwoSidedCusum::default();
         self.block_cusum = TwoSidedCusum::default();
