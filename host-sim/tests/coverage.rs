@@ -234,9 +234,9 @@ fn first_final_readings_are_not_picked_by_chance() {
 /// on any real pan; the study now runs 2 s of empty pan first) it is over-confident: 85.2 %
 /// at 100 ms (400 runs), 91–93 % later. Resting on the empty pan's metered autocovariance
 /// (`estimator_core::AutocovarianceMeter`, 60 s) every cell holds at least the goal's edge
-/// less this run count's Monte Carlo band (92 − 2.1 %); at 100 ms it is cautious (98.5 %:
-/// the errors-in-variables bias on the run's own fit, mostly noise there but kept:
-/// `estimator_core::estimators::metered_noise`).
+/// less this run count's Monte Carlo band (92 − 2.1 %); at 100 ms it was cautious until
+/// stop 55 (98.5 %: the errors-in-variables bias on the run's own fit, mostly noise there;
+/// now less its own scatter, the test below).
 #[test]
 fn the_empty_pans_noise_colour_makes_the_firmware_u_hold_in_the_rigs_noise() {
     let (method, _) = firmware_default().unwrap();
@@ -260,6 +260,40 @@ fn the_empty_pans_noise_colour_makes_the_firmware_u_hold_in_the_rigs_noise() {
         metered.iter().all(|&c| c >= 0.90),
         "with the metered colour: {metered:?}"
     );
+}
+
+/// The errors-in-variables bias of the metered `u` is evaluated on the run's own `ℓ`, and
+/// its square overstates the bias by its own scatter (`E[b̂²] = b² + var(b̂)`): until stop 55
+/// it kept the rig's noise at 70 and 80 dB 100 ms after the landing cautious, ±2u covering
+/// 98.8 % and 99.1 % (`host-sim study coverage --runs 1000 --seed 1`). With the scatter
+/// taken off both cells are within the goal's 92–98 % over the same 1,000 runs (97.5 % and
+/// 97.8 %) and the RMS of error/u is at least 0.8 (0.74 and 0.64 before).
+#[test]
+fn the_bias_less_its_scatter_keeps_the_rigs_noise_within_the_goal_at_100_ms() {
+    let (method, _) = firmware_default().unwrap();
+    let rows = study_with(
+        "rig-noise",
+        &method,
+        1000,
+        1,
+        &[70.0, 80.0],
+        Colour::Metered,
+    )
+    .unwrap();
+    for row in &rows {
+        let (_, cell) = TIMES_MS
+            .iter()
+            .zip(&row.cells)
+            .find(|(t, _)| **t == 100)
+            .unwrap();
+        let (coverage, rms_z) = (cell.coverage().unwrap(), cell.rms_z().unwrap());
+        assert!(
+            (0.92..=0.98).contains(&coverage) && rms_z >= 0.8,
+            "{} dB: {:.1} % (rms z {rms_z:.2})",
+            row.snr_db,
+            100.0 * coverage
+        );
+    }
 }
 
 /// The rig's vibration near the resonance stays correlated for longer than the first 16

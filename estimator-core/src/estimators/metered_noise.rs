@@ -27,8 +27,8 @@
 //! running totals, as in `step_uncertainty`). The errors-in-variables bias is the same
 //! first-order term with the coloured noise: `N·Σ_i z_i·Σ_m h_m·(γ(|m − (n−1−i)|) − γ(|m −
 //! (n−i)|))`, added to the variance. Evaluated on one run's own `ℓ` and `z` it is mostly
-//! its own estimation noise, and it is what keeps the rig's noise at 70–80 dB 100 ms after
-//! the landing cautious (±2u 98.6–99.1 %, `host-sim study coverage --runs 1000 --seed 1`):
+//! its own estimation noise, and until stop 55 it kept the rig's noise at 70–80 dB 100 ms
+//! after the landing cautious (±2u 98.6–99.1 %, `host-sim study coverage --runs 1000 --seed 1`):
 //! there it exceeded the sandwich's standard deviation in 453 of 1,000 runs at 80 dB (three
 //! times over in 178), its correlation with the run's error was −0.10 (−0.01 to −0.20 in
 //! every scene, SNR and time looked at), subtracting it from the estimate made the RMS
@@ -43,8 +43,12 @@
 //! 1,000 runs at 80 dB (1 in `f64` on the same data) or far too small; the bias stood in
 //! for it. The sandwich is now stated at the upper end of its rounding
 //! (`LagSums::rounding`) and one that is not positive states no `u` (`with_bias`). The
-//! bias stays in full: weighed by `1 − ρ`, `ρ` the regressors' expected noise along the
-//! level's row of `P` as a share of what the rows hold along it, it brought those cells to
+//! bias stays, less its own scatter (since stop 55): `E[b̂²] = b² + var(b̂)`, and
+//! `var(b̂) ≈ γ_ε(0)·gᵀ·P·g` to first order in `ℓ` (`LagSums::metered_uncertainty`), which
+//! brought those cells to 97.5 % and 97.8 % (f64 96.2 % and 96.4 %) with every other cell
+//! of the step method's tables within 92–98 %. Weighed instead by `1 − ρ`, `ρ` the
+//! regressors' expected noise along the level's row of `P` as a share of what the rows
+//! hold along it, it brought those cells to
 //! 97.8 % and 97.9 %, but the scale then showed a pan emptied by hand as empty 0.056 g off
 //! with u = 0.011 g, 1.08 s after the removal (`host-sim torture --runs 10000 --seed 1`,
 //! run 1796: 16 lines shown settled wrong instead of 9), where the full bias's u of

@@ -411,7 +411,9 @@ impl<T: Real, const N: usize, const L: usize, const C: usize> StepEstimator<T, N
         if coloured {
             if let Some(stated) =
                 self.lags
-                    .metered_uncertainty(n, &z, z_level, &lead, &self.metered)
+                    .metered_uncertainty(n, &z, z_level, &lead, &self.metered, |g| {
+                        Some(self.factor.influence(n, *g, [T::ZERO])?.0)
+                    })
             {
                 return Some(stated);
             }

@@ -191,7 +191,7 @@ impl<T: Real, const N: usize, const E: usize> Factor<T, N, E> {
         }
         let mut tail = [T::ZERO; E];
         tail[E - 1] = T::ONE / d;
-        Some(self.back_substitute(active, tail))
+        Some(self.back_substitute(active, [T::ZERO; N], tail))
     }
 
     /// `P·v` for `v` zero on the leading columns and `combination` on the trailing ones
@@ -218,14 +218,59 @@ impl<T: Real, const N: usize, const E: usize> Factor<T, N, E> {
             }
             *value = *value / d;
         }
-        Some(self.back_substitute(active, tail))
+        Some(self.back_substitute(active, [T::ZERO; N], tail))
     }
 
-    /// `U⁻¹·v` for `v` zero on the leading columns and `tail` on the trailing ones: the
-    /// back substitution of the influences above. The last trailing entry has nothing after
-    /// it and stays as it is.
+    /// `P·v` for any `v` (`lead[..active]` then `tail`; `P = U⁻¹·D⁻¹·U⁻ᵀ`): one forward and
+    /// one back substitution, O((n+E)²). `None` while a column has no weight.
+    pub(crate) fn influence(
+        &self,
+        active: usize,
+        lead: [T; N],
+        tail: [T; E],
+    ) -> Option<([T; N], [T; E])> {
+        // `U⁻ᵀ·v`: `Uᵀ` is unit lower triangular.
+        let mut x = [T::ZERO; N];
+        for i in 0..active {
+            let mut value = lead[i];
+            for j in 0..i {
+                value -= self.lead_coupling[j][i] * x[j];
+            }
+            x[i] = value;
+        }
+        let mut y = [T::ZERO; E];
+        for e in 0..E {
+            let mut value = tail[e];
+            for i in 0..active {
+                value -= self.cross_coupling[i][e] * x[i];
+            }
+            for f in 0..e {
+                value -= self.tail_coupling[f][e] * y[f];
+            }
+            y[e] = value;
+        }
+        // `D⁻¹`.
+        for (value, &d) in x[..active].iter_mut().zip(&self.lead_weight) {
+            if !(d > T::ZERO) {
+                return None;
+            }
+            *value = *value / d;
+        }
+        for (value, &d) in y.iter_mut().zip(&self.tail_weight) {
+            if !(d > T::ZERO) {
+                return None;
+            }
+            *value = *value / d;
+        }
+        // `U⁻¹`: the back substitution, the leading entries now not zero.
+        Some(self.back_substitute(active, x, y))
+    }
+
+    /// `U⁻¹·v` for `v` `rhs` on the leading columns (zero for the influences of trailing
+    /// combinations) and `tail` on the trailing ones: the back substitution of the
+    /// influences above. The last trailing entry has nothing after it and stays as it is.
     #[inline]
-    fn back_substitute(&self, active: usize, mut tail: [T; E]) -> ([T; N], [T; E]) {
+    fn back_substitute(&self, active: usize, rhs: [T; N], mut tail: [T; E]) -> ([T; N], [T; E]) {
         for e in (0..E - 1).rev() {
             let mut value = tail[e];
             for f in (e + 1)..E {
@@ -235,7 +280,7 @@ impl<T: Real, const N: usize, const E: usize> Factor<T, N, E> {
         }
         let mut lead = [T::ZERO; N];
         for i in (0..active).rev() {
-            let mut value = T::ZERO;
+            let mut value = rhs[i];
             for j in (i + 1)..active {
                 value -= self.lead_coupling[i][j] * lead[j];
             }
@@ -592,6 +637,39 @@ mod tests {
         }
         assert!(close(tail[0], tau * t_tail[1] + constant_tail[0]));
         assert!(close(tail[1], tau * t_tail[0] + constant_tail[1]));
+    }
+
+    /// `influence` is `P·v` for any `v`: `ΦᵀΦ` (summed from the same rows) times it gives
+    /// `v` back, for a `v` on every column; with `v` the last unit vector it is
+    /// `last_unknown_influence`.
+    #[test]
+    fn the_influence_of_any_combination_is_p_times_it() {
+        let mut factor = Factor::<f64, 5, 1>::new();
+        let mut gram = [[0.0; 6]; 6];
+        for (lead, tail, target) in rows::<f64>(40) {
+            factor.fold(5, lead, [tail], target);
+            let row: [f64; 6] = core::array::from_fn(|i| if i < 5 { lead[i] } else { tail });
+            for (i, gram_row) in gram.iter_mut().enumerate() {
+                for (j, value) in gram_row.iter_mut().enumerate() {
+                    *value += row[i] * row[j];
+                }
+            }
+        }
+        let v = [0.3, -1.2, 2.0, 0.7, -0.4, 1.5];
+        let (lead, [tail]) = factor
+            .influence(5, core::array::from_fn(|i| v[i]), [v[5]])
+            .unwrap();
+        let w: [f64; 6] = core::array::from_fn(|i| if i < 5 { lead[i] } else { tail });
+        for (i, gram_row) in gram.iter().enumerate() {
+            let back: f64 = gram_row.iter().zip(&w).map(|(g, w)| g * w).sum();
+            assert!(
+                (back - v[i]).abs() <= 1e-8 * (1.0 + v[i].abs()),
+                "{i}: {back} vs {}",
+                v[i]
+            );
+        }
+        let (lead, tail) = factor.influence(5, [0.0; 5], [1.0]).unwrap();
+        assert_eq!((lead, tail), factor.last_unknown_influence(5).unwrap());
     }
 
     #[test]
