@@ -204,6 +204,15 @@ impl<T: Real, const N: usize, const E: usize> Factor<T, N, E> {
         active: usize,
         combination: [T; E],
     ) -> Option<([T; N], [T; E])> {
+        let tail = self.tail_forward(combination)?;
+        Some(self.back_substitute(active, [T::ZERO; N], tail))
+    }
+
+    /// `D_tail⁻¹·U_tail⁻ᵀ·combination`: the trailing part of the forward substitution and
+    /// its weights, for a right-hand side from which the leading columns' part is already
+    /// taken (nothing, for [`Self::tail_influence`]). `None` while a trailing column has no
+    /// weight.
+    fn tail_forward(&self, combination: [T; E]) -> Option<[T; E]> {
         let mut tail = [T::ZERO; E];
         for e in 0..E {
             let mut value = combination[e];
@@ -218,7 +227,7 @@ impl<T: Real, const N: usize, const E: usize> Factor<T, N, E> {
             }
             *value = *value / d;
         }
-        Some(self.back_substitute(active, [T::ZERO; N], tail))
+        Some(tail)
     }
 
     /// `P·v` for any `v` (`lead[..active]` then `tail`; `P = U⁻¹·D⁻¹·U⁻ᵀ`): one forward and
@@ -238,25 +247,15 @@ impl<T: Real, const N: usize, const E: usize> Factor<T, N, E> {
             }
             x[i] = value;
         }
-        let mut y = [T::ZERO; E];
-        for e in 0..E {
-            let mut value = tail[e];
+        let mut shifted = tail;
+        for (e, value) in shifted.iter_mut().enumerate() {
             for i in 0..active {
-                value -= self.cross_coupling[i][e] * x[i];
+                *value -= self.cross_coupling[i][e] * x[i];
             }
-            for f in 0..e {
-                value -= self.tail_coupling[f][e] * y[f];
-            }
-            y[e] = value;
         }
-        // `D⁻¹`.
+        let y = self.tail_forward(shifted)?;
+        // `D⁻¹` on the leading columns (the trailing ones had theirs).
         for (value, &d) in x[..active].iter_mut().zip(&self.lead_weight) {
-            if !(d > T::ZERO) {
-                return None;
-            }
-            *value = *value / d;
-        }
-        for (value, &d) in y.iter_mut().zip(&self.tail_weight) {
             if !(d > T::ZERO) {
                 return None;
             }
