@@ -133,6 +133,19 @@ impl<T: Real> NoiseReference<T> {
         }
     }
 
+    /// The variance of a white noise an estimator's `u` is floored at (`None`: not known, 0),
+    /// or `ConfigError::NoiseReference` unless it is finite and non-negative (a white noise
+    /// metered as none is a floor of nothing, not a refusal, unlike [`Self::validate`]).
+    pub(crate) fn white_variance(white: Option<Self>) -> Result<T, ConfigError> {
+        let variance = white.map_or(T::ZERO, |white| white.variance);
+        // Written so that NaN fails too.
+        if variance >= T::ZERO && variance.is_finite() {
+            Ok(variance)
+        } else {
+            Err(ConfigError::NoiseReference)
+        }
+    }
+
     /// Put `reference` in `slot` (an estimator's configured reference, used from its next
     /// reset) if it is valid ([`Self::validate`]); a refused one leaves `slot` as it was.
     pub(crate) fn replace(

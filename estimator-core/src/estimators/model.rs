@@ -1430,11 +1430,7 @@ impl<T: Real, const S: usize, const K: usize> ModelBank<T, S, K> {
     /// fit rests on the metered colour's prediction error instead. One whose variance is not
     /// finite and non-negative is refused and nothing changes.
     pub fn set_white_noise(&mut self, white: Option<NoiseReference<T>>) -> Result<(), ConfigError> {
-        let variance = white.map_or(T::ZERO, |white| white.variance);
-        // Written so that NaN fails too.
-        if !(variance >= T::ZERO && variance.is_finite()) {
-            return Err(ConfigError::NoiseReference);
-        }
+        let variance = NoiseReference::white_variance(white)?;
         self.white_floor = variance / T::from_u32(u32::from(self.decimation()));
         self.white_degrees = white.map_or(0, |white| white.degrees());
         Ok(())
@@ -2383,8 +2379,13 @@ mod tests {
         // the step response long after).
         let level = 0.4;
         let gain = *drop_onto(1.0, 1.0, 0.0, 0, 40_000).last().unwrap();
-        // Readings with a `u` once the fit may state one, against each rest level, and
-        // the readings that may.
+        // The samples after which the fit may state a `u`; the readings with one after
+        // them, against each rest level, and the readings that may.
+        let settled = 8
+            * (BlockModel::new(&configs[0].model, 8)
+                .unwrap()
+                .ringing_blocks
+                + 4);
         let (mut at_zero, mut readings) = (0, 0);
         for seed in 0..20 {
             let data = drop_onto(1.0, 0.0, 0.02 * gain, seed, 8000);
@@ -2394,7 +2395,6 @@ mod tests {
                 bank.set_rest_level(rest).unwrap();
                 assert_eq!(bank.set_rest_level(f32::NAN), Err(ConfigError::Model));
                 assert_eq!(bank.set_rest_level(f32::INFINITY), Err(ConfigError::Model));
-                let settled = 8 * (bank.models[0].block.ringing_blocks + 4);
                 for &y in &data {
                     let reading = bank.push((y + f64::from(level) * gain) as f32);
                     if let (Some(x), Some(u)) = (reading.estimate, reading.uncertainty) {
@@ -2403,12 +2403,7 @@ mod tests {
                     }
                 }
             }
-            let settled = 8
-                * (BlockModel::new(&configs[0].model, 8)
-                    .unwrap()
-                    .ringing_blocks as usize
-                    + 4);
-            let may = data.len() - settled;
+            let may = data.len() - settled as usize;
             assert!(
                 20 * stated[1] >= 19 * may,
                 "seed {seed}: {} of {may}",

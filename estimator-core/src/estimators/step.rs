@@ -243,11 +243,7 @@ impl<T: Real, const N: usize, const L: usize, const C: usize> StepEstimator<T, N
     /// freedom ([`NoiseReference::differences`]: `2M/3`, none for an exact one). One whose
     /// variance is not finite and non-negative is refused and nothing changes.
     pub fn set_white_noise(&mut self, white: Option<NoiseReference<T>>) -> Result<(), ConfigError> {
-        let variance = white.map_or(T::ZERO, |white| white.variance);
-        // Written so that NaN fails too.
-        if !(variance >= T::ZERO && variance.is_finite()) {
-            return Err(ConfigError::NoiseReference);
-        }
+        let variance = NoiseReference::white_variance(white)?;
         let config = &self.config;
         let block = T::from_u32(u32::from(config.decimation));
         self.lags.set_white_floor(white.and_then(|white| {

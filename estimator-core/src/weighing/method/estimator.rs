@@ -139,8 +139,10 @@ impl<T: Real, const N: usize, const S: usize, const K: usize> WeighingEstimator<
         match self {
             // `K ≥ 3`, known when built: no code of it in an image without a grid.
             Self::ModelBank(e) if K >= 3 => e.set_rest_level(level),
-            Self::Step(_) | Self::BiasCompensated(_) | Self::InstrumentalVariable(_) => Ok(()),
-            Self::ModelBank(_) => Ok(()),
+            Self::Step(_)
+            | Self::BiasCompensated(_)
+            | Self::InstrumentalVariable(_)
+            | Self::ModelBank(_) => Ok(()),
         }
     }
 
