@@ -175,17 +175,22 @@ fn a_board_with_the_model_bank_shows_its_empty_pan_empty() {
 #[test]
 fn a_board_with_the_model_bank_shows_a_vibrating_empty_pan_within_its_u() {
     let path = bank_u_config();
-    let floors = [
-        (
-            "rig",
-            "vibration_rms_g = 0.05\nvibration_hz = 25.0\nvibration_bandwidth_hz = 4.0\n",
-        ),
-        (
-            "floor",
-            "vibration_rms_g = 0.02\nvibration_hz = 24.0\nvibration_bandwidth_hz = 1.0\n\
-             mains_amplitude_g = 0.2\n",
-        ),
-    ];
+    // The coverage study's two vibrating floors, their noise as its scenes have it but
+    // for the SNR.
+    let floors = ["rig-noise", "vibration"].map(|name| {
+        let file = format!("{}/scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"));
+        let text = std::fs::read_to_string(file).unwrap();
+        let noise: String = text
+            .split("[noise]")
+            .nth(1)
+            .unwrap()
+            .lines()
+            .filter(|line| !line.trim().is_empty() && !line.starts_with("snr_db"))
+            .map(|line| format!("{line}\n"))
+            .collect();
+        assert!(noise.contains("vibration_hz"), "{name}: {noise}");
+        (name, noise)
+    });
     let mut empty_rows = 0;
     for (floor, noise) in floors {
         for snr_db in [70, 80] {
